@@ -1,0 +1,16 @@
+//! # meshdeco
+//!
+//! Sparse, localized deformation components from collections of meshes that share one
+//! connectivity: SPLOCS on vertex displacements and on triangle deformation gradients,
+//! region-based PCA with posing, holistic PCA, and a mesh-convolutional autoencoder on ACAP
+//! features (Burn).
+//!
+//! Geometry (mesh, operators, representations, linear methods, metrics) is plain `f64` with
+//! faer and does not depend on Burn; Burn lives only in [`nn`].
+
+pub mod error;
+pub mod geometry;
+pub mod mesh;
+pub mod representation;
+
+pub use error::{Error, Result};

@@ -1,0 +1,125 @@
+//! Triangle meshes, mesh sequences that share one connectivity, their topology, and file I/O.
+//!
+//! Conventions: positions are `f64` in the data's own units; faces are triangles given as
+//! 0-based vertex indices, counter-clockwise when seen from outside (the file's order is kept).
+
+pub mod topology;
+
+pub use topology::Topology;
+
+/// One vertex position, `[x, y, z]`.
+pub type Vec3 = [f64; 3];
+
+/// A triangle mesh: positions (N) and triangles (T) as 0-based vertex indices.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TriMesh {
+    /// N vertex positions.
+    pub positions: Vec<Vec3>,
+    /// T triangles, vertex indices into `positions`.
+    pub faces: Vec<[usize; 3]>,
+}
+
+impl TriMesh {
+    /// Builds a mesh; does not validate (see [`TriMesh::validate_indices`]).
+    pub fn new(positions: Vec<Vec3>, faces: Vec<[usize; 3]>) -> Self {
+        TriMesh { positions, faces }
+    }
+
+    /// Number of vertices N.
+    pub fn n_vertices(&self) -> usize {
+        self.positions.len()
+    }
+
+    /// Number of triangles T.
+    pub fn n_faces(&self) -> usize {
+        self.faces.len()
+    }
+
+    /// Returns the first face (index, face) that refers to a vertex index ≥ N, if any.
+    pub fn first_bad_index(&self) -> Option<(usize, [usize; 3])> {
+        let n = self.positions.len();
+        self.faces.iter().enumerate().find(|(_, f)| f.iter().any(|&v| v >= n)).map(|(i, f)| (i, *f))
+    }
+
+    /// Mean edge length over the faces' edges (each interior edge counted twice).
+    pub fn mean_edge_length(&self) -> f64 {
+        let mut sum = 0.0;
+        let mut count = 0usize;
+        for f in &self.faces {
+            for k in 0..3 {
+                sum += dist(self.positions[f[k]], self.positions[f[(k + 1) % 3]]);
+                count += 1;
+            }
+        }
+        if count == 0 { 0.0 } else { sum / count as f64 }
+    }
+
+    /// Axis-aligned bounding box `(min, max)`.
+    pub fn bounding_box(&self) -> (Vec3, Vec3) {
+        bounding_box(&self.positions)
+    }
+}
+
+/// Frames that share one connectivity: the template faces plus F × N positions.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MeshSequence {
+    /// Triangles shared by every frame.
+    pub faces: Vec<[usize; 3]>,
+    /// F frames of N positions each.
+    pub frames: Vec<Vec<Vec3>>,
+    /// One name per frame (file stem, or a generated name for synthetic data).
+    pub names: Vec<String>,
+}
+
+impl MeshSequence {
+    /// Number of frames F.
+    pub fn n_frames(&self) -> usize {
+        self.frames.len()
+    }
+
+    /// Number of vertices N (0 when there is no frame).
+    pub fn n_vertices(&self) -> usize {
+        self.frames.first().map_or(0, |f| f.len())
+    }
+
+    /// Number of triangles T.
+    pub fn n_faces(&self) -> usize {
+        self.faces.len()
+    }
+
+    /// Frame `f` as a standalone mesh (copies positions and faces).
+    pub fn mesh(&self, f: usize) -> TriMesh {
+        TriMesh::new(self.frames[f].clone(), self.faces.clone())
+    }
+
+    /// A sequence with the frames whose 0-based indices are given, in that order.
+    pub fn select(&self, indices: &[usize]) -> MeshSequence {
+        MeshSequence {
+            faces: self.faces.clone(),
+            frames: indices.iter().map(|&i| self.frames[i].clone()).collect(),
+            names: indices.iter().map(|&i| self.names[i].clone()).collect(),
+        }
+    }
+}
+
+/// Euclidean distance of two points.
+pub fn dist(a: Vec3, b: Vec3) -> f64 {
+    let d = [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+    (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt()
+}
+
+/// Axis-aligned bounding box `(min, max)` of points; `([0;3],[0;3])` for none.
+pub fn bounding_box(points: &[Vec3]) -> (Vec3, Vec3) {
+    if points.is_empty() {
+        return ([0.0; 3], [0.0; 3]);
+    }
+    let mut lo = [f64::INFINITY; 3];
+    let mut hi = [f64::NEG_INFINITY; 3];
+    for p in points {
+        for k in 0..3 {
+            lo[k] = lo[k].min(p[k]);
+            hi[k] = hi[k].max(p[k]);
+        }
+    }
+    (lo, hi)
+}
