@@ -14,3 +14,5 @@ pub mod mesh;
 pub mod representation;
 
 pub use error::{Error, Result};
+pub mod config;
+pub mod synthetic;

@@ -1,0 +1,36 @@
+//! Command-line definitions (clap) and dispatch. Each command lives in its own file and turns
+//! its arguments into library calls.
+
+use std::path::PathBuf;
+
+use anyhow::Result;
+use clap::{Parser, Subcommand};
+
+mod train;
+
+/// Sparse, localized deformation components from meshes that share one connectivity.
+#[derive(Debug, Parser)]
+#[command(name = "meshdeco", version, about, long_about = None)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Train a model from a TOML experiment config (see README for the keys).
+    Train(train::TrainArgs),
+}
+
+/// Runs one parsed command line.
+pub fn run(cli: Cli) -> Result<()> {
+    match cli.command {
+        Command::Train(a) => train::run(a),
+    }
+}
+
+/// Default artefact directory for a config name.
+#[allow(dead_code)]
+pub fn default_out(name: &str) -> PathBuf {
+    PathBuf::from("checkpoints").join(name)
+}

@@ -1,0 +1,528 @@
+//! Experiment configuration (TOML): parsed strictly (unknown keys are errors) and validated in
+//! full before any work starts. Errors name the key and the bad value.
+//!
+//! ```toml
+//! name = "scape-ae"               # artefacts go to checkpoints/<name>/ unless --out DIR is given
+//! [data]
+//! path = "../shared/data/scape"   # directory, glob, or synthetic:<name>
+//! train = "1-36"                  # 1-based frame ranges in natural order ("1-36,40", "every:10"); default all
+//! test = "37-71"                  # same syntax, or "rest" (every frame not in train); default none
+//! rest = "first"                  # first | mean | <mesh file>
+//! align = "none"                  # none | rigid
+//! unit_box = false                # scale into the unit box (SPLOCS's convention); outputs keep data units
+//! [method]
+//! kind = "autoencoder"            # autoencoder | splocs | pca | region-pca
+//! components = 50
+//! ```
+//!
+//! Method keys (all optional; each applies only to the kinds listed — a key given for another
+//! kind is an error):
+//!
+//! | key | kinds | default | meaning |
+//! |---|---|---|---|
+//! | `components` | all | 50 | number of components K (region-pca: total budget) |
+//! | `representation` | splocs, pca, region-pca | `displacement` | `displacement` \| `triangle-gradient` (pca also `acap`) |
+//! | `sparsity` | splocs | 2.0 | λ, weight of the group-sparsity term |
+//! | `support` | splocs, autoencoder | [0.1, 0.7] / [0.2, 0.4] | [d_min, d_max] of the support maps (normalised geodesic distance) |
+//! | `weights` | splocs | `nonnegative` | `nonnegative` (Eq. 4) \| `signed` (Eq. 3) |
+//! | `max_iterations` | splocs | 10 | outer iterations |
+//! | `admm` | splocs | { rho = 10, iterations = 10 } | ADMM penalty and inner iterations |
+//! | `tolerance` | splocs | 1e-6 | convergence: mean relative objective change over the last 5 iterations |
+//! | `seed` | all | 0 | random seed |
+//! | `fixed_centers` | splocs | [] | painted vertex sets fixing the first components' centres (lists of vertex indices, or file paths) |
+//! | `geodesic_m` | splocs, autoencoder, region-pca | 10 / 1 / – | heat-method time factor m (t = m·h²) |
+//! | `iterations` | autoencoder | 2000 | training iterations |
+//! | `learning_rate` | autoencoder | 1e-3 | Adam step size |
+//! | `batch_size` | autoencoder | full batch | shapes per step |
+//! | `layers` | autoencoder | 1 | convolution layers L |
+//! | `lambda1`, `lambda2` | autoencoder | 0.5, 0.5 | weights of the sparsity and max-weight terms |
+//! | `theta` | autoencoder | 5.0 | hinge threshold of the max-weight term |
+//! | `checkpoint_every` | autoencoder | 200 | iterations between checkpoints |
+//! | `scaling` | autoencoder | `per-dimension` | feature scaling: `per-dimension` \| `grouped` (the reference code) |
+//! | `consistency` | autoencoder, pca | `global` | ACAP rotation consistency: `bfs` \| `global` |
+//! | `lambda`, `r`, `threshold`, `regions`, `max_regions`, `beta`, `gamma` | region-pca | see region-pca docs | segmentation and coupling |
+
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::{Error, Result};
+
+/// Which frames belong to a split, as 0-based indices (after natural sort).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub enum FrameSelection {
+    /// Every frame.
+    All,
+    /// 1-based inclusive ranges, as written (`"1-36,40"`).
+    Ranges(Vec<(usize, usize)>),
+    /// Frames 1, 1 + n, 1 + 2n, … (the papers' "every n-th frame").
+    Every(usize),
+    /// Frames not in the training split (only valid for `test`).
+    Rest,
+}
+
+impl FrameSelection {
+    /// Parses `"all"`, `"rest"`, `"every:N"` or comma-separated 1-based ranges `"a-b,c"`.
+    pub fn parse(key: &str, s: &str) -> Result<Self> {
+        let t = s.trim();
+        if t == "all" {
+            return Ok(FrameSelection::All);
+        }
+        if t == "rest" {
+            return Ok(FrameSelection::Rest);
+        }
+        if let Some(n) = t.strip_prefix("every:") {
+            let n: usize = n.trim().parse().map_err(|_| Error::config(key, format!("`{s}`: expected every:N with N a positive integer")))?;
+            if n == 0 {
+                return Err(Error::config(key, format!("`{s}`: N must be at least 1")));
+            }
+            return Ok(FrameSelection::Every(n));
+        }
+        let mut ranges = Vec::new();
+        for part in t.split(',') {
+            let part = part.trim();
+            let bad = || Error::config(key, format!("`{s}`: `{part}` is not a frame number or range a-b (1-based); other forms: all, rest, every:N"));
+            let (a, b) = match part.split_once('-') {
+                Some((a, b)) => (a.trim().parse::<usize>().map_err(|_| bad())?, b.trim().parse::<usize>().map_err(|_| bad())?),
+                None => {
+                    let a = part.parse::<usize>().map_err(|_| bad())?;
+                    (a, a)
+                }
+            };
+            if a == 0 || b < a {
+                return Err(Error::config(key, format!("`{s}`: range `{part}` must satisfy 1 <= a <= b")));
+            }
+            ranges.push((a, b));
+        }
+        Ok(FrameSelection::Ranges(ranges))
+    }
+
+    /// Resolves to sorted 0-based frame indices for a sequence of `n_frames`. `train` is needed
+    /// for [`FrameSelection::Rest`].
+    pub fn resolve(&self, key: &str, n_frames: usize, train: Option<&[usize]>) -> Result<Vec<usize>> {
+        let mut out: Vec<usize> = match self {
+            FrameSelection::All => (0..n_frames).collect(),
+            FrameSelection::Every(n) => (0..n_frames).step_by(*n).collect(),
+            FrameSelection::Rest => {
+                let train = train.ok_or_else(|| Error::config(key, "`rest` is only valid for data.test"))?;
+                (0..n_frames).filter(|i| !train.contains(i)).collect()
+            }
+            FrameSelection::Ranges(r) => {
+                let mut v = Vec::new();
+                for &(a, b) in r {
+                    if b > n_frames {
+                        return Err(Error::config(key, format!("range {a}-{b} goes past the last frame ({n_frames} frames)")));
+                    }
+                    v.extend(a - 1..b);
+                }
+                v
+            }
+        };
+        out.sort_unstable();
+        out.dedup();
+        if out.is_empty() {
+            return Err(Error::config(key, "selects no frame"));
+        }
+        Ok(out)
+    }
+}
+
+/// Which shape the deformations are measured against.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub enum RestShape {
+    First,
+    Mean,
+    File(PathBuf),
+}
+
+/// Rigid alignment of frames to the rest shape.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum Align {
+    None,
+    Rigid,
+}
+
+/// The `[data]` section, validated.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DataConfig {
+    pub path: String,
+    pub train: FrameSelection,
+    pub test: Option<FrameSelection>,
+    pub rest: RestShape,
+    pub align: Align,
+    pub unit_box: bool,
+}
+
+/// Raw TOML of the whole file; `deny_unknown_fields` makes typos errors.
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+struct RawConfig {
+    name: Option<String>,
+    data: RawData,
+    method: RawMethod,
+}
+
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+struct RawData {
+    path: String,
+    train: Option<String>,
+    test: Option<String>,
+    rest: Option<String>,
+    align: Option<String>,
+    unit_box: Option<bool>,
+}
+
+/// ADMM settings of SPLOCS.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct AdmmSettings {
+    pub rho: f64,
+    pub iterations: usize,
+}
+
+/// Every `[method]` key; which ones apply depends on `kind` (checked in validation).
+#[derive(Debug, Clone, Default, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct RawMethod {
+    pub kind: String,
+    pub components: Option<usize>,
+    pub representation: Option<String>,
+    pub sparsity: Option<f64>,
+    pub support: Option<[f64; 2]>,
+    pub weights: Option<String>,
+    pub max_iterations: Option<usize>,
+    pub admm: Option<AdmmSettings>,
+    pub tolerance: Option<f64>,
+    pub seed: Option<u64>,
+    pub fixed_centers: Option<Vec<FixedCenter>>,
+    pub geodesic_m: Option<f64>,
+    pub iterations: Option<usize>,
+    pub learning_rate: Option<f64>,
+    pub batch_size: Option<usize>,
+    pub layers: Option<usize>,
+    pub lambda1: Option<f64>,
+    pub lambda2: Option<f64>,
+    pub theta: Option<f64>,
+    pub checkpoint_every: Option<usize>,
+    pub scaling: Option<String>,
+    pub consistency: Option<String>,
+    pub lambda: Option<f64>,
+    pub r: Option<f64>,
+    pub threshold: Option<f64>,
+    pub regions: Option<usize>,
+    pub max_regions: Option<usize>,
+    pub beta: Option<f64>,
+    pub gamma: Option<f64>,
+}
+
+/// A painted vertex set: inline indices or a file of whitespace/comma-separated indices.
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(untagged)]
+pub enum FixedCenter {
+    Vertices(Vec<usize>),
+    File(PathBuf),
+}
+
+/// Method kinds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum MethodKind {
+    Pca,
+    Splocs,
+    RegionPca,
+    Autoencoder,
+}
+
+impl MethodKind {
+    /// Name as written in configs.
+    pub fn name(self) -> &'static str {
+        match self {
+            MethodKind::Pca => "pca",
+            MethodKind::Splocs => "splocs",
+            MethodKind::RegionPca => "region-pca",
+            MethodKind::Autoencoder => "autoencoder",
+        }
+    }
+}
+
+/// A validated experiment configuration.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Config {
+    /// Experiment name (artefact directory name).
+    pub name: String,
+    pub data: DataConfig,
+    pub kind: MethodKind,
+    /// The validated `[method]` table; method modules read their keys from here with defaults.
+    pub method: RawMethod,
+    /// The file it came from (relative data paths are resolved against the working directory,
+    /// as a user types them; `rest = <file>` likewise).
+    pub source: Option<PathBuf>,
+}
+
+/// Keys that each kind accepts (besides `kind`).
+fn allowed_keys(kind: MethodKind) -> &'static [&'static str] {
+    match kind {
+        MethodKind::Pca => &["components", "representation", "seed", "consistency"],
+        MethodKind::Splocs => &[
+            "components", "representation", "sparsity", "support", "weights", "max_iterations", "admm", "tolerance", "seed",
+            "fixed_centers", "geodesic_m",
+        ],
+        MethodKind::RegionPca => &[
+            "components", "representation", "seed", "lambda", "r", "threshold", "regions", "max_regions", "beta", "gamma", "geodesic_m",
+        ],
+        MethodKind::Autoencoder => &[
+            "components", "support", "seed", "geodesic_m", "iterations", "learning_rate", "batch_size", "layers", "lambda1", "lambda2",
+            "theta", "checkpoint_every", "scaling", "consistency",
+        ],
+    }
+}
+
+impl Config {
+    /// Reads and validates a config file.
+    pub fn from_file(path: &Path) -> Result<Self> {
+        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+        let mut c = Self::from_toml(&text).map_err(|e| match e {
+            Error::Config { key, message } => Error::config(key, format!("{message} (in {})", path.display())),
+            Error::Parse { line, message, .. } => Error::parse(path, line, message),
+            other => other,
+        })?;
+        c.source = Some(path.to_path_buf());
+        Ok(c)
+    }
+
+    /// Parses and validates TOML text.
+    pub fn from_toml(text: &str) -> Result<Self> {
+        let raw: RawConfig = toml::from_str(text).map_err(|e| {
+            let line = e.span().map(|s| text[..s.start.min(text.len())].matches('\n').count() + 1);
+            Error::parse("<config>", line, e.message().to_string())
+        })?;
+        Self::validate(raw)
+    }
+
+    fn validate(raw: RawConfig) -> Result<Self> {
+        let name = raw.name.unwrap_or_else(|| "experiment".to_string());
+        if name.is_empty() || name.contains(['/', '\\']) || name == "." || name == ".." {
+            return Err(Error::config("name", format!("`{name}` must be a non-empty file name without path separators")));
+        }
+        let d = raw.data;
+        if d.path.trim().is_empty() {
+            return Err(Error::config("data.path", "must not be empty"));
+        }
+        if let Some(n) = d.path.strip_prefix(crate::synthetic::PREFIX) {
+            if !crate::synthetic::NAMES.contains(&n) {
+                return Err(Error::config("data.path", format!("unknown synthetic dataset `{n}`; available: {}", crate::synthetic::NAMES.join(", "))));
+            }
+        }
+        let train = match &d.train {
+            Some(s) => FrameSelection::parse("data.train", s)?,
+            None => FrameSelection::All,
+        };
+        if train == FrameSelection::Rest {
+            return Err(Error::config("data.train", "`rest` is only valid for data.test"));
+        }
+        let test = d.test.as_deref().map(|s| FrameSelection::parse("data.test", s)).transpose()?;
+        let rest = match d.rest.as_deref().unwrap_or("first") {
+            "first" => RestShape::First,
+            "mean" => RestShape::Mean,
+            f => RestShape::File(PathBuf::from(f)),
+        };
+        let align = match d.align.as_deref().unwrap_or("none") {
+            "none" => Align::None,
+            "rigid" => Align::Rigid,
+            other => return Err(Error::config("data.align", format!("`{other}`: expected none or rigid"))),
+        };
+        let data = DataConfig { path: d.path, train, test, rest, align, unit_box: d.unit_box.unwrap_or(false) };
+
+        let m = raw.method;
+        let kind = match m.kind.as_str() {
+            "pca" => MethodKind::Pca,
+            "splocs" => MethodKind::Splocs,
+            "region-pca" => MethodKind::RegionPca,
+            "autoencoder" => MethodKind::Autoencoder,
+            other => return Err(Error::config("method.kind", format!("`{other}`: expected autoencoder, splocs, pca or region-pca"))),
+        };
+        // Keys given for another kind.
+        let given = toml::Value::try_from(&m).map_err(|e| Error::Invalid(e.to_string()))?;
+        if let toml::Value::Table(t) = given {
+            for k in t.keys() {
+                if k != "kind" && !allowed_keys(kind).contains(&k.as_str()) {
+                    return Err(Error::config(format!("method.{k}"), format!("does not apply to kind = \"{}\" (it accepts: {})", kind.name(), allowed_keys(kind).join(", "))));
+                }
+            }
+        }
+        check_method_values(kind, &m)?;
+        Ok(Config { name, data, kind, method: m, source: None })
+    }
+
+    /// The artefact directory: `--out` if given, else `checkpoints/<name>`.
+    pub fn output_dir(&self, out: Option<&Path>) -> PathBuf {
+        out.map(Path::to_path_buf).unwrap_or_else(|| PathBuf::from("checkpoints").join(&self.name))
+    }
+}
+
+fn positive(key: &str, v: Option<f64>) -> Result<()> {
+    if let Some(x) = v {
+        if !(x.is_finite() && x > 0.0) {
+            return Err(Error::config(key, format!("{x} must be a positive number")));
+        }
+    }
+    Ok(())
+}
+
+fn non_negative(key: &str, v: Option<f64>) -> Result<()> {
+    if let Some(x) = v {
+        if !(x.is_finite() && x >= 0.0) {
+            return Err(Error::config(key, format!("{x} must be a non-negative number")));
+        }
+    }
+    Ok(())
+}
+
+fn at_least_one(key: &str, v: Option<usize>) -> Result<()> {
+    if v == Some(0) {
+        return Err(Error::config(key, "0 must be at least 1"));
+    }
+    Ok(())
+}
+
+fn check_method_values(kind: MethodKind, m: &RawMethod) -> Result<()> {
+    at_least_one("method.components", m.components)?;
+    if let Some(r) = &m.representation {
+        let ok = match kind {
+            MethodKind::Pca => ["displacement", "triangle-gradient", "acap"].contains(&r.as_str()),
+            _ => ["displacement", "triangle-gradient"].contains(&r.as_str()),
+        };
+        if !ok {
+            return Err(Error::config("method.representation", format!("`{r}` is not available for kind = \"{}\"", kind.name())));
+        }
+    }
+    non_negative("method.sparsity", m.sparsity)?;
+    if let Some([lo, hi]) = m.support {
+        if !(lo.is_finite() && hi.is_finite() && lo >= 0.0) {
+            return Err(Error::config("method.support", format!("[{lo}, {hi}] must be finite and non-negative")));
+        }
+        if lo >= hi {
+            return Err(Error::config("method.support", format!("d_min ({lo}) must be below d_max ({hi})")));
+        }
+    }
+    if let Some(w) = &m.weights {
+        if w != "nonnegative" && w != "signed" {
+            return Err(Error::config("method.weights", format!("`{w}`: expected nonnegative or signed")));
+        }
+    }
+    at_least_one("method.max_iterations", m.max_iterations)?;
+    if let Some(a) = m.admm {
+        positive("method.admm.rho", Some(a.rho))?;
+        at_least_one("method.admm.iterations", Some(a.iterations))?;
+    }
+    non_negative("method.tolerance", m.tolerance)?;
+    positive("method.geodesic_m", m.geodesic_m)?;
+    at_least_one("method.iterations", m.iterations)?;
+    positive("method.learning_rate", m.learning_rate)?;
+    at_least_one("method.batch_size", m.batch_size)?;
+    at_least_one("method.layers", m.layers)?;
+    non_negative("method.lambda1", m.lambda1)?;
+    non_negative("method.lambda2", m.lambda2)?;
+    non_negative("method.theta", m.theta)?;
+    at_least_one("method.checkpoint_every", m.checkpoint_every)?;
+    if let Some(s) = &m.scaling {
+        if s != "per-dimension" && s != "grouped" {
+            return Err(Error::config("method.scaling", format!("`{s}`: expected per-dimension or grouped")));
+        }
+    }
+    if let Some(s) = &m.consistency {
+        if s != "bfs" && s != "global" {
+            return Err(Error::config("method.consistency", format!("`{s}`: expected bfs or global")));
+        }
+    }
+    if let Some(l) = m.lambda {
+        if !(0.0..=1.0).contains(&l) {
+            return Err(Error::config("method.lambda", format!("{l} must lie in [0, 1]")));
+        }
+    }
+    positive("method.r", m.r)?;
+    if let Some(t) = m.threshold {
+        if !(-1.0..=1.0).contains(&t) {
+            return Err(Error::config("method.threshold", format!("{t} must lie in [-1, 1] (a correlation)")));
+        }
+    }
+    at_least_one("method.regions", m.regions)?;
+    at_least_one("method.max_regions", m.max_regions)?;
+    non_negative("method.beta", m.beta)?;
+    non_negative("method.gamma", m.gamma)?;
+    if m.regions.is_some() && m.max_regions.is_some() {
+        return Err(Error::config("method.regions", "give either regions (fixed) or max_regions (automatic), not both"));
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const GOOD: &str = r#"
+name = "t"
+[data]
+path = "synthetic:tube"
+train = "1-36"
+test = "rest"
+[method]
+kind = "splocs"
+components = 5
+support = [0.1, 0.7]
+admm = { rho = 10, iterations = 10 }
+"#;
+
+    #[test]
+    fn parses_a_valid_config() {
+        let c = Config::from_toml(GOOD).unwrap();
+        assert_eq!(c.kind, MethodKind::Splocs);
+        assert_eq!(c.method.components, Some(5));
+        assert_eq!(c.data.train, FrameSelection::Ranges(vec![(1, 36)]));
+        let train = c.data.train.resolve("data.train", 60, None).unwrap();
+        assert_eq!(train, (0..36).collect::<Vec<_>>());
+        let test = c.data.test.unwrap().resolve("data.test", 60, Some(&train)).unwrap();
+        assert_eq!(test, (36..60).collect::<Vec<_>>());
+    }
+
+    #[test]
+    fn unknown_keys_are_rejected_with_their_name() {
+        let e = Config::from_toml(&GOOD.replace("components = 5", "componets = 5")).unwrap_err().to_string();
+        assert!(e.contains("componets"), "{e}");
+        let e = Config::from_toml(&GOOD.replace("[method]", "[method]\nlayers = 2")).unwrap_err().to_string();
+        assert!(e.contains("method.layers") && e.contains("splocs"), "{e}");
+    }
+
+    #[test]
+    fn bad_values_name_key_and_value() {
+        let e = Config::from_toml(&GOOD.replace("[0.1, 0.7]", "[0.8, 0.7]")).unwrap_err().to_string();
+        assert!(e.contains("d_min (0.8) must be below d_max (0.7)"), "{e}");
+        let e = Config::from_toml(&GOOD.replace("components = 5", "components = 0")).unwrap_err().to_string();
+        assert!(e.contains("method.components"), "{e}");
+        let e = Config::from_toml(&GOOD.replace("1-36", "5-3")).unwrap_err().to_string();
+        assert!(e.contains("data.train") && e.contains("5-3"), "{e}");
+        let e = Config::from_toml(&GOOD.replace("synthetic:tube", "synthetic:cube")).unwrap_err().to_string();
+        assert!(e.contains("cube"), "{e}");
+        let e = Config::from_toml(&GOOD.replace("kind = \"splocs\"", "kind = \"ica\"")).unwrap_err().to_string();
+        assert!(e.contains("method.kind") && e.contains("ica"), "{e}");
+    }
+
+    #[test]
+    fn frame_selection_forms() {
+        assert_eq!(FrameSelection::parse("k", "every:10").unwrap().resolve("k", 25, None).unwrap(), vec![0, 10, 20]);
+        assert_eq!(FrameSelection::parse("k", "1-3, 7").unwrap().resolve("k", 10, None).unwrap(), vec![0, 1, 2, 6]);
+        assert!(FrameSelection::parse("k", "1-30").unwrap().resolve("k", 10, None).unwrap_err().to_string().contains("past the last frame"));
+        assert!(FrameSelection::parse("k", "every:0").is_err());
+        assert!(FrameSelection::parse("k", "x").is_err());
+    }
+
+    #[test]
+    fn syntax_errors_carry_a_line() {
+        let e = Config::from_toml("name = \"a\"\n[data]\npath = 3\n[method]\nkind = \"pca\"\n").unwrap_err();
+        match e {
+            Error::Parse { line, .. } => assert_eq!(line, Some(3)),
+            other => panic!("unexpected {other}"),
+        }
+    }
+}

@@ -1,0 +1,211 @@
+//! Preprocessing of a loaded sequence before any representation is computed: train/test split,
+//! rest shape (first frame, mean, or a mesh file), rigid alignment of every frame to the rest
+//! shape, and optional scaling into the unit box.
+//!
+//! The unit-box transform is x' = (x − offset)·scale, with `offset` the minimum corner of the
+//! bounding box of the rest shape and `scale` = 1 / (largest side). Everything a method
+//! computes in the scaled space is mapped back with [`UnitBox::invert`] before it is written
+//! or measured, so outputs and metrics are in the data's own units.
+
+use serde::{Deserialize, Serialize};
+
+use crate::config::{Align, DataConfig, RestShape};
+use crate::error::{Error, Result};
+use crate::geometry::rigid_align::kabsch;
+use crate::mesh::{self, MeshSequence, TriMesh, Vec3};
+
+/// An affine scaling into the unit box: x' = (x − offset)·scale.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct UnitBox {
+    pub offset: Vec3,
+    pub scale: f64,
+}
+
+impl UnitBox {
+    /// The identity transform.
+    pub fn identity() -> Self {
+        UnitBox { offset: [0.0; 3], scale: 1.0 }
+    }
+    /// The transform that maps the bounding box of `points` into [0, 1]³ (largest side → 1).
+    pub fn fit(points: &[Vec3]) -> Result<Self> {
+        let (lo, hi) = mesh::bounding_box(points);
+        let side = (0..3).map(|k| hi[k] - lo[k]).fold(0.0, f64::max);
+        if !(side.is_finite() && side > 0.0) {
+            return Err(Error::Invalid(format!("cannot scale into the unit box: bounding box side is {side}")));
+        }
+        Ok(UnitBox { offset: lo, scale: 1.0 / side })
+    }
+    /// Maps a point into the unit box.
+    pub fn apply(&self, p: Vec3) -> Vec3 {
+        [0, 1, 2].map(|k| (p[k] - self.offset[k]) * self.scale)
+    }
+    /// Maps a point back to data units.
+    pub fn invert(&self, p: Vec3) -> Vec3 {
+        [0, 1, 2].map(|k| p[k] / self.scale + self.offset[k])
+    }
+}
+
+/// Data ready for a method: all frames preprocessed, the rest mesh, the split and the scaling.
+#[derive(Debug, Clone)]
+pub struct Prepared {
+    /// All frames after alignment and scaling (natural order, as loaded).
+    pub sequence: MeshSequence,
+    /// The rest (reference) mesh in the same space.
+    pub rest: TriMesh,
+    /// 0-based indices of the training frames.
+    pub train: Vec<usize>,
+    /// 0-based indices of the test frames (empty without a test split).
+    pub test: Vec<usize>,
+    /// Scaling applied (identity unless `unit_box = true`).
+    pub unit_box: UnitBox,
+}
+
+impl Prepared {
+    /// Training frames as their own sequence.
+    pub fn train_sequence(&self) -> MeshSequence {
+        self.sequence.select(&self.train)
+    }
+    /// Test frames as their own sequence.
+    pub fn test_sequence(&self) -> MeshSequence {
+        self.sequence.select(&self.test)
+    }
+}
+
+/// Loads the frames a data config names: `synthetic:<name>` or a directory/glob of mesh files.
+pub fn load_frames(path: &str) -> Result<MeshSequence> {
+    if crate::synthetic::is_synthetic(path) { crate::synthetic::load(path) } else { mesh::load_sequence(path) }
+}
+
+/// Loads and preprocesses the data of a config.
+pub fn prepare(cfg: &DataConfig) -> Result<Prepared> {
+    let seq = load_frames(&cfg.path)?;
+    prepare_sequence(seq, cfg)
+}
+
+/// Preprocesses an already loaded sequence according to `cfg`.
+pub fn prepare_sequence(mut seq: MeshSequence, cfg: &DataConfig) -> Result<Prepared> {
+    let f = seq.n_frames();
+    let train = cfg.train.resolve("data.train", f, None)?;
+    let test = match &cfg.test {
+        Some(t) => t.resolve("data.test", f, Some(&train))?,
+        None => Vec::new(),
+    };
+    let rest_positions = rest_shape(&seq, &cfg.rest, &train)?;
+    if cfg.align == Align::Rigid {
+        align_rigid(&mut seq, &rest_positions);
+    }
+    let mut rest = TriMesh::new(rest_positions, seq.faces.clone());
+    let unit_box = if cfg.unit_box { UnitBox::fit(&rest.positions)? } else { UnitBox::identity() };
+    if cfg.unit_box {
+        for p in seq.frames.iter_mut().flatten() {
+            *p = unit_box.apply(*p);
+        }
+        for p in rest.positions.iter_mut() {
+            *p = unit_box.apply(*p);
+        }
+    }
+    Ok(Prepared { sequence: seq, rest, train, test, unit_box })
+}
+
+/// The rest shape's positions: the first training frame, the mean of the training frames, or a
+/// mesh file with the sequence's vertex count and faces.
+pub fn rest_shape(seq: &MeshSequence, rest: &RestShape, train: &[usize]) -> Result<Vec<Vec3>> {
+    match rest {
+        RestShape::First => Ok(seq.frames[train[0]].clone()),
+        RestShape::Mean => {
+            let n = seq.n_vertices();
+            let mut mean = vec![[0.0; 3]; n];
+            for &f in train {
+                for (m, p) in mean.iter_mut().zip(&seq.frames[f]) {
+                    for k in 0..3 {
+                        m[k] += p[k];
+                    }
+                }
+            }
+            let s = 1.0 / train.len() as f64;
+            Ok(mean.into_iter().map(|m| m.map(|x| x * s)).collect())
+        }
+        RestShape::File(path) => {
+            let m = mesh::load_mesh(path)?;
+            if m.n_vertices() != seq.n_vertices() {
+                return Err(Error::Mismatch {
+                    path: path.clone(),
+                    message: format!("rest mesh has {} vertices, the sequence has {}", m.n_vertices(), seq.n_vertices()),
+                });
+            }
+            if m.faces != seq.faces {
+                return Err(Error::Mismatch { path: path.clone(), message: "rest mesh faces differ from the sequence's faces".into() });
+            }
+            Ok(m.positions)
+        }
+    }
+}
+
+/// Rigidly aligns every frame to `rest` (Kabsch, proper rotations only).
+pub fn align_rigid(seq: &mut MeshSequence, rest: &[Vec3]) {
+    for frame in seq.frames.iter_mut() {
+        let t = kabsch(frame, rest);
+        for p in frame.iter_mut() {
+            *p = t.apply(*p);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::FrameSelection;
+
+    fn cfg(path: &str) -> DataConfig {
+        DataConfig { path: path.into(), train: FrameSelection::All, test: None, rest: RestShape::First, align: Align::None, unit_box: false }
+    }
+
+    #[test]
+    fn unit_box_round_trip() {
+        let pts = vec![[1.0, 2.0, 3.0], [3.0, 2.5, 3.5], [2.0, 6.0, 3.0]];
+        let b = UnitBox::fit(&pts).unwrap();
+        for p in &pts {
+            let q = b.apply(*p);
+            assert!(q.iter().all(|&x| (-1e-12..=1.0 + 1e-12).contains(&x)));
+            let r = b.invert(q);
+            for k in 0..3 {
+                assert!((r[k] - p[k]).abs() < 1e-12);
+            }
+        }
+        assert!(UnitBox::fit(&[[1.0; 3], [1.0; 3]]).is_err());
+    }
+
+    #[test]
+    fn rigid_alignment_undoes_a_rigid_motion() {
+        let seq0 = crate::synthetic::load("synthetic:tube").unwrap();
+        let mut seq = seq0.clone();
+        let (s, c) = 0.7f64.sin_cos();
+        for p in seq.frames[3].iter_mut() {
+            *p = [c * p[0] - s * p[1] + 0.5, s * p[0] + c * p[1] - 2.0, p[2] + 1.0];
+        }
+        let mut c = cfg("synthetic:tube");
+        c.align = Align::Rigid;
+        let prep = prepare_sequence(seq, &c).unwrap();
+        // Frame 4 was moved rigidly; after alignment it matches the alignment of the original.
+        let mut reference = seq0.clone();
+        align_rigid(&mut reference, &seq0.frames[0]);
+        for (a, b) in prep.sequence.frames[3].iter().zip(&reference.frames[3]) {
+            assert!(mesh::dist(*a, *b) < 1e-9);
+        }
+    }
+
+    #[test]
+    fn mean_rest_and_unit_box() {
+        let mut c = cfg("synthetic:bumps");
+        c.rest = RestShape::Mean;
+        c.unit_box = true;
+        c.train = FrameSelection::Ranges(vec![(1, 10)]);
+        c.test = Some(FrameSelection::Rest);
+        let p = prepare(&c).unwrap();
+        assert_eq!(p.train.len(), 10);
+        assert_eq!(p.test.len(), 30);
+        let (lo, hi) = mesh::bounding_box(&p.rest.positions);
+        let side = (0..3).map(|k| hi[k] - lo[k]).fold(0.0, f64::max);
+        assert!((side - 1.0).abs() < 1e-12);
+    }
+}
