@@ -16,3 +16,4 @@ pub mod representation;
 pub use error::{Error, Result};
 pub mod config;
 pub mod synthetic;
+pub mod artifact;
