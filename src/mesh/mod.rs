@@ -4,8 +4,19 @@
 //! 0-based vertex indices, counter-clockwise when seen from outside (the file's order is kept).
 
 pub mod topology;
+pub mod inspect;
+pub mod load;
+pub mod obj;
+pub mod off;
+pub mod ply;
+pub mod sequence;
+pub mod write;
 
 pub use topology::Topology;
+pub use inspect::{inspect, inspect_path, InspectReport, Warning, WarningKind};
+pub use load::{load_mesh, read_mesh, LoadedMesh, MeshFormat};
+pub use sequence::{load_sequence, read_sequence, LoadedSequence};
+pub use write::{colormap, colormap_range, write_obj, write_off, write_ply};
 
 /// One vertex position, `[x, y, z]`.
 pub type Vec3 = [f64; 3];

@@ -1,0 +1,199 @@
+//! Wavefront OBJ reader (geometry only).
+//!
+//! meshdeco parses OBJ itself instead of going through `tobj`: `tobj` reports errors without
+//! file or line and silently skips lines it cannot parse, which would let a corrupt file through.
+//! Only what a deformation dataset needs is read:
+//! - `v x y z [...]`: the first three numbers are the position (a `w` or vertex colours after
+//!   them are ignored); fewer than three numbers, a non-number or a non-finite value is an error.
+//! - `f a b c ...`: vertex references `i`, `i/t`, `i//n` or `i/t/n`; only `i` is used. Indices are
+//!   1-based; negative indices count back from the last vertex defined so far. Zero, an index that
+//!   resolves outside the vertex list, or a non-integer is an error. Faces may refer to vertices
+//!   defined later in the file. Polygons with more than 3 vertices are **triangulated as fans**
+//!   around their first vertex and reported in a warning.
+//! - `vt`, `vn`, `vp`, `g`, `o`, `s`, `usemtl`, `mtllib` and comments are ignored without a
+//!   warning (they do not change the geometry); `l`, `p` and free-form geometry statements
+//!   (`curv`, `surf`, …) are skipped with a warning; any other statement is skipped with a warning
+//!   naming its first line.
+//!
+//! `#` starts a comment anywhere on a line. Line continuations (`\` at the end of a line) are
+//! rejected with a clear error.
+
+use std::path::Path;
+
+use super::load::{finite_coordinate, numbered_lines, show, tokens, FaceCollector, LoadedMesh};
+use super::TriMesh;
+use crate::error::{Error, Result};
+
+/// Statements that do not affect positions or triangles and are skipped without a warning.
+const SILENT: [&[u8]; 12] =
+    [b"vt", b"vn", b"vp", b"g", b"o", b"s", b"usemtl", b"mtllib", b"lod", b"maplib", b"usemap", b"shadow_obj"];
+
+/// Parses OBJ content; `path` is used in messages only. See the module docs for what is read.
+pub fn parse_obj(bytes: &[u8], path: &Path) -> Result<LoadedMesh> {
+    let mut positions: Vec<[f64; 3]> = Vec::new();
+    let mut faces = FaceCollector::default();
+    let mut polygon: Vec<usize> = Vec::with_capacity(8);
+    // (count, first line, statement) of skipped statements, for the warnings.
+    let mut skipped: Vec<(usize, usize, String)> = Vec::new();
+
+    for (line_no, line) in numbered_lines(bytes) {
+        let line = line.split(|&b| b == b'#').next().unwrap_or(line);
+        let mut tok = tokens(line);
+        let Some(keyword) = tok.next() else { continue };
+        if line.trim_ascii_end().ends_with(b"\\") {
+            return Err(Error::parse(path, Some(line_no), "line continuations ('\\' at the end of a line) are not supported"));
+        }
+        match keyword {
+            b"v" => {
+                let mut p = [0.0; 3];
+                for (axis, slot) in p.iter_mut().enumerate() {
+                    let t = tok.next().ok_or_else(|| {
+                        Error::parse(path, Some(line_no), format!("vertex has {axis} coordinates, expected 3"))
+                    })?;
+                    *slot = finite_coordinate(t, axis).map_err(|m| Error::parse(path, Some(line_no), m))?;
+                }
+                positions.push(p);
+            }
+            b"f" => {
+                polygon.clear();
+                for t in tok {
+                    let idx = resolve_index(t, positions.len()).map_err(|m| Error::parse(path, Some(line_no), m))?;
+                    polygon.push(idx);
+                }
+                faces.push(&polygon, line_no).map_err(|m| Error::parse(path, Some(line_no), m))?;
+            }
+            k if SILENT.contains(&k) => {}
+            k => {
+                let name = show(k);
+                match skipped.iter_mut().find(|s| s.2 == name) {
+                    Some(s) => s.0 += 1,
+                    None => skipped.push((1, line_no, name)),
+                }
+            }
+        }
+    }
+
+    if positions.is_empty() {
+        return Err(Error::parse(path, None, "no vertices ('v' lines) found"));
+    }
+    if faces.faces.is_empty() {
+        return Err(Error::parse(path, None, "no faces ('f' lines) found: a point cloud is not a mesh"));
+    }
+    if let Some((line, v)) = faces.first_out_of_range(positions.len()) {
+        return Err(Error::parse(
+            path,
+            Some(line),
+            format!("vertex index {} out of range (the file has {} vertices)", v + 1, positions.len()),
+        ));
+    }
+    let p = path.display();
+    let mut warnings: Vec<String> = faces.polygon_warning(|l| format!("{p}:{l}")).into_iter().collect();
+    for (count, line, name) in skipped {
+        let what = match name.as_str() {
+            "l" => "line elements ('l')".to_string(),
+            "p" => "point elements ('p')".to_string(),
+            other => format!("'{other}' statements"),
+        };
+        warnings.push(format!("{p}:{line}: {count} {what} ignored (only 'v' and 'f' are read)"));
+    }
+    Ok(LoadedMesh { mesh: TriMesh::new(positions, faces.faces), warnings })
+}
+
+/// Resolves one face vertex reference (`i`, `i/t`, `i//n`, `i/t/n`) to a 0-based index.
+/// `defined` is the number of vertices defined before this line (for negative indices). The
+/// upper bound of positive indices is checked after the whole file is read.
+fn resolve_index(token: &[u8], defined: usize) -> std::result::Result<usize, String> {
+    let head = token.split(|&b| b == b'/').next().unwrap_or(token);
+    let value: i64 = std::str::from_utf8(head)
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .ok_or_else(|| format!("face vertex '{}' is not an integer index", show(token)))?;
+    match value {
+        0 => Err("face vertex index 0 (OBJ indices start at 1)".to_string()),
+        v if v > 0 => Ok(v as usize - 1),
+        v => {
+            let back = v.unsigned_abs() as usize;
+            if back > defined {
+                Err(format!("relative face vertex index {v} reaches before the first vertex ({defined} defined so far)"))
+            } else {
+                Ok(defined - back)
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse(s: &str) -> Result<LoadedMesh> {
+        parse_obj(s.as_bytes(), Path::new("t.obj"))
+    }
+
+    #[test]
+    fn reads_vertices_and_face_reference_forms() {
+        let m = parse(
+            "# comment\nv 0 0 0\nv 1 0 0 1.0\nv 0 1 0 0.5 0.5 0.5\r\nv 1 1 0\nvt 0 0\nvn 0 0 1\n\
+             g grp\ns off\nf 1 2 3 # trailing comment\nf 2/1/1 4//1 -2/1\n",
+        )
+        .unwrap();
+        assert!(m.warnings.is_empty(), "{:?}", m.warnings);
+        assert_eq!(m.mesh.positions[1], [1.0, 0.0, 0.0]);
+        assert_eq!(m.mesh.positions[2], [0.0, 1.0, 0.0]);
+        // -2 after four vertices is the third vertex (index 2).
+        assert_eq!(m.mesh.faces, vec![[0, 1, 2], [1, 3, 2]]);
+    }
+
+    #[test]
+    fn quads_are_fanned_with_a_warning() {
+        let m = parse("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\n").unwrap();
+        assert_eq!(m.mesh.faces, vec![[0, 1, 2], [0, 2, 3]]);
+        assert_eq!(m.warnings.len(), 1);
+        assert!(m.warnings[0].starts_with("t.obj:5: 1 polygon"), "{}", m.warnings[0]);
+    }
+
+    #[test]
+    fn forward_references_are_allowed() {
+        let m = parse("f 1 2 3\nv 0 0 0\nv 1 0 0\nv 0 1 0\n").unwrap();
+        assert_eq!(m.mesh.faces, vec![[0, 1, 2]]);
+    }
+
+    #[test]
+    fn unknown_statements_are_reported() {
+        let m = parse("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nl 1 2\nbogus 1\nbogus 2\n").unwrap();
+        assert_eq!(m.warnings.len(), 2);
+        assert!(m.warnings[0].contains("t.obj:5: 1 line elements"), "{:?}", m.warnings);
+        assert!(m.warnings[1].contains("t.obj:6: 2 'bogus' statements"), "{:?}", m.warnings);
+    }
+
+    fn err(s: &str) -> String {
+        parse(s).unwrap_err().to_string()
+    }
+
+    #[test]
+    fn malformed_lines_name_file_and_line() {
+        let tri = "v 0 0 0\nv 1 0 0\nv 0 1 0\n";
+        let e = err(&format!("{tri}v 1 2\nf 1 2 3\n"));
+        assert!(e.starts_with("t.obj:4: vertex has 2 coordinates"), "{e}");
+        let e = err(&format!("{tri}v 1 x 2\n"));
+        assert!(e.starts_with("t.obj:4: y coordinate 'x' is not a number"), "{e}");
+        let e = err(&format!("{tri}v 1 2 NaN\nf 1 2 3\n"));
+        assert!(e.starts_with("t.obj:4: non-finite z coordinate 'NaN'"), "{e}");
+        let e = err(&format!("{tri}f 1 2 4\n"));
+        assert!(e.starts_with("t.obj:4: vertex index 4 out of range (the file has 3 vertices)"), "{e}");
+        let e = err(&format!("{tri}f 0 1 2\n"));
+        assert!(e.starts_with("t.obj:4: face vertex index 0"), "{e}");
+        let e = err(&format!("{tri}f 1 2 -4\n"));
+        assert!(e.starts_with("t.obj:4: relative face vertex index -4"), "{e}");
+        let e = err(&format!("{tri}f 1 2\n"));
+        assert!(e.starts_with("t.obj:4: face with 2 vertices"), "{e}");
+        let e = err(&format!("{tri}f 1 2 a\n"));
+        assert!(e.starts_with("t.obj:4: face vertex 'a' is not an integer"), "{e}");
+        let e = err(&format!("{tri}f 1 2 \\\n 3\n"));
+        assert!(e.starts_with("t.obj:4: line continuations"), "{e}");
+        let e = err(tri);
+        assert!(e.starts_with("t.obj: no faces"), "{e}");
+        let e = err("# empty\n");
+        assert!(e.starts_with("t.obj: no vertices"), "{e}");
+    }
+}

@@ -1,0 +1,115 @@
+//! Loading and inspecting the real datasets in `../shared/data` (counts from its README).
+//! Every test prints a reason and returns early when the folder is absent; the synthetic
+//! counterparts are the unit tests of `src/mesh/*` and `tests/malformed_inputs.rs`.
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use meshdeco::mesh::{inspect, read_mesh, read_sequence, write_obj, write_ply, LoadedSequence, WarningKind};
+
+fn dataset(name: &str) -> Option<PathBuf> {
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data").join(name);
+    if dir.is_dir() {
+        Some(dir)
+    } else {
+        println!("skipping: {} is absent", dir.display());
+        None
+    }
+}
+
+/// Loads a dataset, printing the load time, and checks the README's counts.
+fn load(dir: &PathBuf, frames: usize, vertices: usize, faces: usize) -> LoadedSequence {
+    let start = Instant::now();
+    let loaded = read_sequence(dir.to_str().unwrap()).unwrap();
+    println!("loaded {} in {:.1} ms", dir.display(), start.elapsed().as_secs_f64() * 1e3);
+    let s = &loaded.sequence;
+    assert_eq!((s.n_frames(), s.n_vertices(), s.n_faces()), (frames, vertices, faces));
+    assert!(loaded.warnings.is_empty(), "{:?}", loaded.warnings);
+    loaded
+}
+
+/// The README states: triangles only, valid indices, no degenerate faces, no non-manifold edges.
+/// The only warnings inspect may give are therefore about boundaries and components.
+fn assert_clean(report: &meshdeco::mesh::InspectReport) {
+    for w in &report.warnings {
+        assert!(matches!(w.kind, WarningKind::BoundaryLoops | WarningKind::Components), "unexpected warning: {w}");
+    }
+}
+
+#[test]
+fn scape_71_closed_frames_in_natural_order() {
+    let Some(dir) = dataset("scape") else { return };
+    let loaded = load(&dir, 71, 2161, 4318);
+    let expected: Vec<String> = (1..=71).map(|i| i.to_string()).collect();
+    assert_eq!(loaded.sequence.names, expected);
+    let report = inspect(&loaded.sequence);
+    println!("{report}");
+    assert!(report.boundary_loops.is_empty());
+    assert_eq!(report.euler_characteristic, 2);
+    assert_clean(&report);
+}
+
+#[test]
+fn horse_gallop_has_one_boundary_loop_of_19_edges() {
+    let Some(dir) = dataset("horse-gallop") else { return };
+    let loaded = load(&dir, 48, 8431, 16843);
+    let s = &loaded.sequence;
+    assert_eq!(s.names[0], "0001");
+    assert_eq!(s.names[47], "0048");
+    // README: frame 28 repeats frame 4 exactly (1-based), which also checks the frame order.
+    assert_eq!(s.frames[27], s.frames[3]);
+    assert_ne!(s.frames[27], s.frames[4]);
+    let report = inspect(s);
+    println!("{report}");
+    assert_eq!(report.boundary_loops, vec![19]);
+    assert_eq!(report.boundary_edges, 19);
+    assert_clean(&report);
+}
+
+#[test]
+fn stfaces_ply_loads() {
+    let Some(dir) = dataset("stfaces") else { return };
+    let loaded = load(&dir, 4, 7118, 14037);
+    assert_eq!(loaded.sequence.names, vec!["disgust", "neutral", "smile", "surprise"]);
+    let report = inspect(&loaded.sequence);
+    println!("{report}");
+    assert!(!report.boundary_loops.is_empty(), "stfaces is an open surface");
+    assert_clean(&report);
+}
+
+#[test]
+fn cactus_ply_loads_closed() {
+    let Some(dir) = dataset("cactus") else { return };
+    let loaded = load(&dir, 19, 5261, 10518);
+    let expected: Vec<String> = (0..19).map(|i| format!("cactus{i}")).collect();
+    assert_eq!(loaded.sequence.names, expected);
+    let report = inspect(&loaded.sequence);
+    println!("{report}");
+    assert!(report.boundary_loops.is_empty());
+    assert_clean(&report);
+}
+
+#[test]
+fn face_poses_load() {
+    let Some(dir) = dataset("face-poses") else { return };
+    let loaded = load(&dir, 9, 29299, 57836);
+    let report = inspect(&loaded.sequence);
+    println!("{report}");
+    assert!(!report.boundary_loops.is_empty(), "face-poses is an open surface");
+    assert_clean(&report);
+}
+
+#[test]
+fn scape_frame_round_trips_through_obj_and_ply() {
+    let Some(dir) = dataset("scape") else { return };
+    let mesh = read_mesh(&dir.join("1.obj")).unwrap().mesh;
+    let out = std::env::temp_dir().join(format!("meshdeco-scape-rt-{}", std::process::id()));
+    std::fs::create_dir_all(&out).unwrap();
+    write_obj(&out.join("1.obj"), &mesh).unwrap();
+    let heights: Vec<f64> = mesh.positions.iter().map(|p| p[1]).collect();
+    let colors = meshdeco::mesh::colormap(&heights);
+    write_ply(&out.join("1.ply"), &mesh, Some(&colors), Some(("height", &heights))).unwrap();
+    assert_eq!(read_mesh(&out.join("1.obj")).unwrap().mesh, mesh);
+    assert_eq!(read_mesh(&out.join("1.ply")).unwrap().mesh, mesh);
+    std::fs::remove_dir_all(&out).unwrap();
+}
