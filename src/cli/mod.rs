@@ -6,6 +6,7 @@ use std::path::PathBuf;
 use anyhow::Result;
 use clap::{Parser, Subcommand};
 
+mod inspect;
 mod train;
 
 /// Sparse, localized deformation components from meshes that share one connectivity.
@@ -18,6 +19,9 @@ pub struct Cli {
 
 #[derive(Debug, Subcommand)]
 pub enum Command {
+    /// Summarise a mesh sequence: frames, vertices, faces, boundary loops, components, bounding
+    /// box, warnings.
+    Inspect(inspect::InspectArgs),
     /// Train a model from a TOML experiment config (see README for the keys).
     Train(train::TrainArgs),
 }
@@ -25,6 +29,7 @@ pub enum Command {
 /// Runs one parsed command line.
 pub fn run(cli: Cli) -> Result<()> {
     match cli.command {
+        Command::Inspect(a) => inspect::run(a),
         Command::Train(a) => train::run(a),
     }
 }
