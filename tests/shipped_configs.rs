@@ -1,0 +1,33 @@
+//! Every config shipped in `configs/` parses and validates, so a user's first run never fails
+//! on a typo of ours.
+
+use meshdeco::config::Config;
+
+#[test]
+fn every_shipped_config_validates() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("configs");
+    let mut files: Vec<_> = walk(&dir);
+    files.sort();
+    assert!(files.len() >= 7, "expected the shipped configs, found {files:?}");
+    for f in &files {
+        let c = Config::from_file(f).unwrap_or_else(|e| panic!("{}: {e}", f.display()));
+        assert!(!c.name.is_empty());
+    }
+    // The paper's dataset configs for the autoencoder exist.
+    for name in ["demo", "scape", "horse", "swing", "jumping", "face", "humanoid"] {
+        assert!(dir.join(format!("{name}.toml")).exists(), "configs/{name}.toml missing");
+    }
+}
+
+fn walk(dir: &std::path::Path) -> Vec<std::path::PathBuf> {
+    let mut out = Vec::new();
+    for e in std::fs::read_dir(dir).unwrap() {
+        let p = e.unwrap().path();
+        if p.is_dir() {
+            out.extend(walk(&p));
+        } else if p.extension().is_some_and(|x| x == "toml") {
+            out.push(p);
+        }
+    }
+    out
+}
