@@ -12,6 +12,7 @@ use serde::Serialize;
 
 use super::sequence::read_sequence;
 use super::{bounding_box, dist, MeshSequence, Topology, Vec3};
+use crate::geometry::normals::{cross, norm, sub};
 use crate::error::Result;
 
 /// What a [`Warning`] is about.
@@ -96,7 +97,7 @@ pub fn inspect(seq: &MeshSequence) -> InspectReport {
     let (_, components) = topology.components();
     let used = n - topology.isolated_vertices().len();
     let first = seq.frames.first().map(Vec::as_slice).unwrap_or(&[]);
-    let mean_edge_length = if topology.edges.is_empty() {
+    let mean_edge_length = if topology.edges.is_empty() || first.is_empty() {
         0.0
     } else {
         topology.edges.iter().map(|e| dist(first[e[0]], first[e[1]])).sum::<f64>() / topology.edges.len() as f64
@@ -177,10 +178,8 @@ pub fn mesh_warnings(seq: &MeshSequence, topology: &Topology) -> Vec<Warning> {
         (0..faces.len())
             .filter(|&i| {
                 let [a, b, c] = faces[i].map(|v| frame[v]);
-                let (u, v) = (sub(b, a), sub(c, a));
-                let cr = [u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]];
                 let longest = dist(a, b).max(dist(b, c)).max(dist(c, a));
-                (cr[0] * cr[0] + cr[1] * cr[1] + cr[2] * cr[2]).sqrt() <= ZERO_AREA_REL * longest * longest
+                norm(cross(sub(b, a), sub(c, a))) <= ZERO_AREA_REL * longest * longest
             })
             .filter(|i| repeated.binary_search(i).is_err())
             .collect()
@@ -359,10 +358,6 @@ fn non_manifold_vertices(faces: &[[usize; 3]], topology: &Topology, is_repeated:
     let mut out: Vec<usize> = fans.windows(2).filter(|w| w[0].0 == w[1].0).map(|w| w[0].0).collect();
     out.dedup();
     out
-}
-
-fn sub(a: Vec3, b: Vec3) -> Vec3 {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
 }
 
 /// Joins at most 8 items with ", ", then "… (k more)".
