@@ -2,8 +2,8 @@
 //! everything that is legal but may surprise a method (never fixed silently).
 //!
 //! Warnings (see [`WarningKind`]): faces that repeat a vertex index, faces of (numerically) zero
-//! area in any frame, non-manifold edges, edges whose two faces disagree in orientation, boundary
-//! loops, several connected components, vertices referenced by no face, and whatever the file
+//! area in any frame, non-manifold edges, edges whose two faces disagree in orientation,
+//! non-manifold vertices (several fans of faces meeting at one vertex), boundary loops, several connected components, vertices referenced by no face, and whatever the file
 //! readers reported. `meshdeco inspect <path>` prints [`InspectReport`]'s `Display`.
 
 use std::fmt;
@@ -12,6 +12,7 @@ use serde::Serialize;
 
 use super::sequence::read_sequence;
 use super::{bounding_box, dist, MeshSequence, Topology, Vec3};
+use crate::geometry::normals::{cross, norm, sub};
 use crate::error::Result;
 
 /// What a [`Warning`] is about.
@@ -27,6 +28,9 @@ pub enum WarningKind {
     NonManifoldEdge,
     /// Interior edges whose two faces traverse them in the same direction.
     InconsistentOrientation,
+    /// Vertices where separate fans of faces meet (e.g. two cones touching at their tips); their
+    /// 1-ring has no single cyclic order.
+    NonManifoldVertex,
     /// The surface is open (informational for data like faces; not a problem by itself).
     BoundaryLoops,
     /// More than one connected component.
@@ -93,7 +97,7 @@ pub fn inspect(seq: &MeshSequence) -> InspectReport {
     let (_, components) = topology.components();
     let used = n - topology.isolated_vertices().len();
     let first = seq.frames.first().map(Vec::as_slice).unwrap_or(&[]);
-    let mean_edge_length = if topology.edges.is_empty() {
+    let mean_edge_length = if topology.edges.is_empty() || first.is_empty() {
         0.0
     } else {
         topology.edges.iter().map(|e| dist(first[e[0]], first[e[1]])).sum::<f64>() / topology.edges.len() as f64
@@ -174,10 +178,8 @@ pub fn mesh_warnings(seq: &MeshSequence, topology: &Topology) -> Vec<Warning> {
         (0..faces.len())
             .filter(|&i| {
                 let [a, b, c] = faces[i].map(|v| frame[v]);
-                let (u, v) = (sub(b, a), sub(c, a));
-                let cr = [u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]];
                 let longest = dist(a, b).max(dist(b, c)).max(dist(c, a));
-                (cr[0] * cr[0] + cr[1] * cr[1] + cr[2] * cr[2]).sqrt() <= ZERO_AREA_REL * longest * longest
+                norm(cross(sub(b, a), sub(c, a))) <= ZERO_AREA_REL * longest * longest
             })
             .filter(|i| repeated.binary_search(i).is_err())
             .collect()
@@ -261,6 +263,19 @@ pub fn mesh_warnings(seq: &MeshSequence, topology: &Topology) -> Vec<Warning> {
         );
     }
 
+    let pinched = non_manifold_vertices(faces, topology, &is_repeated);
+    if let Some(&v) = pinched.first() {
+        let k = pinched.len();
+        warn(
+            WarningKind::NonManifoldVertex,
+            format!(
+                "{k} non-manifold vert{} where separate fans of faces meet (first: vertex {v}); their 1-rings \
+                 have no single cyclic order",
+                if k == 1 { "ex" } else { "ices" }
+            ),
+        );
+    }
+
     let loops = topology.boundary_loops(faces);
     if !loops.is_empty() {
         let lengths: Vec<String> = loops.iter().map(|l| l.len().to_string()).collect();
@@ -307,8 +322,42 @@ pub fn mesh_warnings(seq: &MeshSequence, topology: &Topology) -> Vec<Warning> {
     out
 }
 
-fn sub(a: Vec3, b: Vec3) -> Vec3 {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+/// Vertices whose incident faces form more than one fan, i.e. whose face corners fall into
+/// several groups when corners of the same vertex are joined across shared edges with exactly two
+/// (non-degenerate) faces. Faces with a repeated index are left out.
+fn non_manifold_vertices(faces: &[[usize; 3]], topology: &Topology, is_repeated: &impl Fn(usize) -> bool) -> Vec<usize> {
+    // Union–find over corners `3 · face + k`.
+    let mut parent: Vec<usize> = (0..3 * faces.len()).collect();
+    fn root(parent: &mut [usize], mut x: usize) -> usize {
+        while parent[x] != x {
+            parent[x] = parent[parent[x]];
+            x = parent[x];
+        }
+        x
+    }
+    let corner = |face: usize, v: usize| 3 * face + faces[face].iter().position(|&u| u == v).expect("vertex of face");
+    for (e, inc) in topology.edges.iter().zip(&topology.edge_faces) {
+        let proper: Vec<usize> = inc.iter().map(|&(f, _)| f).filter(|&f| !is_repeated(f)).collect();
+        if let [f1, f2] = proper[..] {
+            for &v in e {
+                let (a, b) = (root(&mut parent, corner(f1, v)), root(&mut parent, corner(f2, v)));
+                parent[a] = b;
+            }
+        }
+    }
+    let mut fans: Vec<(usize, usize)> = Vec::with_capacity(3 * faces.len());
+    for (fi, f) in faces.iter().enumerate() {
+        if !is_repeated(fi) {
+            for (k, &v) in f.iter().enumerate() {
+                fans.push((v, root(&mut parent, 3 * fi + k)));
+            }
+        }
+    }
+    fans.sort_unstable();
+    fans.dedup();
+    let mut out: Vec<usize> = fans.windows(2).filter(|w| w[0].0 == w[1].0).map(|w| w[0].0).collect();
+    out.dedup();
+    out
 }
 
 /// Joins at most 8 items with ", ", then "… (k more)".
@@ -455,6 +504,23 @@ mod tests {
         assert!(r.warnings[4].message.contains("2 connected components (vertex counts 6, 3)"), "{}", r.warnings[4]);
         assert!(r.warnings[5].message.starts_with("1 vertex referenced by no face (first: vertex 9)"), "{}", r.warnings[5]);
         assert_eq!(r.components, 2);
+    }
+
+    #[test]
+    fn bow_tie_vertex_is_non_manifold() {
+        // Two triangles touching only at vertex 0, and a closed octahedron (no such vertex).
+        let p = vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]];
+        let r = inspect(&seq(vec![p], vec![[0, 1, 2], [0, 3, 4]]));
+        let w = r.warnings.iter().find(|w| w.kind == WarningKind::NonManifoldVertex).expect("bow tie");
+        assert!(w.message.starts_with("1 non-manifold vertex where") && w.message.contains("vertex 0)"), "{w}");
+        assert_eq!(r.components, 1);
+        let (_, f) = octahedron(1.0);
+        let t = Topology::new(6, &f);
+        assert!(non_manifold_vertices(&f, &t, &|_| false).is_empty());
+        // An open fan (octahedron minus the faces around vertex 5 but one) is still one fan.
+        let open: Vec<[usize; 3]> = f.iter().copied().filter(|f| !f.contains(&5)).chain([[2, 0, 5]]).collect();
+        let t = Topology::new(6, &open);
+        assert!(non_manifold_vertices(&open, &t, &|_| false).is_empty());
     }
 
     #[test]

@@ -176,6 +176,16 @@ impl FaceCollector {
     }
 }
 
+/// A fresh, empty directory under the system temp dir for one unit test (`name` keeps parallel
+/// tests apart).
+#[cfg(test)]
+pub(crate) fn test_dir(name: &str) -> std::path::PathBuf {
+    let d = std::env::temp_dir().join(format!("meshdeco-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -144,14 +144,14 @@ fn parse_header(bytes: &[u8], path: &Path) -> Result<Header> {
                 let bad_type = |t: &[u8]| err(line_no, format!("unknown property type '{}'", show(t)));
                 let (ty, name) = match tok.as_slice() {
                     [_, b"list", count, item, name] => {
-                        let c = Scalar::from_name(count).ok_or_else(|| bad_type(*count))?;
-                        let i = Scalar::from_name(item).ok_or_else(|| bad_type(*item))?;
+                        let c = Scalar::from_name(count).ok_or_else(|| bad_type(count))?;
+                        let i = Scalar::from_name(item).ok_or_else(|| bad_type(item))?;
                         if !c.is_integer() {
                             return Err(err(line_no, format!("list count type '{}' is not an integer type", show(count))));
                         }
                         (PropertyType::List(c, i), name)
                     }
-                    [_, ty, name] => (PropertyType::Scalar(Scalar::from_name(ty).ok_or_else(|| bad_type(*ty))?), name),
+                    [_, ty, name] => (PropertyType::Scalar(Scalar::from_name(ty).ok_or_else(|| bad_type(ty))?), name),
                     _ => {
                         return Err(err(
                             line_no,

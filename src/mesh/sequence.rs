@@ -72,10 +72,12 @@ pub fn read_sequence(spec: &str) -> Result<LoadedSequence> {
     Ok(LoadedSequence { sequence, files, warnings })
 }
 
-/// Builds a sequence from meshes read from `files` (same length), checking that every frame has
-/// the first frame's vertex count and exactly its face list. Names are the file stems.
+/// Builds a sequence from meshes read from `files` (one file per mesh), checking that every
+/// frame has the first frame's vertex count and exactly its face list. Names are the file stems.
 pub fn sequence_from_meshes(files: &[PathBuf], meshes: Vec<TriMesh>) -> Result<MeshSequence> {
-    assert_eq!(files.len(), meshes.len(), "one file per mesh");
+    if files.len() != meshes.len() {
+        return Err(Error::Invalid(format!("{} files given for {} meshes", files.len(), meshes.len())));
+    }
     let Some(first) = meshes.first() else {
         return Err(Error::Invalid("a sequence needs at least one frame".into()));
     };
@@ -258,6 +260,7 @@ fn merge_warnings(files: &[PathBuf], per_file: &[Vec<String>]) -> Vec<String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::mesh::load::test_dir;
 
     #[test]
     fn natural_order_examples() {
@@ -295,18 +298,12 @@ mod tests {
         assert!(glob_match("", ""));
     }
 
-    fn tmp_dir(name: &str) -> PathBuf {
-        let d = std::env::temp_dir().join(format!("meshdeco-seq-{name}-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&d);
-        std::fs::create_dir_all(&d).unwrap();
-        d
-    }
 
     const TRI: &str = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nf 1 2 3\nf 2 4 3\n";
 
     #[test]
     fn directory_glob_and_file_specs() {
-        let d = tmp_dir("spec");
+        let d = test_dir("seq-spec");
         for name in ["10.obj", "2.OBJ", "1.obj", "notes.txt", ".hidden.obj", "3.off"] {
             let body = if name.ends_with(".off") { "OFF\n4 2 0\n0 0 0\n1 0 0\n0 1 0\n1 1 1\n3 0 1 2\n3 1 3 2\n" } else { TRI };
             std::fs::write(d.join(name), body).unwrap();
@@ -333,7 +330,7 @@ mod tests {
 
     #[test]
     fn mismatching_frames_are_named() {
-        let d = tmp_dir("mismatch");
+        let d = test_dir("seq-mismatch");
         std::fs::write(d.join("1.obj"), TRI).unwrap();
         std::fs::write(d.join("2.obj"), TRI.replace("f 2 4 3", "f 2 3 4")).unwrap();
         let e = read_sequence(d.to_str().unwrap()).unwrap_err().to_string();
@@ -350,7 +347,7 @@ mod tests {
 
     #[test]
     fn repeated_warnings_are_merged() {
-        let d = tmp_dir("warn");
+        let d = test_dir("seq-warn");
         let quad = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\n";
         for name in ["a.obj", "b.obj", "c.obj"] {
             std::fs::write(d.join(name), quad).unwrap();

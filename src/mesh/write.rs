@@ -197,12 +197,8 @@ pub(crate) fn write_atomic(path: &Path, body: impl FnOnce(&mut BufWriter<File>) 
 mod tests {
     use super::super::load::read_mesh;
     use super::*;
+    use crate::mesh::load::test_dir;
 
-    fn tmp_dir(name: &str) -> PathBuf {
-        let d = std::env::temp_dir().join(format!("meshdeco-write-{name}-{}", std::process::id()));
-        std::fs::create_dir_all(&d).unwrap();
-        d
-    }
 
     /// A tetrahedron with awkward coordinates (no short decimal form, tiny and huge magnitudes).
     fn tetra() -> TriMesh {
@@ -214,7 +210,7 @@ mod tests {
 
     #[test]
     fn round_trips_are_exact() {
-        let d = tmp_dir("rt");
+        let d = test_dir("write-rt");
         let m = tetra();
         for name in ["a.obj", "a.ply", "a.off"] {
             let p = d.join(name);
@@ -244,7 +240,7 @@ mod tests {
 
     #[test]
     fn refuses_bad_input_and_leaves_target_untouched() {
-        let d = tmp_dir("bad");
+        let d = test_dir("write-bad");
         let p = d.join("m.obj");
         std::fs::write(&p, "old").unwrap();
         let mut m = tetra();
