@@ -71,23 +71,97 @@ pub fn cotan_weights(positions: &[Vec3], faces: &[[usize; 3]], topology: &Topolo
         .edges
         .iter()
         .zip(&topology.edge_faces)
-        .map(|(e, inc)| {
-            inc.iter()
-                .filter(|(f, _)| !degenerate[*f])
-                .map(|&(_, opp)| 0.5 * cotangent(positions[opp], positions[e[0]], positions[e[1]]))
-                .sum()
-        })
+        .map(|(e, inc)| edge_weight(positions, &degenerate, *e, inc))
         .collect()
+}
+
+fn edge_weight(positions: &[Vec3], degenerate: &[bool], e: [usize; 2], incident: &[(usize, usize)]) -> f64 {
+    incident
+        .iter()
+        .filter(|(f, _)| !degenerate[*f])
+        .map(|&(_, opp)| 0.5 * cotangent(positions[opp], positions[e[0]], positions[e[1]]))
+        .sum()
 }
 
 /// The N×N cotangent Laplacian (positive semi-definite convention, see the module docs):
 /// `L_ij = −w_ij`, `L_ii = Σ_j w_ij`, `nnz = N + 2E`. N = `positions.len()`.
 ///
-/// Face indices must be `< N` (validate first).
+/// Face indices must be `< N` (validate first). Builds its edge list by sorting (it does not
+/// need the 1-rings of a full [`Topology`]); the edges and weights are those of
+/// [`Topology::edges`] and [`cotan_weights`].
 pub fn cotan_laplacian(positions: &[Vec3], faces: &[[usize; 3]]) -> SparseColMat<usize, f64> {
-    let topology = Topology::new(positions.len(), faces);
-    let weights = cotan_weights(positions, faces, &topology);
-    laplacian_from_weights(&topology, &weights)
+    let inc = EdgeIncidence::new(faces);
+    let weights = inc.cotan_weights(positions, &degenerate_faces(positions, faces));
+    let mut diag = vec![0.0; positions.len()];
+    for (e, &w) in inc.edges.iter().zip(&weights) {
+        diag[e[0]] += w;
+        diag[e[1]] += w;
+    }
+    let off: Vec<f64> = weights.iter().map(|w| -w).collect();
+    SymmetricPattern::from_edges(positions.len(), &inc.edges).assemble(&diag, &off)
+}
+
+/// Unique undirected edges of a face list with their incident (face, opposite vertex) pairs,
+/// built by sorting (no hashing). Same edges, order and incidence as [`Topology`].
+#[derive(Debug, Clone)]
+pub struct EdgeIncidence {
+    /// Unique edges `[i, j]`, `i < j`, sorted lexicographically.
+    pub edges: Vec<[usize; 2]>,
+    /// CSR offsets: the incident faces of edge e are `incident[offsets[e]..offsets[e + 1]]`.
+    pub offsets: Vec<usize>,
+    /// `(face, opposite vertex)` pairs, grouped per edge, faces ascending.
+    pub incident: Vec<(usize, usize)>,
+}
+
+impl EdgeIncidence {
+    /// Edges of `faces`; a face side whose two ends are equal is ignored (as in [`Topology`]).
+    pub fn new(faces: &[[usize; 3]]) -> Self {
+        let mut sides: Vec<(usize, usize, usize, usize)> = Vec::with_capacity(faces.len() * 3);
+        for (fi, f) in faces.iter().enumerate() {
+            for k in 0..3 {
+                let (a, b, c) = (f[k], f[(k + 1) % 3], f[(k + 2) % 3]);
+                if a != b {
+                    sides.push((a.min(b), a.max(b), fi, c));
+                }
+            }
+        }
+        sides.sort_unstable();
+        let mut edges = Vec::with_capacity(sides.len() / 2 + 1);
+        let mut offsets = Vec::with_capacity(sides.len() / 2 + 2);
+        let mut incident = Vec::with_capacity(sides.len());
+        for (k, &(i, j, f, c)) in sides.iter().enumerate() {
+            if k == 0 || (sides[k - 1].0, sides[k - 1].1) != (i, j) {
+                edges.push([i, j]);
+                offsets.push(incident.len());
+            }
+            incident.push((f, c));
+        }
+        offsets.push(incident.len());
+        EdgeIncidence { edges, offsets, incident }
+    }
+
+    /// Incident `(face, opposite vertex)` pairs of edge `e`.
+    pub fn faces_of(&self, e: usize) -> &[(usize, usize)] {
+        &self.incident[self.offsets[e]..self.offsets[e + 1]]
+    }
+
+    /// `true` for every vertex (of `n`) on an edge with exactly one incident face.
+    pub fn boundary_vertices(&self, n: usize) -> Vec<bool> {
+        let mut b = vec![false; n];
+        for (e, edge) in self.edges.iter().enumerate() {
+            if self.offsets[e + 1] - self.offsets[e] == 1 {
+                b[edge[0]] = true;
+                b[edge[1]] = true;
+            }
+        }
+        b
+    }
+
+    /// Cotangent weight of every edge (as [`cotan_weights`]), skipping faces flagged in
+    /// `degenerate` (one flag per face).
+    pub fn cotan_weights(&self, positions: &[Vec3], degenerate: &[bool]) -> Vec<f64> {
+        (0..self.edges.len()).map(|e| edge_weight(positions, degenerate, self.edges[e], self.faces_of(e))).collect()
+    }
 }
 
 /// Assembles `L_ij = −w_ij`, `L_ii = Σ_j w_ij` for arbitrary symmetric edge weights `weights`
@@ -103,7 +177,7 @@ pub fn laplacian_from_weights(topology: &Topology, weights: &[f64]) -> SparseCol
         diag[e[1]] += w;
     }
     let off: Vec<f64> = weights.iter().map(|w| -w).collect();
-    SymmetricPattern::new(topology).assemble(&diag, &off)
+    SymmetricPattern::from_edges(topology.n_vertices, &topology.edges).assemble(&diag, &off)
 }
 
 /// Sparsity pattern "diagonal + both entries of every edge" of an N×N symmetric matrix in
@@ -124,9 +198,19 @@ pub struct SymmetricPattern {
 impl SymmetricPattern {
     /// Pattern of `topology` (N = `topology.n_vertices`, E = `topology.edges.len()`).
     pub fn new(topology: &Topology) -> Self {
-        let n = topology.n_vertices;
+        Self::from_edges(topology.n_vertices, &topology.edges)
+    }
+
+    /// Pattern of N vertices and the given edges, which must be unique, `[i, j]` with
+    /// `i < j < n`, sorted lexicographically (as [`Topology::edges`] and [`EdgeIncidence::edges`]).
+    ///
+    /// # Panics
+    /// If an edge is out of range or the edges are not strictly increasing.
+    pub fn from_edges(n: usize, edges: &[[usize; 2]]) -> Self {
+        assert!(edges.windows(2).all(|w| w[0] < w[1]), "edges must be unique and sorted");
+        assert!(edges.iter().all(|e| e[0] < e[1] && e[1] < n), "edges must be [i, j] with i < j < n");
         let mut count = vec![1usize; n]; // the diagonal
-        for e in &topology.edges {
+        for e in edges {
             count[e[0]] += 1;
             count[e[1]] += 1;
         }
@@ -135,24 +219,31 @@ impl SymmetricPattern {
         for c in &count {
             col_ptr.push(col_ptr.last().unwrap() + c);
         }
-        let nnz = *col_ptr.last().unwrap();
-        // Rows of column j: its neighbours and j itself, sorted.
-        let mut rows: Vec<Vec<usize>> = (0..n).map(|j| vec![j]).collect();
-        for e in &topology.edges {
-            rows[e[0]].push(e[1]);
-            rows[e[1]].push(e[0]);
+        let nnz = col_ptr[n];
+        // Column c holds, in this order: rows i < c of edges [i, c] (ascending, since the edges
+        // are sorted by i first), the diagonal, rows j > c of edges [c, j] (ascending). So the
+        // three passes below leave every column sorted.
+        let mut row_idx = vec![0usize; nnz];
+        let mut cursor: Vec<usize> = col_ptr[..n].to_vec();
+        let mut edge_slots = vec![[0usize; 2]; edges.len()];
+        for (k, e) in edges.iter().enumerate() {
+            let s = cursor[e[1]];
+            row_idx[s] = e[0];
+            edge_slots[k][0] = s; // entry (i, j): row i, column j
+            cursor[e[1]] += 1;
         }
-        let mut row_idx = Vec::with_capacity(nnz);
-        for r in &mut rows {
-            r.sort_unstable();
-            row_idx.extend_from_slice(r);
+        let mut diag_slot = vec![0usize; n];
+        for (c, d) in diag_slot.iter_mut().enumerate() {
+            row_idx[cursor[c]] = c;
+            *d = cursor[c];
+            cursor[c] += 1;
         }
-        let slot = |row: usize, col: usize| -> usize {
-            let s = &row_idx[col_ptr[col]..col_ptr[col + 1]];
-            col_ptr[col] + s.binary_search(&row).expect("entry in pattern")
-        };
-        let diag_slot = (0..n).map(|i| slot(i, i)).collect();
-        let edge_slots = topology.edges.iter().map(|e| [slot(e[0], e[1]), slot(e[1], e[0])]).collect();
+        for (k, e) in edges.iter().enumerate() {
+            let s = cursor[e[0]];
+            row_idx[s] = e[1];
+            edge_slots[k][1] = s; // entry (j, i): row j, column i
+            cursor[e[0]] += 1;
+        }
         SymmetricPattern { n, col_ptr, row_idx, diag_slot, edge_slots }
     }
 
@@ -271,6 +362,34 @@ mod tests {
             if name.starts_with("grid") {
                 // Area 2×2 = 4, |∇x|² = 1 + 0.09.
                 assert!((energy - 4.0 * 1.09).abs() < 1e-10, "{name}: energy {energy}");
+            }
+        }
+    }
+
+    #[test]
+    fn edge_incidence_and_laplacian_agree_with_topology() {
+        for (name, m) in meshes() {
+            let topo = Topology::new(m.n_vertices(), &m.faces);
+            let inc = EdgeIncidence::new(&m.faces);
+            assert_eq!(inc.edges, topo.edges, "{name}");
+            for e in 0..inc.edges.len() {
+                let mut a = inc.faces_of(e).to_vec();
+                let mut b = topo.edge_faces[e].clone();
+                a.sort_unstable();
+                b.sort_unstable();
+                assert_eq!(a, b, "{name}: edge {e}");
+            }
+            assert_eq!(inc.boundary_vertices(m.n_vertices()), topo.is_boundary_vertex, "{name}");
+            let w = cotan_weights(&m.positions, &m.faces, &topo);
+            let a = laplacian_from_weights(&topo, &w);
+            let b = cotan_laplacian(&m.positions, &m.faces);
+            assert_eq!(a.symbolic().col_ptr(), b.symbolic().col_ptr());
+            assert_eq!(a.symbolic().row_idx(), b.symbolic().row_idx());
+            assert_eq!(a.val(), b.val(), "{name}");
+            // Every column's rows are strictly increasing (faer's sorted-CSC invariant).
+            let (cp, ri) = (b.symbolic().col_ptr(), b.symbolic().row_idx());
+            for c in 0..m.n_vertices() {
+                assert!(ri[cp[c]..cp[c + 1]].windows(2).all(|w| w[0] < w[1]));
             }
         }
     }

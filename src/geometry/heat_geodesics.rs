@@ -55,10 +55,10 @@
 
 use faer::sparse::SparseColMat;
 
-use crate::geometry::cotan_laplacian::{SymmetricPattern, cotan_weights, degenerate_faces};
+use crate::geometry::cotan_laplacian::{EdgeIncidence, SymmetricPattern, degenerate_faces};
 use crate::geometry::mass_matrix::lumped_mass;
 use crate::geometry::sparse_cholesky::SparseCholesky;
-use crate::mesh::{Topology, Vec3};
+use crate::mesh::Vec3;
 use crate::{Error, Result};
 
 /// Boundary condition of the heat flow step. See the module docs.
@@ -225,10 +225,10 @@ impl HeatGeodesics {
             label[v] = root_label[r];
         }
 
-        let topology = Topology::new(n, faces);
-        let weights = cotan_weights(positions, faces, &topology);
+        let topology = EdgeIncidence::new(faces);
+        let weights = topology.cotan_weights(positions, &degenerate);
         let mass = lumped_mass(positions, faces);
-        let pattern = SymmetricPattern::new(&topology);
+        let pattern = SymmetricPattern::from_edges(n, &topology.edges);
         let mut lap_diag = vec![0.0; n];
         for (e, &w) in topology.edges.iter().zip(&weights) {
             lap_diag[e[0]] += w;
@@ -242,7 +242,7 @@ impl HeatGeodesics {
         let symbolic = SparseCholesky::analyze(heat_matrix.as_ref())?;
         let heat_neumann = SparseCholesky::factor_with_symbolic(symbolic.clone(), heat_matrix.as_ref(), "heat system M + tL")?;
 
-        let is_boundary = topology.is_boundary_vertex.clone();
+        let is_boundary = topology.boundary_vertices(n);
         let has_boundary = is_boundary.iter().any(|&b| b);
         let heat_dirichlet = if options.boundary == BoundaryCondition::Averaged && has_boundary {
             let off = masked_off(&topology, &heat_off, &is_boundary);
@@ -532,7 +532,7 @@ fn solve_dense(s: &mut [f64], r: &mut [f64], k: usize) -> Option<Vec<f64>> {
 }
 
 /// Off-diagonal values with every entry of an edge touching a `fixed` vertex set to 0.
-fn masked_off(topology: &Topology, off: &[f64], fixed: &[bool]) -> Vec<f64> {
+fn masked_off(topology: &EdgeIncidence, off: &[f64], fixed: &[bool]) -> Vec<f64> {
     topology.edges.iter().zip(off).map(|(e, &v)| if fixed[e[0]] || fixed[e[1]] { 0.0 } else { v }).collect()
 }
 
