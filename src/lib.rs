@@ -17,3 +17,4 @@ pub use error::{Error, Result};
 pub mod config;
 pub mod synthetic;
 pub mod artifact;
+pub mod preprocess;

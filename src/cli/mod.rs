@@ -6,6 +6,7 @@ use std::path::PathBuf;
 use anyhow::Result;
 use clap::{Parser, Subcommand};
 
+mod geodesic;
 mod inspect;
 mod train;
 
@@ -19,6 +20,8 @@ pub struct Cli {
 
 #[derive(Debug, Subcommand)]
 pub enum Command {
+    /// Heat-method geodesic distances from source vertices, written as a coloured PLY.
+    Geodesic(geodesic::GeodesicArgs),
     /// Summarise a mesh sequence: frames, vertices, faces, boundary loops, components, bounding
     /// box, warnings.
     Inspect(inspect::InspectArgs),
@@ -29,6 +32,7 @@ pub enum Command {
 /// Runs one parsed command line.
 pub fn run(cli: Cli) -> Result<()> {
     match cli.command {
+        Command::Geodesic(a) => geodesic::run(a),
         Command::Inspect(a) => inspect::run(a),
         Command::Train(a) => train::run(a),
     }

@@ -134,3 +134,5 @@ pub fn bounding_box(points: &[Vec3]) -> (Vec3, Vec3) {
     }
     (lo, hi)
 }
+
+pub mod primitives;

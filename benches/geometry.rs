@@ -1,0 +1,59 @@
+//! Geometry operator benchmarks: cotangent Laplacian assembly, heat-method factorisation
+//! (`HeatGeodesics::new`: Laplacian, mass, one symbolic analysis, three numeric Cholesky
+//! factorisations on meshes with a boundary) and one single-source geodesic query.
+//!
+//! Meshes: a unit icosphere with 10 242 vertices (always) and frame 1 of the horse gallop
+//! (8 431 vertices, `../shared/data/horse-gallop/0001.obj`, loaded with tobj directly; skipped
+//! with a message when the file is absent).
+//!
+//! Run: `cargo bench --bench geometry`. Target: a query on the horse ≤ 5 ms.
+
+use std::hint::black_box;
+use std::path::Path;
+use std::time::Duration;
+
+use criterion::{Criterion, criterion_group, criterion_main};
+use meshdeco::geometry::cotan_laplacian::cotan_laplacian;
+use meshdeco::geometry::heat_geodesics::HeatGeodesics;
+use meshdeco::mesh::primitives::icosphere;
+use meshdeco::mesh::{TriMesh, Vec3};
+
+const HORSE: &str = "../shared/data/horse-gallop/0001.obj";
+
+/// Loads an OBJ's positions and triangles (position indices, models concatenated).
+fn load_obj(path: &Path) -> Option<TriMesh> {
+    let opts = tobj::LoadOptions { triangulate: true, single_index: false, ..Default::default() };
+    let (models, _) = tobj::load_obj(path, &opts).ok()?;
+    let mut positions: Vec<Vec3> = Vec::new();
+    let mut faces = Vec::new();
+    for m in models {
+        let off = positions.len();
+        positions.extend(m.mesh.positions.chunks_exact(3).map(|c| [c[0] as f64, c[1] as f64, c[2] as f64]));
+        faces.extend(m.mesh.indices.chunks_exact(3).map(|c| [off + c[0] as usize, off + c[1] as usize, off + c[2] as usize]));
+    }
+    Some(TriMesh::new(positions, faces))
+}
+
+fn bench_mesh(c: &mut Criterion, name: &str, mesh: &TriMesh) {
+    let mut group = c.benchmark_group(format!("geometry/{name} ({} vertices)", mesh.n_vertices()));
+    group.sample_size(20).warm_up_time(Duration::from_secs(1)).measurement_time(Duration::from_secs(4));
+    group.bench_function("cotan_laplacian", |b| b.iter(|| cotan_laplacian(black_box(&mesh.positions), black_box(&mesh.faces))));
+    group.bench_function("heat_factor (m=1)", |b| {
+        b.iter(|| HeatGeodesics::new(black_box(&mesh.positions), black_box(&mesh.faces), 1.0).unwrap())
+    });
+    let solver = HeatGeodesics::new(&mesh.positions, &mesh.faces, 1.0).unwrap();
+    let source = mesh.n_vertices() / 3;
+    group.bench_function("geodesic_query", |b| b.iter(|| solver.distances(black_box(&[source])).unwrap()));
+    group.finish();
+}
+
+fn geometry(c: &mut Criterion) {
+    bench_mesh(c, "icosphere(5)", &icosphere(5));
+    match load_obj(Path::new(HORSE)) {
+        Some(horse) => bench_mesh(c, "horse-gallop/0001", &horse),
+        None => eprintln!("skipping horse-gallop benchmarks: {HORSE} not found (shared data absent)"),
+    }
+}
+
+criterion_group!(benches, geometry);
+criterion_main!(benches);
