@@ -45,8 +45,9 @@ fn load(folder: &str, names: &[String]) -> Option<MeshSequence> {
 fn benches(c: &mut Criterion) {
     let scape_names: Vec<String> = (1..=71).map(|i| format!("{i}.obj")).collect();
     if let Some(scape) = load("scape", &scape_names) {
-        let rep = Representation::new(RepresentationKind::TriangleGradient, &scape.mesh(0), RepresentationOptions::default())
-            .expect("SCAPE triangle-gradient representation");
+        let rep =
+            Representation::new(RepresentationKind::TriangleGradient, &scape.mesh(0), RepresentationOptions::default())
+                .expect("SCAPE triangle-gradient representation");
         c.bench_function("triangle_gradient/encode_scape_71", |b| b.iter(|| black_box(rep.encode(&scape).unwrap())));
     }
     let horse_names: Vec<String> = vec!["0001.obj".into(), "0010.obj".into()];
@@ -62,7 +63,10 @@ fn benches(c: &mut Criterion) {
         group.sample_size(10);
         group.bench_function("factorise_horse", |b| {
             b.iter(|| {
-                black_box(Representation::new(RepresentationKind::TriangleGradient, &rest, RepresentationOptions::default()).unwrap())
+                black_box(
+                    Representation::new(RepresentationKind::TriangleGradient, &rest, RepresentationOptions::default())
+                        .unwrap(),
+                )
             })
         });
         group.finish();

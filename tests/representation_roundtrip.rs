@@ -88,7 +88,8 @@ fn load_dir(dir: &Path, ext: &str) -> MeshSequence {
         .filter(|p| p.extension().is_some_and(|e| e.eq_ignore_ascii_case(ext)))
         .collect();
     files.sort_by_key(|p| natural_key(&p.file_stem().unwrap().to_string_lossy()));
-    let meshes: Vec<TriMesh> = files.iter().map(|p| if ext == "obj" { load_obj(p) } else { load_ascii_ply(p) }).collect();
+    let meshes: Vec<TriMesh> =
+        files.iter().map(|p| if ext == "obj" { load_obj(p) } else { load_ascii_ply(p) }).collect();
     let faces = meshes[0].faces.clone();
     for (m, p) in meshes.iter().zip(&files) {
         assert_eq!(m.faces, faces, "{}: connectivity differs from the first frame", p.display());
@@ -164,7 +165,8 @@ fn cactus_round_trip() {
 #[test]
 fn synthetic_bent_sphere_round_trip() {
     let mut p: Vec<Vec3> = vec![[1., 0., 0.], [-1., 0., 0.], [0., 1., 0.], [0., -1., 0.], [0., 0., 1.], [0., 0., -1.]];
-    let mut f: Vec<[usize; 3]> = vec![[0, 2, 4], [2, 1, 4], [1, 3, 4], [3, 0, 4], [2, 0, 5], [1, 2, 5], [3, 1, 5], [0, 3, 5]];
+    let mut f: Vec<[usize; 3]> =
+        vec![[0, 2, 4], [2, 1, 4], [1, 3, 4], [3, 0, 4], [2, 0, 5], [1, 2, 5], [3, 1, 5], [0, 3, 5]];
     for _ in 0..4 {
         let mut mid = std::collections::HashMap::new();
         let mut nf = Vec::new();

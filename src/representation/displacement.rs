@@ -5,6 +5,8 @@
 //! (SPLOCS additionally divides the whole data matrix by its standard deviation; that global
 //! scale belongs to the method, not to this representation.)
 
+#![warn(missing_docs)]
+
 use crate::error::{Error, Result};
 use crate::mesh::Vec3;
 
@@ -53,7 +55,12 @@ impl Displacement {
         if let Some(i) = features.iter().position(|x| !x.is_finite()) {
             return Err(Error::Invalid(format!("displacement {i} (vertex {}) is not finite: {}", i / 3, features[i])));
         }
-        Ok(self.rest.iter().zip(features.chunks_exact(3)).map(|(r, d)| [r[0] + d[0], r[1] + d[1], r[2] + d[2]]).collect())
+        Ok(self
+            .rest
+            .iter()
+            .zip(features.chunks_exact(3))
+            .map(|(r, d)| [r[0] + d[0], r[1] + d[1], r[2] + d[2]])
+            .collect())
     }
 }
 

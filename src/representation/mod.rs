@@ -117,7 +117,7 @@ impl Features {
 }
 
 /// Options of [`Representation::new`] (the parts that are not implied by the kind).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy)]
 pub struct RepresentationOptions {
     /// ACAP rotation consistency: BFS (default, the reference's option 0) or global.
     pub acap_consistency: Consistency,
@@ -166,7 +166,10 @@ impl Representation {
     /// positions; for triangle-gradient no degenerate triangle) and factorises the decoder.
     pub fn new(kind: RepresentationKind, rest: &TriMesh, options: RepresentationOptions) -> Result<Self> {
         if let Some((fi, f)) = rest.first_bad_index() {
-            return Err(Error::Invalid(format!("rest mesh face {fi} {f:?} refers to a vertex ≥ {}", rest.n_vertices())));
+            return Err(Error::Invalid(format!(
+                "rest mesh face {fi} {f:?} refers to a vertex ≥ {}",
+                rest.n_vertices()
+            )));
         }
         let codec = match kind {
             RepresentationKind::Displacement => Codec::Displacement(Displacement::new(&rest.positions)?),
@@ -247,7 +250,11 @@ impl Representation {
             Element::Triangle => mesh
                 .faces
                 .iter()
-                .map(|f| std::array::from_fn(|k| (mesh.positions[f[0]][k] + mesh.positions[f[1]][k] + mesh.positions[f[2]][k]) / 3.0))
+                .map(|f| {
+                    std::array::from_fn(|k| {
+                        (mesh.positions[f[0]][k] + mesh.positions[f[1]][k] + mesh.positions[f[2]][k]) / 3.0
+                    })
+                })
                 .collect(),
         })
     }
@@ -414,9 +421,18 @@ mod tests {
     fn sequence_encode_decode_and_mismatches() {
         let m = tetra();
         let frames: Vec<Vec<Vec3>> = (0..3)
-            .map(|f| m.positions.iter().map(|p| [p[0] * (1.0 + 0.1 * f as f64), p[1] + 0.2 * p[2] * f as f64, p[2] + 1.0]).collect())
+            .map(|f| {
+                m.positions
+                    .iter()
+                    .map(|p| [p[0] * (1.0 + 0.1 * f as f64), p[1] + 0.2 * p[2] * f as f64, p[2] + 1.0])
+                    .collect()
+            })
             .collect();
-        let seq = MeshSequence { faces: m.faces.clone(), frames: frames.clone(), names: vec!["a".into(), "b".into(), "c".into()] };
+        let seq = MeshSequence {
+            faces: m.faces.clone(),
+            frames: frames.clone(),
+            names: vec!["a".into(), "b".into(), "c".into()],
+        };
         for kind in [RepresentationKind::Displacement, RepresentationKind::TriangleGradient] {
             let r = Representation::new(kind, &m, Default::default()).unwrap();
             let feats = r.encode(&seq).unwrap();
@@ -425,7 +441,9 @@ mod tests {
             let back = r.decode(&feats).unwrap();
             for (b, x) in back.iter().zip(&frames) {
                 let off: Vec3 = if r.translation_free() {
-                    std::array::from_fn(|k| (x.iter().map(|p| p[k]).sum::<f64>() - b.iter().map(|p| p[k]).sum::<f64>()) / 4.0)
+                    std::array::from_fn(|k| {
+                        (x.iter().map(|p| p[k]).sum::<f64>() - b.iter().map(|p| p[k]).sum::<f64>()) / 4.0
+                    })
                 } else {
                     [0.0; 3]
                 };

@@ -6,6 +6,8 @@
 //! the input frame's ([`Alignment::Centroid`]); otherwise no alignment is applied. The report
 //! records which one was used.
 
+#![warn(missing_docs)]
+
 use std::fmt;
 
 use super::{Representation, RepresentationKind};
@@ -44,11 +46,7 @@ pub fn frame_squared_error(truth: &[Vec3], result: &[Vec3], alignment: Alignment
             std::array::from_fn(|k| truth.iter().zip(result).map(|(t, r)| t[k] - r[k]).sum::<f64>() / n)
         }
     };
-    Ok(truth
-        .iter()
-        .zip(result)
-        .map(|(t, r)| (0..3).map(|k| (t[k] - r[k] - shift[k]).powi(2)).sum::<f64>())
-        .sum())
+    Ok(truth.iter().zip(result).map(|(t, r)| (0..3).map(|k| (t[k] - r[k] - shift[k]).powi(2)).sum::<f64>()).sum())
 }
 
 /// Erms of F result frames against F ground-truth frames of N vertices each (module docs).

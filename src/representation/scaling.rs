@@ -15,6 +15,8 @@
 //! is nothing to stretch: the map is the shift `y = x − min_k` (`a_k = 1`, `c_k = min_k`), which
 //! sends the training value to 0, never divides by zero and stays exactly invertible.
 
+#![warn(missing_docs)]
+
 use serde::{Deserialize, Serialize};
 
 use super::Features;
@@ -35,7 +37,10 @@ pub enum ScalingMode {
     PerDimension,
     /// Each group of dimension indices (0-based, `< width`, each index at most once) shares one
     /// min/max; unlisted dimensions are their own group.
-    Grouped { groups: Vec<Vec<usize>> },
+    Grouped {
+        /// Groups of 0-based dimension indices.
+        groups: Vec<Vec<usize>>,
+    },
 }
 
 impl ScalingMode {
@@ -60,10 +65,7 @@ impl ScalingMode {
                         )));
                     }
                     if label[k] != usize::MAX {
-                        return Err(Error::Invalid(format!(
-                            "scaling dimension {k} is in groups {} and {g}",
-                            label[k]
-                        )));
+                        return Err(Error::Invalid(format!("scaling dimension {k} is in groups {} and {g}", label[k])));
                     }
                     label[k] = g;
                 }
@@ -115,10 +117,7 @@ impl FeatureScaling {
     /// Fits on a flat array of width-`width` vectors (see [`FeatureScaling::fit`]).
     pub fn fit_slice(data: &[f64], width: usize, mode: ScalingMode) -> Result<Self> {
         if width == 0 || data.is_empty() || data.len() % width != 0 {
-            return Err(Error::Invalid(format!(
-                "cannot fit a scaling on {} numbers of width {width}",
-                data.len()
-            )));
+            return Err(Error::Invalid(format!("cannot fit a scaling on {} numbers of width {width}", data.len())));
         }
         if let Some(i) = data.iter().position(|x| !x.is_finite()) {
             return Err(Error::Invalid(format!(
@@ -161,7 +160,9 @@ impl FeatureScaling {
         for k in 0..self.width {
             let (lo, hi) = (self.min[k], self.max[k]);
             if !(lo.is_finite() && hi.is_finite() && lo <= hi) {
-                return Err(Error::Invalid(format!("scaling dimension {k}: min ({lo}) must be finite and ≤ max ({hi})")));
+                return Err(Error::Invalid(format!(
+                    "scaling dimension {k}: min ({lo}) must be finite and ≤ max ({hi})"
+                )));
             }
         }
         Ok(())
@@ -333,5 +334,4 @@ mod tests {
         assert_eq!(back, s);
         back.validate().unwrap();
     }
-
 }

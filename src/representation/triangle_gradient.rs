@@ -46,6 +46,8 @@
 //! (unweighted mean) equals the rest mesh's centroid of that component. Vertices referenced by no
 //! face are returned at their rest positions. Compare decoded shapes after centroid alignment.
 
+#![warn(missing_docs)]
+
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::sparse::linalg::cholesky::{LltRef, SymbolicCholesky, factorize_symbolic_cholesky};
 use faer::sparse::{SparseColMat, Triplet};
@@ -326,7 +328,13 @@ impl TriangleGradient {
     pub fn new(rest: &TriMesh, convention: NormalConvention) -> Result<Self> {
         let rest_tris = rest_triangles(rest)?;
         let solver = GradientReconstruction::from_rest(rest, &rest_tris)?;
-        Ok(TriangleGradient { faces: rest.faces.clone(), n_vertices: rest.n_vertices(), convention, rest: rest_tris, solver })
+        Ok(TriangleGradient {
+            faces: rest.faces.clone(),
+            n_vertices: rest.n_vertices(),
+            convention,
+            rest: rest_tris,
+            solver,
+        })
     }
 
     /// Number of triangles T (elements).
@@ -502,8 +510,9 @@ impl GradientReconstruction {
             .map_err(|e| Error::Numerical(format!("symbolic Cholesky of the gradient reconstruction matrix: {e:?}")))?;
         let mut l_values = vec![0.0; symbolic.len_val()];
         {
-            let mut mem = MemBuffer::try_new(symbolic.factorize_numeric_llt_scratch::<f64>(Par::Seq, Default::default()))
-                .map_err(|e| Error::Numerical(format!("Cholesky workspace: {e:?}")))?;
+            let mut mem =
+                MemBuffer::try_new(symbolic.factorize_numeric_llt_scratch::<f64>(Par::Seq, Default::default()))
+                    .map_err(|e| Error::Numerical(format!("Cholesky workspace: {e:?}")))?;
             symbolic
                 .factorize_numeric_llt(
                     &mut l_values,
@@ -515,7 +524,9 @@ impl GradientReconstruction {
                     Default::default(),
                 )
                 .map_err(|e| {
-                    Error::Numerical(format!("Cholesky of the gradient reconstruction matrix ({n_reduced} unknowns): {e:?}"))
+                    Error::Numerical(format!(
+                        "Cholesky of the gradient reconstruction matrix ({n_reduced} unknowns): {e:?}"
+                    ))
                 })?;
         }
         Ok(GradientReconstruction {
@@ -747,10 +758,14 @@ mod tests {
         let m = sphere(2);
         let u_true = scale3([0.2, -0.5, 0.8], 2.2 / norm([0.2, -0.5, 0.8]));
         let r = rotation_exp(u_true);
-        let moved: Vec<Vec3> = m.positions.iter().map(|p| {
-            let q = apply(&r, *p);
-            [q[0] + 3.0, q[1] - 1.0, q[2] + 0.5]
-        }).collect();
+        let moved: Vec<Vec3> = m
+            .positions
+            .iter()
+            .map(|p| {
+                let q = apply(&r, *p);
+                [q[0] + 3.0, q[1] - 1.0, q[2] + 0.5]
+            })
+            .collect();
         for conv in [NormalConvention::UnitNormal, NormalConvention::MinNorm] {
             let tg = TriangleGradient::new(&m, conv).unwrap();
             let q = tg.encode_frame(&moved).unwrap();
@@ -793,8 +808,14 @@ mod tests {
             let [a, b, c] = f.map(|v| m.positions[v]);
             let n = crate::geometry::normals::normalize(cross(sub(b, a), sub(c, a)));
             let k = s - 1.0;
-            let want = [k * (1.0 - n[0] * n[0]), k * (1.0 - n[1] * n[1]), k * (1.0 - n[2] * n[2]),
-                -k * n[0] * n[1], -k * n[0] * n[2], -k * n[1] * n[2]];
+            let want = [
+                k * (1.0 - n[0] * n[0]),
+                k * (1.0 - n[1] * n[1]),
+                k * (1.0 - n[2] * n[2]),
+                -k * n[0] * n[1],
+                -k * n[0] * n[2],
+                -k * n[1] * n[2],
+            ];
             assert!(norm([qt[0], qt[1], qt[2]]) < 1e-12);
             for i in 0..6 {
                 assert!((qt[3 + i] - want[i]).abs() < 1e-12);
@@ -805,7 +826,11 @@ mod tests {
     #[test]
     fn gradient_reproduces_edges_and_polar_factors_are_valid() {
         let m = sphere(1);
-        let def: Vec<Vec3> = m.positions.iter().map(|p| [p[0] * 1.3 + 0.2 * p[1], p[1] - 0.4 * p[2] * p[2], p[2] * 0.7 + p[0] * p[1]]).collect();
+        let def: Vec<Vec3> = m
+            .positions
+            .iter()
+            .map(|p| [p[0] * 1.3 + 0.2 * p[1], p[1] - 0.4 * p[2] * p[2], p[2] * 0.7 + p[0] * p[1]])
+            .collect();
         let tg = TriangleGradient::new(&m, NormalConvention::UnitNormal).unwrap();
         let q = tg.encode_frame(&def).unwrap();
         let js = tg.gradients(&q).unwrap();
@@ -839,7 +864,11 @@ mod tests {
         let det = nalgebra::Matrix3::from_fn(|r, c| u[r][c]).determinant();
         assert!((det - 1.0).abs() < 1e-12);
         let j = gradient_of(&q);
-        let jmin = deformation_gradient(rest.faces[0].map(|v| rest.positions[v]), [[0., 0., 0.], [-2., 0., 0.], [-1., 0., 0.]]).unwrap();
+        let jmin = deformation_gradient(
+            rest.faces[0].map(|v| rest.positions[v]),
+            [[0., 0., 0.], [-2., 0., 0.], [-1., 0., 0.]],
+        )
+        .unwrap();
         for r in 0..3 {
             for c in 0..3 {
                 assert!((j[r][c] - jmin[r][c]).abs() < 1e-12);
@@ -868,7 +897,8 @@ mod tests {
                 assert!(dev < 1e-9, "{conv:?}: max deviation {dev}");
                 // Decoded centroid is the rest centroid.
                 let c_back: Vec3 = std::array::from_fn(|k| back.iter().map(|p| p[k]).sum::<f64>() / back.len() as f64);
-                let c_rest: Vec3 = std::array::from_fn(|k| m.positions.iter().map(|p| p[k]).sum::<f64>() / m.positions.len() as f64);
+                let c_rest: Vec3 =
+                    std::array::from_fn(|k| m.positions.iter().map(|p| p[k]).sum::<f64>() / m.positions.len() as f64);
                 assert!(norm(sub(c_back, c_rest)) < 1e-12);
             }
         }
