@@ -135,8 +135,8 @@ impl Default for RepresentationOptions {
 /// Per-kind encoder/decoder state.
 enum Codec {
     Displacement(Displacement),
-    TriangleGradient(TriangleGradient),
-    Acap(Acap),
+    TriangleGradient(Box<TriangleGradient>),
+    Acap(Box<Acap>),
 }
 
 /// A representation bound to a rest mesh: encoder, decoder (factorised once) and the element
@@ -174,9 +174,9 @@ impl Representation {
         let codec = match kind {
             RepresentationKind::Displacement => Codec::Displacement(Displacement::new(&rest.positions)?),
             RepresentationKind::TriangleGradient => {
-                Codec::TriangleGradient(TriangleGradient::new(rest, options.gradient_normal)?)
+                Codec::TriangleGradient(Box::new(TriangleGradient::new(rest, options.gradient_normal)?))
             }
-            RepresentationKind::Acap => Codec::Acap(Acap::new(rest)?),
+            RepresentationKind::Acap => Codec::Acap(Box::new(Acap::new(rest)?)),
         };
         let topo = Topology::new(rest.n_vertices(), &rest.faces);
         let adjacency = match kind.element() {
@@ -262,7 +262,7 @@ impl Representation {
     /// The ACAP codec, when the kind is acap (energies, neighbourhoods, raw matrices).
     pub fn acap(&self) -> Option<&Acap> {
         match &self.codec {
-            Codec::Acap(a) => Some(a),
+            Codec::Acap(a) => Some(a.as_ref()),
             _ => None,
         }
     }
@@ -270,7 +270,7 @@ impl Representation {
     /// The triangle-gradient codec, when the kind is triangle-gradient.
     pub fn triangle_gradient(&self) -> Option<&TriangleGradient> {
         match &self.codec {
-            Codec::TriangleGradient(t) => Some(t),
+            Codec::TriangleGradient(t) => Some(t.as_ref()),
             _ => None,
         }
     }

@@ -116,7 +116,7 @@ impl FeatureScaling {
 
     /// Fits on a flat array of width-`width` vectors (see [`FeatureScaling::fit`]).
     pub fn fit_slice(data: &[f64], width: usize, mode: ScalingMode) -> Result<Self> {
-        if width == 0 || data.is_empty() || data.len() % width != 0 {
+        if width == 0 || data.is_empty() || !data.len().is_multiple_of(width) {
             return Err(Error::Invalid(format!("cannot fit a scaling on {} numbers of width {width}", data.len())));
         }
         if let Some(i) = data.iter().position(|x| !x.is_finite()) {
@@ -184,7 +184,11 @@ impl FeatureScaling {
     }
 
     fn check_len(&self, len: usize) -> Result<()> {
-        if self.width == 0 || len % self.width != 0 || self.min.len() != self.width || self.max.len() != self.width {
+        if self.width == 0
+            || !len.is_multiple_of(self.width)
+            || self.min.len() != self.width
+            || self.max.len() != self.width
+        {
             return Err(Error::Invalid(format!("{len} numbers do not split into vectors of width {}", self.width)));
         }
         Ok(())

@@ -589,18 +589,18 @@ impl GradientReconstruction {
         // Pinned vertices sit at 0; shift each component onto its rest centroid.
         let mut out = vec![[0.0; 3]; n];
         let mut sums = vec![[0.0; 3]; self.rest_centroids.len()];
-        for v in 0..n {
+        for (v, o) in out.iter_mut().enumerate() {
             let c = self.component[v];
             if c == usize::MAX {
-                out[v] = self.rest_positions[v];
+                *o = self.rest_positions[v];
                 continue;
             }
             let r = self.reduced[v];
             if r != usize::MAX {
-                out[v] = [rhs[(r, 0)], rhs[(r, 1)], rhs[(r, 2)]];
+                *o = [rhs[(r, 0)], rhs[(r, 1)], rhs[(r, 2)]];
             }
             for k in 0..3 {
-                sums[c][k] += out[v][k];
+                sums[c][k] += o[k];
             }
         }
         let shift: Vec<Vec3> = sums
@@ -608,11 +608,10 @@ impl GradientReconstruction {
             .zip(&self.rest_centroids)
             .map(|(s, (rc, cnt))| std::array::from_fn(|k| rc[k] - s[k] / *cnt as f64))
             .collect();
-        for v in 0..n {
-            let c = self.component[v];
+        for (o, &c) in out.iter_mut().zip(&self.component) {
             if c != usize::MAX {
                 for k in 0..3 {
-                    out[v][k] += shift[c][k];
+                    o[k] += shift[c][k];
                 }
             }
         }
@@ -716,11 +715,12 @@ mod tests {
             assert!(err < 1e-7 * angle.max(1e-3), "axis {axis:?} angle {angle}: got {back:?}");
             // Orthonormal with det +1.
             let rtr = mat_mul(&transpose(&r), &r);
-            for i in 0..3 {
-                for j in 0..3 {
-                    assert!((rtr[i][j] - if i == j { 1.0 } else { 0.0 }).abs() < 1e-14);
+            for (i, row) in rtr.iter().enumerate() {
+                for (j, x) in row.iter().enumerate() {
+                    assert!((x - if i == j { 1.0 } else { 0.0 }).abs() < 1e-14);
                 }
             }
+            assert!((nalgebra::Matrix3::from_fn(|a, b| r[a][b]).determinant() - 1.0).abs() < 1e-14);
         }
         // Angle above π maps back into [0, π] with the opposite axis.
         let u = [0.0, 0.0, 4.0];
