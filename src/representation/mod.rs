@@ -9,8 +9,28 @@
 //!
 //! Layout of [`Features::data`]: frame-major, then element, then the `width` numbers of the
 //! element: index `(f * n_elements + e) * width + k`.
+//!
+//! [`Representation`] is the one entry point every method uses: built once per rest mesh (it
+//! precomputes and factorises what decoding needs), it encodes a [`MeshSequence`] into
+//! [`Features`] and decodes features back to vertex positions. `triangle-gradient` and `acap`
+//! lose translation ([`Representation::translation_free`]): their decoders place the result's
+//! centroid on the rest centroid, and errors must be measured after centroid alignment
+//! ([`roundtrip`]).
 
+pub mod acap;
+pub mod displacement;
+pub mod roundtrip;
+pub mod scaling;
+pub mod triangle_gradient;
+
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
+
+use crate::error::{Error, Result};
+use crate::mesh::{MeshSequence, Topology, TriMesh, Vec3};
+use acap::{Acap, Consistency};
+use displacement::Displacement;
+use triangle_gradient::{NormalConvention, TriangleGradient};
 
 /// Which mesh element carries a feature vector (and on which graph support maps live).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -93,5 +113,352 @@ impl Features {
     pub fn element(&self, f: usize, e: usize) -> &[f64] {
         let i = (f * self.n_elements + e) * self.width;
         &self.data[i..i + self.width]
+    }
+}
+
+/// Options of [`Representation::new`] (the parts that are not implied by the kind).
+#[derive(Debug, Clone, Copy)]
+pub struct RepresentationOptions {
+    /// ACAP rotation consistency: BFS (default, the reference's option 0) or global.
+    pub acap_consistency: Consistency,
+    /// Triangle-gradient stretch convention for the normal direction (default
+    /// [`NormalConvention::UnitNormal`]: the rest shape encodes to zero).
+    pub gradient_normal: NormalConvention,
+}
+
+impl Default for RepresentationOptions {
+    fn default() -> Self {
+        RepresentationOptions { acap_consistency: Consistency::Bfs, gradient_normal: NormalConvention::UnitNormal }
+    }
+}
+
+/// Per-kind encoder/decoder state.
+enum Codec {
+    Displacement(Displacement),
+    TriangleGradient(Box<TriangleGradient>),
+    Acap(Box<Acap>),
+}
+
+/// A representation bound to a rest mesh: encoder, decoder (factorised once) and the element
+/// graph on which support maps live.
+pub struct Representation {
+    kind: RepresentationKind,
+    options: RepresentationOptions,
+    rest: TriMesh,
+    codec: Codec,
+    adjacency: Vec<Vec<usize>>,
+}
+
+impl std::fmt::Debug for Representation {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Representation")
+            .field("kind", &self.kind)
+            .field("options", &self.options)
+            .field("n_vertices", &self.rest.n_vertices())
+            .field("n_faces", &self.rest.n_faces())
+            .finish()
+    }
+}
+
+impl Representation {
+    /// Builds the representation of `kind` against `rest` (the mesh whose features are zero
+    /// displacement / identity gradients). Validates the rest mesh (face indices, finite
+    /// positions; for triangle-gradient no degenerate triangle) and factorises the decoder.
+    pub fn new(kind: RepresentationKind, rest: &TriMesh, options: RepresentationOptions) -> Result<Self> {
+        if let Some((fi, f)) = rest.first_bad_index() {
+            return Err(Error::Invalid(format!(
+                "rest mesh face {fi} {f:?} refers to a vertex ≥ {}",
+                rest.n_vertices()
+            )));
+        }
+        let codec = match kind {
+            RepresentationKind::Displacement => Codec::Displacement(Displacement::new(&rest.positions)?),
+            RepresentationKind::TriangleGradient => {
+                Codec::TriangleGradient(Box::new(TriangleGradient::new(rest, options.gradient_normal)?))
+            }
+            RepresentationKind::Acap => Codec::Acap(Box::new(Acap::new(rest)?)),
+        };
+        let topo = Topology::new(rest.n_vertices(), &rest.faces);
+        let adjacency = match kind.element() {
+            Element::Vertex => (0..rest.n_vertices()).map(|v| topo.neighbors(v).to_vec()).collect(),
+            Element::Triangle => triangle_adjacency(&topo, rest.n_faces()),
+        };
+        Ok(Representation { kind, options, rest: rest.clone(), codec, adjacency })
+    }
+
+    /// The kind.
+    pub fn kind(&self) -> RepresentationKind {
+        self.kind
+    }
+
+    /// The options it was built with.
+    pub fn options(&self) -> RepresentationOptions {
+        self.options
+    }
+
+    /// Element carrying the feature vectors.
+    pub fn element(&self) -> Element {
+        self.kind.element()
+    }
+
+    /// Numbers per element W.
+    pub fn width(&self) -> usize {
+        self.kind.width()
+    }
+
+    /// Number of elements E (vertices N or triangles T of the rest mesh).
+    pub fn n_elements(&self) -> usize {
+        match self.element() {
+            Element::Vertex => self.rest.n_vertices(),
+            Element::Triangle => self.rest.n_faces(),
+        }
+    }
+
+    /// The rest mesh.
+    pub fn rest(&self) -> &TriMesh {
+        &self.rest
+    }
+
+    /// `true` when decoding loses translation (triangle-gradient, acap): decoded shapes have
+    /// the rest centroid (per connected component for triangle-gradient) and must be compared
+    /// after centroid alignment. `false` for displacement (absolute positions).
+    pub fn translation_free(&self) -> bool {
+        !matches!(self.kind, RepresentationKind::Displacement)
+    }
+
+    /// Neighbourhood graph of the elements (E lists): for vertices the mesh's 1-ring (in the
+    /// topology's counter-clockwise order), for triangles the triangles sharing an edge
+    /// (ascending; more than 3 only at non-manifold edges).
+    pub fn element_adjacency(&self) -> &[Vec<usize>] {
+        &self.adjacency
+    }
+
+    /// One position per element of `mesh` (same connectivity as the rest mesh): vertex positions
+    /// or triangle centroids. Errors on a vertex or face count mismatch.
+    pub fn element_positions(&self, mesh: &TriMesh) -> Result<Vec<Vec3>> {
+        if mesh.n_vertices() != self.rest.n_vertices() || mesh.faces != self.rest.faces {
+            return Err(Error::Invalid(format!(
+                "mesh ({} vertices, {} faces) does not share the rest mesh's connectivity ({} vertices, {} faces)",
+                mesh.n_vertices(),
+                mesh.n_faces(),
+                self.rest.n_vertices(),
+                self.rest.n_faces()
+            )));
+        }
+        Ok(match self.element() {
+            Element::Vertex => mesh.positions.clone(),
+            Element::Triangle => mesh
+                .faces
+                .iter()
+                .map(|f| {
+                    std::array::from_fn(|k| {
+                        (mesh.positions[f[0]][k] + mesh.positions[f[1]][k] + mesh.positions[f[2]][k]) / 3.0
+                    })
+                })
+                .collect(),
+        })
+    }
+
+    /// The ACAP codec, when the kind is acap (energies, neighbourhoods, raw matrices).
+    pub fn acap(&self) -> Option<&Acap> {
+        match &self.codec {
+            Codec::Acap(a) => Some(a.as_ref()),
+            _ => None,
+        }
+    }
+
+    /// The triangle-gradient codec, when the kind is triangle-gradient.
+    pub fn triangle_gradient(&self) -> Option<&TriangleGradient> {
+        match &self.codec {
+            Codec::TriangleGradient(t) => Some(t.as_ref()),
+            _ => None,
+        }
+    }
+
+    /// E·W features of one frame (N vertex positions of the rest connectivity).
+    pub fn encode_frame(&self, positions: &[Vec3]) -> Result<Vec<f64>> {
+        if positions.len() != self.rest.n_vertices() {
+            return Err(Error::Invalid(format!(
+                "frame has {} vertices, the rest mesh has {}",
+                positions.len(),
+                self.rest.n_vertices()
+            )));
+        }
+        match &self.codec {
+            Codec::Displacement(d) => d.encode_frame(positions),
+            Codec::TriangleGradient(t) => t.encode_frame(positions),
+            Codec::Acap(a) => Ok(a.encode_frame(positions, self.options.acap_consistency)?.features()),
+        }
+    }
+
+    /// N vertex positions from the E·W features of one frame.
+    pub fn decode_frame(&self, features: &[f64]) -> Result<Vec<Vec3>> {
+        let expect = self.n_elements() * self.width();
+        if features.len() != expect {
+            return Err(Error::Invalid(format!(
+                "{} features have {} numbers, expected {} elements × {}",
+                self.kind.name(),
+                features.len(),
+                self.n_elements(),
+                self.width()
+            )));
+        }
+        match &self.codec {
+            Codec::Displacement(d) => d.decode_frame(features),
+            Codec::TriangleGradient(t) => t.decode_frame(features),
+            Codec::Acap(a) => a.decode_frame(features),
+        }
+    }
+
+    /// Features F × E × W of every frame of `seq` (frames in parallel). Errors when the
+    /// sequence's connectivity differs from the rest mesh's; the message names the frame.
+    pub fn encode(&self, seq: &MeshSequence) -> Result<Features> {
+        if seq.faces != self.rest.faces {
+            return Err(Error::Invalid(format!(
+                "sequence faces ({}) differ from the rest mesh's faces ({})",
+                seq.n_faces(),
+                self.rest.n_faces()
+            )));
+        }
+        let frames: Vec<Vec<f64>> = seq
+            .frames
+            .par_iter()
+            .enumerate()
+            .map(|(f, x)| {
+                self.encode_frame(x).map_err(|e| {
+                    Error::Invalid(format!("frame {f} ({}): {e}", seq.names.get(f).map_or("?", |s| s.as_str())))
+                })
+            })
+            .collect::<Result<_>>()?;
+        let mut out = Features::zeros(0, self.n_elements(), self.width());
+        out.n_frames = frames.len();
+        out.data = frames.concat();
+        Ok(out)
+    }
+
+    /// Vertex positions (F × N) of every frame of `features` (frames in parallel).
+    pub fn decode(&self, features: &Features) -> Result<Vec<Vec<Vec3>>> {
+        if features.n_elements != self.n_elements() || features.width != self.width() {
+            return Err(Error::Invalid(format!(
+                "features are {} elements × {}, the {} representation has {} × {}",
+                features.n_elements,
+                features.width,
+                self.kind.name(),
+                self.n_elements(),
+                self.width()
+            )));
+        }
+        if features.data.len() != features.n_frames * features.n_elements * features.width {
+            return Err(Error::Invalid(format!(
+                "features hold {} numbers, expected {} frames × {} × {}",
+                features.data.len(),
+                features.n_frames,
+                features.n_elements,
+                features.width
+            )));
+        }
+        (0..features.n_frames)
+            .into_par_iter()
+            .map(|f| self.decode_frame(features.frame(f)).map_err(|e| Error::Invalid(format!("frame {f}: {e}"))))
+            .collect()
+    }
+}
+
+/// Edge-sharing triangle neighbours, ascending per triangle.
+fn triangle_adjacency(topo: &Topology, n_faces: usize) -> Vec<Vec<usize>> {
+    let mut adj = vec![Vec::new(); n_faces];
+    for inc in &topo.edge_faces {
+        for (a, &(fa, _)) in inc.iter().enumerate() {
+            for &(fb, _) in &inc[a + 1..] {
+                if fa != fb {
+                    adj[fa].push(fb);
+                    adj[fb].push(fa);
+                }
+            }
+        }
+    }
+    for l in &mut adj {
+        l.sort_unstable();
+        l.dedup();
+    }
+    adj
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn tetra() -> TriMesh {
+        TriMesh::new(
+            vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+            vec![[0, 2, 1], [0, 1, 3], [1, 2, 3], [0, 3, 2]],
+        )
+    }
+
+    #[test]
+    fn describes_itself_and_graphs() {
+        let m = tetra();
+        let d = Representation::new(RepresentationKind::Displacement, &m, Default::default()).unwrap();
+        assert_eq!((d.element(), d.width(), d.n_elements(), d.translation_free()), (Element::Vertex, 3, 4, false));
+        for (v, nb) in d.element_adjacency().iter().enumerate() {
+            let mut s = nb.clone();
+            s.sort_unstable();
+            let want: Vec<usize> = (0..4).filter(|&u| u != v).collect();
+            assert_eq!(s, want);
+        }
+        let t = Representation::new(RepresentationKind::TriangleGradient, &m, Default::default()).unwrap();
+        assert_eq!((t.element(), t.width(), t.n_elements(), t.translation_free()), (Element::Triangle, 9, 4, true));
+        for (f, nb) in t.element_adjacency().iter().enumerate() {
+            let want: Vec<usize> = (0..4).filter(|&u| u != f).collect();
+            assert_eq!(nb, &want);
+        }
+        let c = t.element_positions(&m).unwrap();
+        assert!((c[2][0] - 1.0 / 3.0).abs() < 1e-15 && (c[2][2] - 1.0 / 3.0).abs() < 1e-15);
+        assert_eq!(d.element_positions(&m).unwrap(), m.positions);
+    }
+
+    #[test]
+    fn sequence_encode_decode_and_mismatches() {
+        let m = tetra();
+        let frames: Vec<Vec<Vec3>> = (0..3)
+            .map(|f| {
+                m.positions
+                    .iter()
+                    .map(|p| [p[0] * (1.0 + 0.1 * f as f64), p[1] + 0.2 * p[2] * f as f64, p[2] + 1.0])
+                    .collect()
+            })
+            .collect();
+        let seq = MeshSequence {
+            faces: m.faces.clone(),
+            frames: frames.clone(),
+            names: vec!["a".into(), "b".into(), "c".into()],
+        };
+        for kind in [RepresentationKind::Displacement, RepresentationKind::TriangleGradient] {
+            let r = Representation::new(kind, &m, Default::default()).unwrap();
+            let feats = r.encode(&seq).unwrap();
+            assert_eq!((feats.n_frames, feats.n_elements, feats.width), (3, 4, r.width()));
+            assert_eq!(feats.frame(1), &r.encode_frame(&frames[1]).unwrap()[..]);
+            let back = r.decode(&feats).unwrap();
+            for (b, x) in back.iter().zip(&frames) {
+                let off: Vec3 = if r.translation_free() {
+                    std::array::from_fn(|k| {
+                        (x.iter().map(|p| p[k]).sum::<f64>() - b.iter().map(|p| p[k]).sum::<f64>()) / 4.0
+                    })
+                } else {
+                    [0.0; 3]
+                };
+                for (p, q) in b.iter().zip(x) {
+                    for k in 0..3 {
+                        assert!((p[k] + off[k] - q[k]).abs() < 1e-12);
+                    }
+                }
+            }
+            let mut bad = seq.clone();
+            bad.faces.swap(0, 1);
+            assert!(r.encode(&bad).is_err());
+            let mut short = feats.clone();
+            short.width = 2;
+            assert!(r.decode(&short).is_err());
+        }
     }
 }

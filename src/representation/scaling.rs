@@ -1,0 +1,341 @@
+//! Linear feature scaling to [−0.95, 0.95] for the network (Tan et al. 2018), fitted on the
+//! training set and stored with the model.
+//!
+//! Dimension `k` of the width-W feature vectors (shared by all elements and frames) maps
+//! `x ↦ y = (x − c_k)·a_k` with `c_k = (min_k + max_k)/2`, `a_k = 2·0.95/(max_k − min_k)`, so the
+//! training minimum goes to −0.95 and the maximum to +0.95; [`FeatureScaling::invert`] is
+//! `x = y/a_k + c_k`. The minima and maxima are taken
+//! * [`ScalingMode::PerDimension`] (default, the paper): per dimension, over all frames and
+//!   elements;
+//! * [`ScalingMode::Grouped`] (the reference code): one shared min/max over all dimensions of a
+//!   group; [`ScalingMode::reference_grouped`] gives the reference's groups `{0,1,2}` (rotation)
+//!   and `{3..8}` (stretch) of a 9-wide feature. Dimensions in no group form their own group.
+//!
+//! **Constant dimensions.** When `max_k − min_k ≤ CONSTANT_TOL·(1 + max(|min_k|, |max_k|))` there
+//! is nothing to stretch: the map is the shift `y = x − min_k` (`a_k = 1`, `c_k = min_k`), which
+//! sends the training value to 0, never divides by zero and stays exactly invertible.
+
+#![warn(missing_docs)]
+
+use serde::{Deserialize, Serialize};
+
+use super::Features;
+use crate::error::{Error, Result};
+
+/// Training minimum/maximum map to ∓`TARGET`.
+pub const TARGET: f64 = 0.95;
+
+/// Relative range under which a dimension counts as constant (see the module docs).
+pub const CONSTANT_TOL: f64 = 1e-12;
+
+/// Which dimensions share a min/max.
+#[derive(Debug, Clone, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ScalingMode {
+    /// Every dimension has its own min/max (the paper; default).
+    #[default]
+    PerDimension,
+    /// Each group of dimension indices (0-based, `< width`, each index at most once) shares one
+    /// min/max; unlisted dimensions are their own group.
+    Grouped {
+        /// Groups of 0-based dimension indices.
+        groups: Vec<Vec<usize>>,
+    },
+}
+
+impl ScalingMode {
+    /// The reference implementation's grouping of a 9-wide feature: rotation dims 0..3 and
+    /// stretch dims 3..9.
+    pub fn reference_grouped() -> Self {
+        ScalingMode::Grouped { groups: vec![vec![0, 1, 2], vec![3, 4, 5, 6, 7, 8]] }
+    }
+
+    /// Group label per dimension (`width` entries), validating the groups.
+    fn labels(&self, width: usize) -> Result<Vec<usize>> {
+        let mut label: Vec<usize> = vec![usize::MAX; width];
+        if let ScalingMode::Grouped { groups } = self {
+            for (g, dims) in groups.iter().enumerate() {
+                if dims.is_empty() {
+                    return Err(Error::Invalid(format!("scaling group {g} is empty")));
+                }
+                for &k in dims {
+                    if k >= width {
+                        return Err(Error::Invalid(format!(
+                            "scaling group {g} names dimension {k}, but the features are {width} wide"
+                        )));
+                    }
+                    if label[k] != usize::MAX {
+                        return Err(Error::Invalid(format!("scaling dimension {k} is in groups {} and {g}", label[k])));
+                    }
+                    label[k] = g;
+                }
+            }
+        }
+        let mut next = match self {
+            ScalingMode::Grouped { groups } => groups.len(),
+            ScalingMode::PerDimension => 0,
+        };
+        for l in &mut label {
+            if *l == usize::MAX {
+                *l = next;
+                next += 1;
+            }
+        }
+        Ok(label)
+    }
+}
+
+/// A fitted scaling: the training min/max per dimension (equal within a group).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FeatureScaling {
+    /// How min/max were shared.
+    pub mode: ScalingMode,
+    /// Feature width W.
+    pub width: usize,
+    /// Training minimum per dimension (W).
+    pub min: Vec<f64>,
+    /// Training maximum per dimension (W).
+    pub max: Vec<f64>,
+}
+
+impl FeatureScaling {
+    /// Fits on training features (all frames and elements). Errors on empty or non-finite data
+    /// or invalid groups.
+    pub fn fit(features: &Features, mode: ScalingMode) -> Result<Self> {
+        if features.data.len() != features.n_frames * features.n_elements * features.width {
+            return Err(Error::Invalid(format!(
+                "features hold {} numbers, expected {} × {} × {}",
+                features.data.len(),
+                features.n_frames,
+                features.n_elements,
+                features.width
+            )));
+        }
+        Self::fit_slice(&features.data, features.width, mode)
+    }
+
+    /// Fits on a flat array of width-`width` vectors (see [`FeatureScaling::fit`]).
+    pub fn fit_slice(data: &[f64], width: usize, mode: ScalingMode) -> Result<Self> {
+        if width == 0 || data.is_empty() || !data.len().is_multiple_of(width) {
+            return Err(Error::Invalid(format!("cannot fit a scaling on {} numbers of width {width}", data.len())));
+        }
+        if let Some(i) = data.iter().position(|x| !x.is_finite()) {
+            return Err(Error::Invalid(format!(
+                "feature {i} (vector {}, dimension {}) is not finite: {}",
+                i / width,
+                i % width,
+                data[i]
+            )));
+        }
+        let label = mode.labels(width)?;
+        let n_groups = label.iter().max().map_or(0, |m| m + 1);
+        let mut glo = vec![f64::INFINITY; n_groups];
+        let mut ghi = vec![f64::NEG_INFINITY; n_groups];
+        for v in data.chunks_exact(width) {
+            for (k, &x) in v.iter().enumerate() {
+                let g = label[k];
+                glo[g] = glo[g].min(x);
+                ghi[g] = ghi[g].max(x);
+            }
+        }
+        Ok(FeatureScaling {
+            min: label.iter().map(|&g| glo[g]).collect(),
+            max: label.iter().map(|&g| ghi[g]).collect(),
+            mode,
+            width,
+        })
+    }
+
+    /// Checks a (deserialised) scaling: lengths, finiteness, min ≤ max, groups.
+    pub fn validate(&self) -> Result<()> {
+        if self.min.len() != self.width || self.max.len() != self.width {
+            return Err(Error::Invalid(format!(
+                "scaling of width {} has {} minima and {} maxima",
+                self.width,
+                self.min.len(),
+                self.max.len()
+            )));
+        }
+        self.mode.labels(self.width)?;
+        for k in 0..self.width {
+            let (lo, hi) = (self.min[k], self.max[k]);
+            if !(lo.is_finite() && hi.is_finite() && lo <= hi) {
+                return Err(Error::Invalid(format!(
+                    "scaling dimension {k}: min ({lo}) must be finite and ≤ max ({hi})"
+                )));
+            }
+        }
+        Ok(())
+    }
+
+    /// `true` when dimension `k` is treated as constant (module docs).
+    pub fn is_constant(&self, k: usize) -> bool {
+        let (lo, hi) = (self.min[k], self.max[k]);
+        hi - lo <= CONSTANT_TOL * (1.0 + lo.abs().max(hi.abs()))
+    }
+
+    /// `(c_k, a_k)` of dimension `k`: `y = (x − c)·a`.
+    fn affine(&self, k: usize) -> (f64, f64) {
+        if self.is_constant(k) {
+            (self.min[k], 1.0)
+        } else {
+            (0.5 * (self.min[k] + self.max[k]), 2.0 * TARGET / (self.max[k] - self.min[k]))
+        }
+    }
+
+    fn check_len(&self, len: usize) -> Result<()> {
+        if self.width == 0
+            || !len.is_multiple_of(self.width)
+            || self.min.len() != self.width
+            || self.max.len() != self.width
+        {
+            return Err(Error::Invalid(format!("{len} numbers do not split into vectors of width {}", self.width)));
+        }
+        Ok(())
+    }
+
+    /// Scales a flat array of width-W vectors in place.
+    pub fn apply_in_place(&self, data: &mut [f64]) -> Result<()> {
+        self.check_len(data.len())?;
+        let ab: Vec<(f64, f64)> = (0..self.width).map(|k| self.affine(k)).collect();
+        for v in data.chunks_exact_mut(self.width) {
+            for (x, &(c, a)) in v.iter_mut().zip(&ab) {
+                *x = (*x - c) * a;
+            }
+        }
+        Ok(())
+    }
+
+    /// Inverse of [`FeatureScaling::apply_in_place`].
+    pub fn invert_in_place(&self, data: &mut [f64]) -> Result<()> {
+        self.check_len(data.len())?;
+        let ab: Vec<(f64, f64)> = (0..self.width).map(|k| self.affine(k)).collect();
+        for v in data.chunks_exact_mut(self.width) {
+            for (y, &(c, a)) in v.iter_mut().zip(&ab) {
+                *y = *y / a + c;
+            }
+        }
+        Ok(())
+    }
+
+    /// Scaled copy of `features` (width must match).
+    pub fn apply(&self, features: &Features) -> Result<Features> {
+        self.check_width(features)?;
+        let mut out = features.clone();
+        self.apply_in_place(&mut out.data)?;
+        Ok(out)
+    }
+
+    /// Unscaled copy of `features` (inverse of [`FeatureScaling::apply`]).
+    pub fn invert(&self, features: &Features) -> Result<Features> {
+        self.check_width(features)?;
+        let mut out = features.clone();
+        self.invert_in_place(&mut out.data)?;
+        Ok(out)
+    }
+
+    fn check_width(&self, features: &Features) -> Result<()> {
+        if features.width != self.width {
+            return Err(Error::Invalid(format!(
+                "features are {} wide, the scaling was fitted on width {}",
+                features.width, self.width
+            )));
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn sample() -> Features {
+        // 2 frames × 3 elements × 4 dims; dim 3 constant.
+        let data = vec![
+            0.0, -1.0, 5.0, 2.0, //
+            1.0, 3.0, 6.0, 2.0, //
+            0.5, 1.0, 7.0, 2.0, //
+            -1.0, 0.0, 5.5, 2.0, //
+            2.0, 2.0, 6.5, 2.0, //
+            0.0, -0.5, 5.0, 2.0,
+        ];
+        Features { n_frames: 2, n_elements: 3, width: 4, data }
+    }
+
+    #[test]
+    fn per_dimension_hits_the_bounds_and_inverts() {
+        let f = sample();
+        let s = FeatureScaling::fit(&f, ScalingMode::PerDimension).unwrap();
+        assert_eq!(s.min, vec![-1.0, -1.0, 5.0, 2.0]);
+        assert_eq!(s.max, vec![2.0, 3.0, 7.0, 2.0]);
+        let y = s.apply(&f).unwrap();
+        for k in 0..3 {
+            let col: Vec<f64> = y.data.iter().skip(k).step_by(4).copied().collect();
+            let lo = col.iter().copied().fold(f64::INFINITY, f64::min);
+            let hi = col.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+            assert!((lo + TARGET).abs() < 1e-15 && (hi - TARGET).abs() < 1e-15, "dim {k}: {lo} {hi}");
+        }
+        // Constant dimension: shifted to 0, no division by zero.
+        assert!(s.is_constant(3));
+        assert!(y.data.iter().skip(3).step_by(4).all(|&v| v == 0.0));
+        let back = s.invert(&y).unwrap();
+        for (a, b) in back.data.iter().zip(&f.data) {
+            assert!((a - b).abs() < 1e-14);
+        }
+        // Also exact inverses away from the training data (including the constant dim).
+        let mut z = vec![10.0, -7.0, 0.3, 2.5];
+        let z0 = z.clone();
+        s.invert_in_place(&mut z).unwrap();
+        s.apply_in_place(&mut z).unwrap();
+        for (a, b) in z.iter().zip(&z0) {
+            assert!((a - b).abs() < 1e-13);
+        }
+    }
+
+    #[test]
+    fn grouped_shares_min_max_and_unlisted_dims_stand_alone() {
+        let f = sample();
+        let s = FeatureScaling::fit(&f, ScalingMode::Grouped { groups: vec![vec![0, 1]] }).unwrap();
+        assert_eq!(s.min, vec![-1.0, -1.0, 5.0, 2.0]);
+        assert_eq!(s.max, vec![3.0, 3.0, 7.0, 2.0]);
+        let y = s.apply(&f).unwrap();
+        // Dim 0 reaches −0.95 (its min equals the group min) but not +0.95.
+        let d0: Vec<f64> = y.data.iter().step_by(4).copied().collect();
+        assert!((d0.iter().copied().fold(f64::INFINITY, f64::min) + TARGET).abs() < 1e-15);
+        assert!(d0.iter().copied().fold(f64::NEG_INFINITY, f64::max) < TARGET - 0.1);
+        let back = s.invert(&y).unwrap();
+        for (a, b) in back.data.iter().zip(&f.data) {
+            assert!((a - b).abs() < 1e-14);
+        }
+        let r = ScalingMode::reference_grouped();
+        assert_eq!(r.labels(9).unwrap(), vec![0, 0, 0, 1, 1, 1, 1, 1, 1]);
+    }
+
+    #[test]
+    fn invalid_inputs_are_errors_with_values() {
+        let f = sample();
+        let e = FeatureScaling::fit(&f, ScalingMode::Grouped { groups: vec![vec![0, 4]] }).unwrap_err();
+        assert!(e.to_string().contains("dimension 4"), "{e}");
+        let e = FeatureScaling::fit(&f, ScalingMode::Grouped { groups: vec![vec![0, 1], vec![1]] }).unwrap_err();
+        assert!(e.to_string().contains("dimension 1"), "{e}");
+        let mut g = f.clone();
+        g.data[5] = f64::NAN;
+        assert!(FeatureScaling::fit(&g, ScalingMode::PerDimension).is_err());
+        let s = FeatureScaling::fit(&f, ScalingMode::PerDimension).unwrap();
+        let wrong = Features::zeros(1, 2, 3);
+        assert!(s.apply(&wrong).is_err());
+        let mut bad = s.clone();
+        bad.min[1] = 9.0;
+        assert!(bad.validate().is_err());
+        assert!(s.validate().is_ok());
+    }
+
+    #[test]
+    fn serde_round_trip() {
+        let s = FeatureScaling::fit(&sample(), ScalingMode::Grouped { groups: vec![vec![0, 2], vec![1]] }).unwrap();
+        let text = serde_json::to_string(&s).unwrap();
+        let back: FeatureScaling = serde_json::from_str(&text).unwrap();
+        assert_eq!(back, s);
+        back.validate().unwrap();
+    }
+}
