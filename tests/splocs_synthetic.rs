@@ -160,6 +160,7 @@ fn match_regions(fit: &SplocsFit, planted: &[Vec<bool>]) -> Vec<(usize, f64)> {
                 .unwrap()
         })
         .collect();
+    eprintln!("(component, IoU) per planted region: {matches:?}; objective {:?}", fit.objective_history);
     let mut ks: Vec<usize> = matches.iter().map(|m| m.0).collect();
     ks.sort();
     ks.dedup();
