@@ -8,13 +8,14 @@
 //! Geometry (mesh, operators, representations, linear methods, metrics) is plain `f64` with
 //! faer and does not depend on Burn; Burn lives only in [`nn`].
 
+pub mod artifact;
+pub mod config;
 pub mod error;
 pub mod geometry;
 pub mod mesh;
+pub mod methods;
+pub mod preprocess;
 pub mod representation;
+pub mod synthetic;
 
 pub use error::{Error, Result};
-pub mod config;
-pub mod synthetic;
-pub mod artifact;
-pub mod preprocess;

@@ -1,0 +1,305 @@
+//! SPLOCS (K 50, λ 2, support [0.1, 0.7], 10 iterations, nonnegative weights) on SCAPE and the
+//! horse gallop from `../shared/data`, with the reference's preprocessing choices: rest shape =
+//! first frame, data = vertex displacements in the data's own units, support distances on the
+//! rest mesh scaled into the unit box (largest bounding-box side 1).
+//!
+//! Prints the SPLOCS wall time (excluding loading), the train Erms in the data's units,
+//! holistic PCA's Erms for comparison, and per-component locality (share of energy inside the
+//! support region d < d_max, support size).
+//!
+//! Distances: a stand-in for heat geodesics — Dijkstra along mesh edges (graph distance, an
+//! over-estimate of the geodesic distance of a few percent) — until `geometry::heat_geodesics`
+//! is merged.
+//!
+//! ```text
+//! cargo run --release --example splocs_scape -- [scape|horse|all] [--align] [--threads N]
+//!     [--iterations N] [--signed] [--per-component]
+//! ```
+//! `--align` rigidly aligns every frame to the first (Kabsch) before decomposing; Erms is then
+//! measured against the aligned frames.
+
+use std::cell::Cell;
+use std::collections::BinaryHeap;
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use meshdeco::Result;
+use meshdeco::methods::support_map::SupportDistances;
+use meshdeco::methods::{DataMatrix, Pca, PcaConfig, SplocsConfig, SplocsSolver, WeightConstraint};
+
+type V3 = [f64; 3];
+
+fn natural_key(p: &Path) -> (u64, String) {
+    let stem = p.file_stem().unwrap_or_default().to_string_lossy().to_string();
+    let digits: String = stem.chars().filter(|c| c.is_ascii_digit()).collect();
+    (digits.parse().unwrap_or(u64::MAX), stem)
+}
+
+fn load_folder(dir: &Path) -> (Vec<[usize; 3]>, Vec<Vec<V3>>) {
+    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
+        .unwrap()
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|x| x == "obj"))
+        .collect();
+    files.sort_by_key(|p| natural_key(p));
+    let mut faces = Vec::new();
+    let mut frames = Vec::new();
+    for (i, f) in files.iter().enumerate() {
+        let (models, _) = tobj::load_obj(f, &tobj::LoadOptions::default()).expect("OBJ load");
+        let m = &models[0].mesh;
+        let pos: Vec<V3> = m.positions.chunks_exact(3).map(|c| [c[0] as f64, c[1] as f64, c[2] as f64]).collect();
+        if i == 0 {
+            faces = m.indices.chunks_exact(3).map(|c| [c[0] as usize, c[1] as usize, c[2] as usize]).collect();
+        }
+        frames.push(pos);
+    }
+    (faces, frames)
+}
+
+/// Dijkstra along mesh edges; counts the time spent.
+struct GraphDistances {
+    pos: Vec<V3>,
+    adj: Vec<Vec<(usize, f64)>>,
+    time: Cell<Duration>,
+}
+
+impl GraphDistances {
+    fn new(pos: Vec<V3>, faces: &[[usize; 3]]) -> Self {
+        let mut adj: Vec<Vec<(usize, f64)>> = vec![Vec::new(); pos.len()];
+        for f in faces {
+            for k in 0..3 {
+                let (a, b) = (f[k], f[(k + 1) % 3]);
+                if !adj[a].iter().any(|&(n, _)| n == b) {
+                    let l = dist(pos[a], pos[b]);
+                    adj[a].push((b, l));
+                    adj[b].push((a, l));
+                }
+            }
+        }
+        GraphDistances { pos, adj, time: Cell::new(Duration::ZERO) }
+    }
+}
+
+#[derive(PartialEq)]
+struct Item(f64, usize);
+impl Eq for Item {}
+impl PartialOrd for Item {
+    fn partial_cmp(&self, o: &Self) -> Option<std::cmp::Ordering> {
+        Some(self.cmp(o))
+    }
+}
+impl Ord for Item {
+    fn cmp(&self, o: &Self) -> std::cmp::Ordering {
+        o.0.total_cmp(&self.0)
+    }
+}
+
+impl SupportDistances for GraphDistances {
+    fn n_elements(&self) -> usize {
+        self.pos.len()
+    }
+    fn distances(&self, centers: &[usize]) -> Result<Vec<f64>> {
+        let t0 = Instant::now();
+        let mut d = vec![f64::INFINITY; self.pos.len()];
+        let mut heap = BinaryHeap::new();
+        for &c in centers {
+            d[c] = 0.0;
+            heap.push(Item(0.0, c));
+        }
+        while let Some(Item(dv, v)) = heap.pop() {
+            if dv > d[v] {
+                continue;
+            }
+            for &(n, l) in &self.adj[v] {
+                if dv + l < d[n] {
+                    d[n] = dv + l;
+                    heap.push(Item(dv + l, n));
+                }
+            }
+        }
+        // unreachable vertices (other connected components) are "far"
+        for v in &mut d {
+            if !v.is_finite() {
+                *v = 1e9;
+            }
+        }
+        self.time.set(self.time.get() + t0.elapsed());
+        Ok(d)
+    }
+}
+
+fn dist(a: V3, b: V3) -> f64 {
+    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
+}
+
+/// Rigid (proper) rotation + translation of `src` onto `dst` (Kabsch); a reflection is fixed
+/// by flipping the last singular vector.
+fn kabsch_apply(src: &[V3], dst: &[V3]) -> Vec<V3> {
+    let n = src.len() as f64;
+    let mut cs = [0.0; 3];
+    let mut cd = [0.0; 3];
+    for (s, d) in src.iter().zip(dst) {
+        for q in 0..3 {
+            cs[q] += s[q] / n;
+            cd[q] += d[q] / n;
+        }
+    }
+    let mut h = nalgebra::Matrix3::<f64>::zeros();
+    for (s, d) in src.iter().zip(dst) {
+        let a = nalgebra::Vector3::new(s[0] - cs[0], s[1] - cs[1], s[2] - cs[2]);
+        let b = nalgebra::Vector3::new(d[0] - cd[0], d[1] - cd[1], d[2] - cd[2]);
+        h += b * a.transpose();
+    }
+    let svd = h.svd(true, true);
+    let mut u = svd.u.unwrap();
+    let vt = svd.v_t.unwrap();
+    if (u * vt).determinant() < 0.0 {
+        let c = u.column(2) * -1.0;
+        u.set_column(2, &c);
+    }
+    let r = u * vt;
+    src.iter()
+        .map(|s| {
+            let p = r * nalgebra::Vector3::new(s[0] - cs[0], s[1] - cs[1], s[2] - cs[2]);
+            [p[0] + cd[0], p[1] + cd[1], p[2] + cd[2]]
+        })
+        .collect()
+}
+
+fn erms(a: &[f64], b: &[f64]) -> f64 {
+    let s: f64 = a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum();
+    1000.0 * (s / a.len() as f64).sqrt()
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(|a, b| a.total_cmp(b));
+    if v.is_empty() { f64::NAN } else { v[v.len() / 2] }
+}
+
+struct Opts {
+    align: bool,
+    threads: usize,
+    iterations: usize,
+    signed: bool,
+    per_component: bool,
+}
+
+fn run(name: &str, dir: &Path, target_s: f64, target_erms: f64, o: &Opts) {
+    if !dir.is_dir() {
+        println!("{name}: {} absent, skipped", dir.display());
+        return;
+    }
+    let (faces, mut frames) = load_folder(dir);
+    if o.align {
+        let rest = frames[0].clone();
+        for f in frames.iter_mut().skip(1) {
+            *f = kabsch_apply(f, &rest);
+        }
+    }
+    let (nf, nv) = (frames.len(), frames[0].len());
+    let rest = frames[0].clone();
+    // displacements in the data's units
+    let mut x = Vec::with_capacity(nf * nv * 3);
+    for f in &frames {
+        for (p, r) in f.iter().zip(&rest) {
+            x.extend_from_slice(&[p[0] - r[0], p[1] - r[1], p[2] - r[2]]);
+        }
+    }
+    // support distances on the rest mesh scaled into the unit box
+    let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+    for p in &rest {
+        for q in 0..3 {
+            lo[q] = lo[q].min(p[q]);
+            hi[q] = hi[q].max(p[q]);
+        }
+    }
+    let extent = (0..3).map(|q| hi[q] - lo[q]).fold(0.0, f64::max);
+    let scaled: Vec<V3> = rest.iter().map(|p| [p[0] / extent, p[1] / extent, p[2] / extent]).collect();
+    let provider = GraphDistances::new(scaled, &faces);
+    let cfg = SplocsConfig {
+        max_iterations: o.iterations,
+        threads: o.threads,
+        weights: if o.signed { WeightConstraint::Signed } else { WeightConstraint::Nonnegative },
+        ..Default::default()
+    };
+    println!(
+        "{name}: {nf} frames × {nv} vertices, {} faces, rest = first, unit-box extent {extent:.4}, align {}, \
+         distances: Dijkstra graph distance (stand-in for heat geodesics), threads {}",
+        faces.len(),
+        o.align,
+        o.threads
+    );
+    let dm = DataMatrix::new(&x, nf, nv, 3).unwrap();
+    let t0 = Instant::now();
+    let fit = SplocsSolver::fit(dm, &provider, &cfg, |i, e| println!("  iteration {i:03}, E={e:.6}")).unwrap();
+    let secs = t0.elapsed().as_secs_f64();
+    let rec = fit.model.reconstruct();
+    let e_splocs = erms(&rec, &x);
+    println!(
+        "  SPLOCS: {secs:.3} s (target ≤ {target_s} s; of which distances {:.3} s for {} centre sets), \
+         {} iterations, train Erms {e_splocs:.3} (target ≤ {target_erms})",
+        provider.time.get().as_secs_f64(),
+        fit.distance_queries,
+        fit.iterations
+    );
+    let t1 = Instant::now();
+    let pca = Pca::fit(dm, &PcaConfig { components: 50, ..Default::default() }).unwrap();
+    println!("  PCA (K 50, mean-centred): train Erms {:.3} ({:.3} s)", erms(&pca.reconstruct(), &x), t1.elapsed().as_secs_f64());
+    let shares: Vec<f64> = fit.locality.iter().map(|l| l.energy_share).collect();
+    let sizes: Vec<f64> = fit.locality.iter().map(|l| l.support_size as f64).collect();
+    let regions: Vec<f64> = fit.locality.iter().map(|l| l.region_size as f64).collect();
+    let zero = fit.locality.iter().filter(|l| l.energy == 0.0).count();
+    println!(
+        "  locality: median energy share inside d < d_max {:.4} (min {:.4}, target median ≥ 0.95), \
+         median support size {} of {nv} vertices (min {}, max {}), median region size {}, zero components {zero}",
+        median(shares.clone()),
+        shares.iter().fold(1.0f64, |a, &b| a.min(b)),
+        median(sizes.clone()),
+        sizes.iter().fold(f64::INFINITY, |a, &b| a.min(b)),
+        sizes.iter().fold(0.0f64, |a, &b| a.max(b)),
+        median(regions),
+    );
+    if o.per_component {
+        for (k, l) in fit.locality.iter().enumerate() {
+            println!(
+                "    component {k:2}: centre {:5}, support {:5}, region {:5}, energy share {:.4}",
+                l.center, l.support_size, l.region_size, l.energy_share
+            );
+        }
+    }
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let mut which = "all".to_string();
+    let mut o = Opts { align: false, threads: 1, iterations: 10, signed: false, per_component: false };
+    let mut i = 0;
+    while i < args.len() {
+        match args[i].as_str() {
+            "--align" => o.align = true,
+            "--signed" => o.signed = true,
+            "--per-component" => o.per_component = true,
+            "--threads" => {
+                i += 1;
+                o.threads = args[i].parse().expect("--threads N");
+            }
+            "--iterations" => {
+                i += 1;
+                o.iterations = args[i].parse().expect("--iterations N");
+            }
+            s => which = s.to_string(),
+        }
+        i += 1;
+    }
+    let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data");
+    if !data.is_dir() {
+        println!("{} absent: nothing to do", data.display());
+        return;
+    }
+    if which == "scape" || which == "all" {
+        run("scape", &data.join("scape"), 0.4, 14.18, &o);
+    }
+    if which == "horse" || which == "all" {
+        run("horse-gallop", &data.join("horse-gallop"), 1.2, 5.75, &o);
+    }
+}

@@ -1,0 +1,98 @@
+//! Linear decomposition methods over a data matrix X of F rows (frames) and E·W columns
+//! (E elements, W numbers per element): holistic PCA ([`pca`]) and SPLOCS ([`splocs`]), both
+//! producing a [`LinearModel`] (components C: K × E·W, weights W: F × K, offset: E·W).
+//!
+//! Layout of a data matrix: row-major, row `f` holds frame `f`; inside a row, element `e`
+//! occupies columns `e·W .. e·W + W`. This is exactly the frame-major layout of
+//! [`crate::representation::Features`], so features are passed without copying through
+//! [`DataMatrix::from_features`]. The W numbers of one element form one *group* (SPLOCS
+//! regularises the group's Euclidean length): W = 3 for vertex displacements, W = 9 for
+//! triangle deformation gradients or ACAP features.
+//!
+//! Spatial locality (SPLOCS) needs distances on the mesh; they come from a
+//! [`SupportDistances`] provider so that the methods stay independent of how geodesics are
+//! computed (heat method, Dijkstra, Euclidean, per triangle...).
+
+pub mod linear_model;
+pub mod pca;
+pub mod splocs;
+mod splocs_admm;
+pub mod support_map;
+
+pub use linear_model::{Encoder, LinearModel, WeightConstraint};
+pub use pca::{Pca, PcaCentering, PcaConfig};
+pub use splocs::{AdmmConfig, SplocsConfig, SplocsFit, SplocsSolver};
+pub use support_map::{ComponentLocality, SupportDistances, TriangleSupport};
+
+use crate::representation::Features;
+use crate::{Error, Result};
+
+/// A borrowed data matrix X: `n_rows` × (`n_elements` · `width`), row-major (see the module
+/// docs). Construction checks the length and that every value is finite.
+#[derive(Debug, Clone, Copy)]
+pub struct DataMatrix<'a> {
+    data: &'a [f64],
+    n_rows: usize,
+    n_elements: usize,
+    width: usize,
+}
+
+impl<'a> DataMatrix<'a> {
+    /// Wraps `data` (length `n_rows · n_elements · width`, row-major). Errors on a length
+    /// mismatch, on an empty matrix, or on a non-finite value (reporting its row and column).
+    pub fn new(data: &'a [f64], n_rows: usize, n_elements: usize, width: usize) -> Result<Self> {
+        if n_rows == 0 || n_elements == 0 || width == 0 {
+            return Err(Error::Invalid(format!(
+                "data matrix must be non-empty (rows {n_rows}, elements {n_elements}, width {width})"
+            )));
+        }
+        let expected = n_rows * n_elements * width;
+        if data.len() != expected {
+            return Err(Error::Invalid(format!(
+                "data matrix has {} values, expected rows {n_rows} × elements {n_elements} × width {width} = {expected}",
+                data.len()
+            )));
+        }
+        let cols = n_elements * width;
+        if let Some(i) = data.iter().position(|v| !v.is_finite()) {
+            return Err(Error::Invalid(format!(
+                "data matrix value at row {}, column {} is not finite ({})",
+                i / cols,
+                i % cols,
+                data[i]
+            )));
+        }
+        Ok(DataMatrix { data, n_rows, n_elements, width })
+    }
+
+    /// Borrows a feature array (F × E × W, frame-major) as a data matrix.
+    pub fn from_features(features: &'a Features) -> Result<Self> {
+        Self::new(&features.data, features.n_frames, features.n_elements, features.width)
+    }
+
+    /// All values, row-major.
+    pub fn data(&self) -> &'a [f64] {
+        self.data
+    }
+    /// Number of rows F (frames).
+    pub fn n_rows(&self) -> usize {
+        self.n_rows
+    }
+    /// Number of elements E (vertices or triangles).
+    pub fn n_elements(&self) -> usize {
+        self.n_elements
+    }
+    /// Group width W (numbers per element).
+    pub fn width(&self) -> usize {
+        self.width
+    }
+    /// Number of columns E·W.
+    pub fn n_cols(&self) -> usize {
+        self.n_elements * self.width
+    }
+    /// Row `f` (E·W numbers).
+    pub fn row(&self, f: usize) -> &'a [f64] {
+        let c = self.n_cols();
+        &self.data[f * c..(f + 1) * c]
+    }
+}
