@@ -526,3 +526,77 @@ admm = { rho = 10, iterations = 10 }
         }
     }
 }
+
+impl std::fmt::Display for FrameSelection {
+    /// The config syntax that parses back to the same selection.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            FrameSelection::All => write!(f, "all"),
+            FrameSelection::Rest => write!(f, "rest"),
+            FrameSelection::Every(n) => write!(f, "every:{n}"),
+            FrameSelection::Ranges(r) => {
+                let parts: Vec<String> = r.iter().map(|&(a, b)| if a == b { a.to_string() } else { format!("{a}-{b}") }).collect();
+                write!(f, "{}", parts.join(","))
+            }
+        }
+    }
+}
+
+impl std::fmt::Display for RestShape {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            RestShape::First => write!(f, "first"),
+            RestShape::Mean => write!(f, "mean"),
+            RestShape::File(p) => write!(f, "{}", p.display()),
+        }
+    }
+}
+
+impl DataConfig {
+    /// The `[data]` table with every default written out (for the artefact's config.toml).
+    pub fn to_table(&self) -> toml::Table {
+        let mut t = toml::Table::new();
+        t.insert("path".into(), self.path.clone().into());
+        t.insert("train".into(), self.train.to_string().into());
+        if let Some(test) = &self.test {
+            t.insert("test".into(), test.to_string().into());
+        }
+        t.insert("rest".into(), self.rest.to_string().into());
+        t.insert("align".into(), (if self.align == Align::Rigid { "rigid" } else { "none" }).into());
+        t.insert("unit_box".into(), self.unit_box.into());
+        t
+    }
+}
+
+/// Renders a resolved config (name, `[data]`, and a fully specified `[method]` table) as TOML.
+pub fn resolved_toml(name: &str, data: &DataConfig, method: toml::Table) -> String {
+    let mut root = toml::Table::new();
+    root.insert("name".into(), name.into());
+    root.insert("data".into(), toml::Value::Table(data.to_table()));
+    root.insert("method".into(), toml::Value::Table(method));
+    format!("# Resolved by meshdeco {}: every default written out.\n{}", env!("CARGO_PKG_VERSION"), toml::to_string(&root).unwrap_or_default())
+}
+
+#[cfg(test)]
+mod display_tests {
+    use super::*;
+
+    #[test]
+    fn selections_print_in_their_own_syntax() {
+        for s in ["all", "rest", "every:10", "1-36", "1-3,7,9-12"] {
+            assert_eq!(FrameSelection::parse("k", s).unwrap().to_string(), s);
+        }
+    }
+
+    #[test]
+    fn resolved_config_parses_back() {
+        let c = Config::from_toml("name = \"x\"\n[data]\npath = \"synthetic:tube\"\ntrain = \"every:2\"\ntest = \"rest\"\n[method]\nkind = \"pca\"\n").unwrap();
+        let mut m = toml::Table::new();
+        m.insert("kind".into(), "pca".into());
+        m.insert("components".into(), 5.into());
+        let text = resolved_toml(&c.name, &c.data, m);
+        let back = Config::from_toml(&text).unwrap();
+        assert_eq!(back.data, c.data);
+        assert_eq!(back.method.components, Some(5));
+    }
+}

@@ -19,3 +19,4 @@ pub mod representation;
 pub mod synthetic;
 
 pub use error::{Error, Result};
+pub mod pipeline;

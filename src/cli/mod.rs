@@ -8,6 +8,7 @@ use clap::{Parser, Subcommand};
 
 mod geodesic;
 mod inspect;
+mod progress;
 mod train;
 
 /// Sparse, localized deformation components from meshes that share one connectivity.

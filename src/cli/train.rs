@@ -4,11 +4,14 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
 use clap::Args;
-use meshdeco::config::Config;
+use meshdeco::config::{Config, MethodKind};
+use meshdeco::pipeline::linear;
+
+use super::progress::Bars;
 
 #[derive(Debug, Args)]
 pub struct TrainArgs {
-    /// Experiment config (TOML).
+    /// Experiment config (TOML); see the README for every key.
     #[arg(long, short)]
     pub config: PathBuf,
     /// Artefact directory (default: checkpoints/<name>).
@@ -21,6 +24,32 @@ pub struct TrainArgs {
 
 pub fn run(a: TrainArgs) -> Result<()> {
     let cfg = Config::from_file(&a.config).with_context(|| format!("reading config {}", a.config.display()))?;
-    let _out = cfg.output_dir(a.out.as_deref());
-    bail!("method `{}` is not yet available in this build (config {})", cfg.kind.name(), a.config.display())
+    let out = cfg.output_dir(a.out.as_deref());
+    match cfg.kind {
+        MethodKind::Pca | MethodKind::Splocs => {
+            if a.resume {
+                bail!("--resume applies to the autoencoder only; {} trains in one go", cfg.kind.name());
+            }
+            let mut bars = Bars::new();
+            let o = linear::train(&cfg, &out, &mut bars).with_context(|| format!("training {} ({})", cfg.name, a.config.display()))?;
+            let m = &o.metrics;
+            println!(
+                "{} ({}, {}, K = {}): train Erms {:.4}{} [alignment: {}], fit {:.3} s, representation {:.3} s, {} iterations{}",
+                cfg.name,
+                m.method,
+                m.representation,
+                m.components,
+                m.train_erms,
+                m.test_erms.map(|t| format!(", test Erms {t:.4}")).unwrap_or_default(),
+                m.erms_alignment,
+                m.train_seconds,
+                m.representation_seconds,
+                m.iterations,
+                m.median_energy_share.map(|s| format!(", median in-support energy {s:.3}")).unwrap_or_default(),
+            );
+            println!("artefacts in {}", o.out_dir.display());
+            Ok(())
+        }
+        other => bail!("method `{}` is not yet available in this build (config {})", other.name(), a.config.display()),
+    }
 }

@@ -1,0 +1,63 @@
+//! `metrics.json` of the artefact directory.
+
+use serde::{Deserialize, Serialize};
+
+use crate::methods::support_map::ComponentLocality;
+
+/// Summary of a trained model's quality and cost, written as `metrics.json`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Metrics {
+    /// `pca`, `splocs`, `region-pca` or `autoencoder`.
+    pub method: String,
+    /// Representation the method ran on.
+    pub representation: String,
+    /// Number of components K.
+    pub components: usize,
+    /// Erms (1000 · RMS vertex error, data units) over the training frames.
+    pub train_erms: f64,
+    /// Erms over the test frames (`null` without a test split).
+    pub test_erms: Option<f64>,
+    /// How results were aligned to the ground truth before measuring: `none` or `centroid`
+    /// (representations that drop translation are centroid-aligned).
+    pub erms_alignment: String,
+    /// Wall time of the fit itself (excluding loading, measuring and writing), seconds.
+    pub train_seconds: f64,
+    /// Wall time of computing the representation of the training frames, seconds.
+    pub representation_seconds: f64,
+    /// Iterations run.
+    pub iterations: usize,
+    /// Final objective (method's own units; `null` when the method has none).
+    pub objective: Option<f64>,
+    /// Whether a convergence test stopped the iterations.
+    pub converged: Option<bool>,
+    /// Number of training and test frames.
+    pub train_frames: usize,
+    pub test_frames: usize,
+    /// Median in-support energy share of the components (`null` if not measured).
+    pub median_energy_share: Option<f64>,
+    /// Median support size (elements with non-zero magnitude).
+    pub median_support_size: Option<f64>,
+    /// Per-component locality, in component order.
+    pub locality: Vec<ComponentLocality>,
+}
+
+/// Median of a slice (mean of the two middle values for even lengths); `None` when empty.
+pub fn median(values: &[f64]) -> Option<f64> {
+    if values.is_empty() {
+        return None;
+    }
+    let mut v: Vec<f64> = values.to_vec();
+    v.sort_by(|a, b| a.total_cmp(b));
+    let n = v.len();
+    Some(if n % 2 == 1 { v[n / 2] } else { 0.5 * (v[n / 2 - 1] + v[n / 2]) })
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn median_odd_even() {
+        assert_eq!(super::median(&[3.0, 1.0, 2.0]), Some(2.0));
+        assert_eq!(super::median(&[4.0, 1.0, 2.0, 3.0]), Some(2.5));
+        assert_eq!(super::median(&[]), None);
+    }
+}
