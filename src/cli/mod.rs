@@ -6,6 +6,7 @@ use std::path::PathBuf;
 use anyhow::Result;
 use clap::{Parser, Subcommand};
 
+mod apply;
 mod geodesic;
 mod inspect;
 mod progress;
@@ -21,6 +22,10 @@ pub struct Cli {
 
 #[derive(Debug, Subcommand)]
 pub enum Command {
+    /// Fit a trained model's weights to new meshes; writes reconstructions, weights and Erms.
+    Encode(apply::EncodeArgs),
+    /// Build a shape from component weights ("index:weight,…").
+    Synthesize(apply::SynthesizeArgs),
     /// Heat-method geodesic distances from source vertices, written as a coloured PLY.
     Geodesic(geodesic::GeodesicArgs),
     /// Summarise a mesh sequence: frames, vertices, faces, boundary loops, components, bounding
@@ -33,6 +38,8 @@ pub enum Command {
 /// Runs one parsed command line.
 pub fn run(cli: Cli) -> Result<()> {
     match cli.command {
+        Command::Encode(a) => apply::encode(a),
+        Command::Synthesize(a) => apply::synthesize(a),
         Command::Geodesic(a) => geodesic::run(a),
         Command::Inspect(a) => inspect::run(a),
         Command::Train(a) => train::run(a),
