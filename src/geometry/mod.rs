@@ -7,3 +7,4 @@ pub mod heat_geodesics;
 pub mod mass_matrix;
 pub mod rigid_align;
 pub mod sparse_cholesky;
+pub mod intrinsic_delaunay;
