@@ -33,7 +33,7 @@ pub fn run(a: GeodesicArgs) -> Result<()> {
     if let Some(&bad) = a.source.iter().find(|&&s| s >= n) {
         bail!("--source {bad} is out of range: {} has {n} vertices (0-based indices 0..{})", a.mesh, n.saturating_sub(1));
     }
-    let options = HeatOptions { m: a.m, boundary: if a.neumann { BoundaryCondition::Neumann } else { BoundaryCondition::Averaged } };
+    let options = HeatOptions { m: a.m, boundary: if a.neumann { BoundaryCondition::Neumann } else { BoundaryCondition::Averaged }, ..Default::default() };
     let solver = HeatGeodesics::with_options(&m.positions, &m.faces, options).context("setting up the heat method")?;
     let d = solver.distances(&a.source)?;
     let colors = mesh::colormap(&d);
