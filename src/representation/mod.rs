@@ -95,3 +95,9 @@ impl Features {
         &self.data[i..i + self.width]
     }
 }
+
+pub mod acap;
+pub mod acap_consistency;
+pub mod acap_reconstruct;
+pub mod acap_rotation;
+pub mod acap_text;
