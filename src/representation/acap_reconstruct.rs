@@ -26,13 +26,13 @@ use faer::sparse::linalg::cholesky::{LltRef, SymbolicCholesky, factorize_symboli
 use faer::sparse::{SparseColMat, Triplet};
 use faer::{Conj, MatMut, Par, Side};
 
-/// Factorised reconstruction for one reference mesh: build once, [`AcapReconstruction::solve`]
-/// for every frame.
+/// A sparse symmetric positive semi-definite system on the vertices whose null space is the
+/// translations of each connected component (a graph Laplacian or a Gram matrix of
+/// difference operators). One vertex per component (its smallest index) is pinned at the origin,
+/// the reduced SPD matrix is factorised once (sparse Cholesky, faer, `Par::Seq`), and every
+/// solution is translated so that each component's centroid equals its reference centroid.
 #[derive(Debug)]
-pub struct AcapReconstruction {
-    rest: Vec<Vec3>,
-    edges: Vec<[usize; 2]>,
-    weights: Vec<f64>,
+pub(crate) struct PinnedSystem {
     /// Row of each vertex in the reduced system (`usize::MAX` for pinned vertices).
     reduced: Vec<usize>,
     /// Component label per vertex.
@@ -43,27 +43,17 @@ pub struct AcapReconstruction {
     values: Vec<f64>,
 }
 
-impl AcapReconstruction {
-    /// Factorises the system for reference positions `rest` (N), undirected `edges` (i ≠ j,
-    /// indices < N, each once) and their weights (`weights.len() == edges.len()`, all finite and
-    /// > 0).
-    pub fn new(rest: &[Vec3], edges: &[[usize; 2]], weights: &[f64]) -> Result<Self> {
+impl PinnedSystem {
+    /// Components from `edges`; `entries` are the matrix entries `(i, j, value)` in full vertex
+    /// indices, both triangles (duplicates are summed; only the upper triangle of the reduced
+    /// matrix is used). `what` names the system in error messages.
+    pub(crate) fn new(
+        rest: &[Vec3],
+        edges: &[[usize; 2]],
+        entries: impl Iterator<Item = (usize, usize, f64)>,
+        what: &str,
+    ) -> Result<Self> {
         let n = rest.len();
-        if weights.len() != edges.len() {
-            return Err(Error::Invalid(format!(
-                "reconstruction: {} weights for {} edges",
-                weights.len(),
-                edges.len()
-            )));
-        }
-        for (e, (&[i, j], &c)) in edges.iter().zip(weights).enumerate() {
-            if i >= n || j >= n || i == j {
-                return Err(Error::Invalid(format!("reconstruction: bad edge {e} = [{i}, {j}] for {n} vertices")));
-            }
-            if !(c.is_finite() && c > 0.0) {
-                return Err(Error::Invalid(format!("reconstruction: weight of edge [{i}, {j}] is {c}, must be > 0")));
-            }
-        }
         // Components by union–find; the smallest vertex of each is pinned.
         let mut uf: Vec<usize> = (0..n).collect();
         fn find(uf: &mut [usize], mut x: usize) -> usize {
@@ -108,40 +98,23 @@ impl AcapReconstruction {
                 *s /= *cnt as f64;
             }
         }
-        let mut this = AcapReconstruction {
-            rest: rest.to_vec(),
-            edges: edges.to_vec(),
-            weights: weights.to_vec(),
-            reduced,
-            component,
-            centroids,
-            symbolic: None,
-            values: Vec::new(),
-        };
+        let mut this = PinnedSystem { reduced, component, centroids, symbolic: None, values: Vec::new() };
         if n_free == 0 {
             return Ok(this);
         }
-        // Upper triangle of the reduced Laplacian.
-        let mut trip: Vec<Triplet<usize, usize, f64>> = Vec::with_capacity(n_free + edges.len());
-        for (&[i, j], &c) in edges.iter().zip(weights) {
-            let (ri, rj) = (this.reduced[i], this.reduced[j]);
-            if ri != usize::MAX {
-                trip.push(Triplet::new(ri, ri, c));
-            }
-            if rj != usize::MAX {
-                trip.push(Triplet::new(rj, rj, c));
-            }
-            if ri != usize::MAX && rj != usize::MAX {
-                trip.push(Triplet::new(ri.min(rj), ri.max(rj), -c));
-            }
-        }
+        let trip: Vec<Triplet<usize, usize, f64>> = entries
+            .filter_map(|(i, j, v)| {
+                let (ri, rj) = (this.reduced[i], this.reduced[j]);
+                (ri != usize::MAX && rj != usize::MAX && ri <= rj).then(|| Triplet::new(ri, rj, v))
+            })
+            .collect();
         let a = SparseColMat::<usize, f64>::try_new_from_triplets(n_free, n_free, &trip)
-            .map_err(|e| Error::Numerical(format!("reconstruction matrix: {e:?}")))?;
+            .map_err(|e| Error::Numerical(format!("{what} matrix: {e:?}")))?;
         let symbolic = factorize_symbolic_cholesky(a.symbolic(), Side::Upper, Default::default(), Default::default())
-            .map_err(|e| Error::Numerical(format!("reconstruction symbolic factorisation: {e:?}")))?;
+            .map_err(|e| Error::Numerical(format!("{what}: symbolic factorisation: {e:?}")))?;
         let mut values = vec![0.0; symbolic.len_val()];
         let mut mem = MemBuffer::try_new(symbolic.factorize_numeric_llt_scratch::<f64>(Par::Seq, Default::default()))
-            .map_err(|e| Error::Numerical(format!("reconstruction workspace: {e:?}")))?;
+            .map_err(|e| Error::Numerical(format!("{what}: workspace: {e:?}")))?;
         symbolic
             .factorize_numeric_llt::<f64>(
                 &mut values,
@@ -152,48 +125,31 @@ impl AcapReconstruction {
                 MemStack::new(&mut mem),
                 Default::default(),
             )
-            .map_err(|e| Error::Numerical(format!("reconstruction Cholesky factorisation: {e:?}")))?;
+            .map_err(|e| Error::Numerical(format!("{what}: Cholesky factorisation failed: {e:?}")))?;
         this.symbolic = Some(symbolic);
         this.values = values;
         Ok(this)
     }
 
-    /// Number of vertices N.
-    pub fn n_vertices(&self) -> usize {
-        self.rest.len()
+    /// Number of unknowns of the reduced system (rows of a right-hand-side column).
+    pub(crate) fn n_reduced(&self) -> usize {
+        self.symbolic.as_ref().map_or(0, |s| s.nrows())
     }
 
-    /// Positions (N) from per-vertex deformation gradients `transforms` (N, row-major 3×3,
-    /// applied to reference edge vectors), each component centred on its reference centroid.
-    pub fn solve(&self, transforms: &[Mat3]) -> Result<Vec<Vec3>> {
-        let n = self.rest.len();
-        if transforms.len() != n {
-            return Err(Error::Invalid(format!(
-                "reconstruction: {} transforms for {n} vertices",
-                transforms.len()
-            )));
-        }
+    /// Reduced row of vertex `v` (`usize::MAX` when pinned).
+    #[inline]
+    pub(crate) fn row(&self, v: usize) -> usize {
+        self.reduced[v]
+    }
+
+    /// Solves for three right-hand sides given column-major in `rhs` (3 × [`Self::n_reduced`],
+    /// overwritten) and returns the N positions, each component centred on its reference
+    /// centroid.
+    pub(crate) fn solve(&self, rhs: &mut [f64]) -> Result<Vec<Vec3>> {
+        let n = self.reduced.len();
         let mut p = vec![[0.0; 3]; n];
         if let Some(symbolic) = &self.symbolic {
             let m = symbolic.nrows();
-            // Right-hand sides, column-major m × 3.
-            let mut rhs = vec![0.0; 3 * m];
-            for (&[i, j], &c) in self.edges.iter().zip(&self.weights) {
-                let (ti, tj) = (&transforms[i], &transforms[j]);
-                let e = [self.rest[i][0] - self.rest[j][0], self.rest[i][1] - self.rest[j][1], self.rest[i][2] - self.rest[j][2]];
-                let (ri, rj) = (self.reduced[i], self.reduced[j]);
-                for k in 0..3 {
-                    let d = 0.5
-                        * c
-                        * ((ti[k][0] + tj[k][0]) * e[0] + (ti[k][1] + tj[k][1]) * e[1] + (ti[k][2] + tj[k][2]) * e[2]);
-                    if ri != usize::MAX {
-                        rhs[k * m + ri] += d;
-                    }
-                    if rj != usize::MAX {
-                        rhs[k * m + rj] -= d;
-                    }
-                }
-            }
             if rhs.iter().any(|v| !v.is_finite()) {
                 return Err(Error::Numerical("reconstruction: non-finite right-hand side (bad features?)".into()));
             }
@@ -201,14 +157,14 @@ impl AcapReconstruction {
             let mut mem = MemBuffer::new(symbolic.solve_in_place_scratch::<f64>(3, Par::Seq));
             llt.solve_in_place_with_conj(
                 Conj::No,
-                MatMut::from_column_major_slice_mut(&mut rhs, m, 3),
+                MatMut::from_column_major_slice_mut(&mut rhs[..3 * m], m, 3),
                 Par::Seq,
                 MemStack::new(&mut mem),
             );
-            for v in 0..n {
+            for (v, pv) in p.iter_mut().enumerate() {
                 let r = self.reduced[v];
                 if r != usize::MAX {
-                    p[v] = [rhs[r], rhs[m + r], rhs[2 * m + r]];
+                    *pv = [rhs[r], rhs[m + r], rhs[2 * m + r]];
                 }
             }
         }
@@ -227,6 +183,82 @@ impl AcapReconstruction {
             }
         }
         Ok(p)
+    }
+}
+
+/// Factorised reconstruction for one reference mesh: build once, [`AcapReconstruction::solve`]
+/// for every frame.
+#[derive(Debug)]
+pub struct AcapReconstruction {
+    rest: Vec<Vec3>,
+    edges: Vec<[usize; 2]>,
+    weights: Vec<f64>,
+    system: PinnedSystem,
+}
+
+impl AcapReconstruction {
+    /// Factorises the system for reference positions `rest` (N), undirected `edges` (i ≠ j,
+    /// indices < N, each once) and their weights (`weights.len() == edges.len()`, all finite and
+    /// > 0).
+    pub fn new(rest: &[Vec3], edges: &[[usize; 2]], weights: &[f64]) -> Result<Self> {
+        let n = rest.len();
+        if weights.len() != edges.len() {
+            return Err(Error::Invalid(format!(
+                "reconstruction: {} weights for {} edges",
+                weights.len(),
+                edges.len()
+            )));
+        }
+        for (e, (&[i, j], &c)) in edges.iter().zip(weights).enumerate() {
+            if i >= n || j >= n || i == j {
+                return Err(Error::Invalid(format!("reconstruction: bad edge {e} = [{i}, {j}] for {n} vertices")));
+            }
+            if !(c.is_finite() && c > 0.0) {
+                return Err(Error::Invalid(format!("reconstruction: weight of edge [{i}, {j}] is {c}, must be > 0")));
+            }
+        }
+        let entries = edges
+            .iter()
+            .zip(weights)
+            .flat_map(|(&[i, j], &c)| [(i, i, c), (j, j, c), (i, j, -c), (j, i, -c)]);
+        let system = PinnedSystem::new(rest, edges, entries, "edge reconstruction")?;
+        Ok(AcapReconstruction { rest: rest.to_vec(), edges: edges.to_vec(), weights: weights.to_vec(), system })
+    }
+
+    /// Number of vertices N.
+    pub fn n_vertices(&self) -> usize {
+        self.rest.len()
+    }
+
+    /// Positions (N) from per-vertex deformation gradients `transforms` (N, row-major 3×3,
+    /// applied to reference edge vectors), each component centred on its reference centroid.
+    pub fn solve(&self, transforms: &[Mat3]) -> Result<Vec<Vec3>> {
+        let n = self.rest.len();
+        if transforms.len() != n {
+            return Err(Error::Invalid(format!(
+                "reconstruction: {} transforms for {n} vertices",
+                transforms.len()
+            )));
+        }
+        let m = self.system.n_reduced();
+        let mut rhs = vec![0.0; 3 * m];
+        for (&[i, j], &c) in self.edges.iter().zip(&self.weights) {
+            let (ti, tj) = (&transforms[i], &transforms[j]);
+            let e = [self.rest[i][0] - self.rest[j][0], self.rest[i][1] - self.rest[j][1], self.rest[i][2] - self.rest[j][2]];
+            let (ri, rj) = (self.system.row(i), self.system.row(j));
+            for k in 0..3 {
+                let d = 0.5
+                    * c
+                    * ((ti[k][0] + tj[k][0]) * e[0] + (ti[k][1] + tj[k][1]) * e[1] + (ti[k][2] + tj[k][2]) * e[2]);
+                if ri != usize::MAX {
+                    rhs[k * m + ri] += d;
+                }
+                if rj != usize::MAX {
+                    rhs[k * m + rj] -= d;
+                }
+            }
+        }
+        self.system.solve(&mut rhs)
     }
 }
 
