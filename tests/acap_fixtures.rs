@@ -201,10 +201,10 @@ fn bfs_on_reference_rotations_is_no_worse_than_reference_bfs() {
         offsets.push(ring.len());
     }
     let tree = BfsTree::new(&offsets, &ring);
-    for k in 1..3 {
-        let (axis, theta): (Vec<Vec3>, Vec<f64>) = gt_l[k].iter().map(|l| axis_angle(&exp_so3(vee(l)))).unzip();
+    for (k, gt) in gt_l.iter().enumerate().skip(1) {
+        let (axis, theta): (Vec<Vec3>, Vec<f64>) = gt.iter().map(|l| axis_angle(&exp_so3(vee(l)))).unzip();
         let ours = neighbour_energy(&bfs_consistency(&tree, &axis, &theta), acap.edges());
-        let theirs = energy_of(&gt_l[k], acap.edges());
+        let theirs = energy_of(gt, acap.edges());
         println!("shape {}: BFS energy on the reference's rotations: ours {ours:.3}, reference file {theirs:.3}", k + 1);
         assert!(ours <= theirs);
     }
@@ -365,12 +365,12 @@ fn round_trips_fixtures_and_synthetic() {
         assert!(v.iter().zip(want).all(|(a, b)| (a - b).abs() < 1e-12), "{v:?}");
     }
     let back = acap.decode_frame(&identity.features()).unwrap();
-    assert!(erms(&[bar.positions.clone()], &[back]) < 1e-9);
+    assert!(erms(std::slice::from_ref(&bar.positions), &[back]) < 1e-9);
     for (name, x) in [("twist", twist(&bar, 1.5 * PI, len)), ("bend", bend(&bar, 1.9 * PI, len))] {
         for c in [Consistency::Bfs, Consistency::Global] {
             let f = acap.encode_frame(&x, c).unwrap();
             let back = acap.decode_frame(&f.features()).unwrap();
-            let e = erms(&[x.clone()], &[back]);
+            let e = erms(std::slice::from_ref(&x), &[back]);
             println!("round trip {name} {c:?}: Erms {e:.4e} (bar length {len})");
             assert!(e < 1e-3, "{name}: Erms {e}");
         }
@@ -382,7 +382,7 @@ fn round_trips_fixtures_and_synthetic() {
     for (k, m) in meshes.iter().enumerate() {
         let f = acap.encode_frame(&m.positions, Consistency::Global).unwrap();
         let back = acap.decode_frame(&f.features()).unwrap();
-        let e = erms(&[m.positions.clone()], &[back]);
+        let e = erms(std::slice::from_ref(&m.positions), &[back]);
         println!("round trip fixture {}: Erms {e:.4e}", k + 1);
         assert!(e < 1e-3, "fixture {}: Erms {e}", k + 1);
     }

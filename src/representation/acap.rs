@@ -24,13 +24,21 @@
 //! q_j)‖² with c_ij = w_ij, the ACAP weights above: positive, bounded, the ones that weight the
 //! 1-ring fits). See [`AcapDecoder`]. Both matrices depend on the reference only and are
 //! factorised once in [`Acap::new`]; the result's centroid is the reference's.
+//!
+//! Matching the reference: on its fixtures (`../shared/fixtures/acap`) S and logR equal the
+//! with-opt output files within 6.2e-5 (printing precision); the BFS output files were produced
+//! from other inputs (their S, which no consistency option changes, differs from the with-opt
+//! S by 5.4e-3) and carry a 2π seam that no BFS from vertex 0 over that mesh produces. Rings
+//! come from [`Topology`] (counter-clockwise); the reference circulates OpenMesh's clockwise
+//! order. Only the BFS tree depends on it, and on the fixtures both orders give identical
+//! results.
 
 use crate::geometry::normals::{NormalWeighting, vertex_normals};
 use crate::mesh::{Topology, TriMesh, Vec3};
 use crate::representation::Features;
 pub use crate::representation::acap_consistency::{BfsTree, RotationField};
 use crate::representation::acap_consistency::{IDENTITY_ANGLE, bfs_consistency, global_consistency, neighbour_energy};
-pub use crate::representation::acap_fit_inverse::FitInverse;
+pub use crate::representation::acap_fit_inverse::{FitInverse, RingFit};
 pub use crate::representation::acap_reconstruct::AcapReconstruction;
 pub use crate::representation::acap_rotation::Mat3;
 use crate::representation::acap_rotation::{
@@ -88,7 +96,7 @@ impl AcapFrame {
     /// Inverse of [`AcapFrame::features`]: logR skew-symmetric, S symmetric. Energies are NaN
     /// (unknown). Errors when the length is not a multiple of 9.
     pub fn from_features(features: &[f64]) -> Result<Self> {
-        if features.len() % WIDTH != 0 {
+        if !features.len().is_multiple_of(WIDTH) {
             return Err(Error::Invalid(format!(
                 "ACAP features: length {} is not a multiple of {WIDTH}",
                 features.len()
@@ -276,7 +284,9 @@ impl Acap {
             for &j in nb {
                 let e = [q[j][0] - q[i][0], q[j][1] - q[i][1], q[j][2] - q[i][2]];
                 len_sum += (e[0] * e[0] + e[1] * e[1] + e[2] * e[2]).sqrt();
-                let id = topo.edge_id(i, j).expect("ring neighbours share an edge");
+                let id = topo.edge_id(i, j).ok_or_else(|| {
+                    Error::Invalid(format!("ACAP reference: ring neighbours {i} and {j} share no edge"))
+                })?;
                 let sw = edge_weight[id].sqrt();
                 let a = [sw * e[0], sw * e[1], sw * e[2]];
                 add_outer(&mut ata, a, a);
@@ -305,17 +315,15 @@ impl Acap {
             AcapDecoder::FitInverse { edge_weight: mu } => {
                 let h = reference.mean_edge_length();
                 let scale = if h > 0.0 { mu / (h * h) } else { 0.0 };
-                Decoder::FitInverse(FitInverse::new(
-                    q,
-                    &topo.edges,
-                    &ring_offsets,
-                    &ring,
-                    &row_scale,
-                    &ref_rows,
-                    &ref_normal_rows,
-                    &inv_ata,
-                    Some((&edge_weight, scale)),
-                )?)
+                let fit = RingFit {
+                    ring_offsets: &ring_offsets,
+                    ring: &ring,
+                    row_scale: &row_scale,
+                    ref_rows: &ref_rows,
+                    ref_normal_rows: &ref_normal_rows,
+                    inv_ata: &inv_ata,
+                };
+                Decoder::FitInverse(FitInverse::new(q, &topo.edges, fit, Some((&edge_weight, scale)))?)
             }
         };
         Ok(Acap {

@@ -27,6 +27,8 @@
 //!   π) by m = ±1, which repairs the seams where two BFS branches met with different cycle counts.
 //!   The search stops when no move improves E; hence E(global) ≤ E(BFS) always.
 
+
+#![allow(clippy::needless_range_loop)] // index loops over 3-vectors read like the formulas
 use crate::mesh::Vec3;
 use std::f64::consts::PI;
 

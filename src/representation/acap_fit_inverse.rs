@@ -34,10 +34,34 @@
 //! residual, so the round trip is exact to rounding. (On a flat 1-ring, h_i is the normal and
 //! the removed component of the residual does not depend on p at all, so nothing is lost.)
 
+#![allow(clippy::needless_range_loop)] // index loops over 3-vectors read like the formulas
+
 use crate::mesh::Vec3;
 use crate::representation::acap_reconstruct::PinnedSystem;
 use crate::representation::acap_rotation::{Mat3, mat_vec};
 use crate::{Error, Result};
+
+/// The encoder's 1-ring fit data (reference only): rings in CSR form (`ring[ring_offsets[i]..
+/// ring_offsets[i+1]]`), per ring entry the row scale s_k = sqrt(w_ij) and reference row a_k,
+/// per vertex the reference normal row a_n and A_i⁻¹.
+#[derive(Debug, Clone, Copy)]
+pub struct RingFit<'a> {
+    pub ring_offsets: &'a [usize],
+    pub ring: &'a [usize],
+    pub row_scale: &'a [f64],
+    pub ref_rows: &'a [Vec3],
+    pub ref_normal_rows: &'a [Vec3],
+    pub inv_ata: &'a [Mat3],
+}
+
+/// The optional edge least-squares term: reference positions, undirected edges and their
+/// weights, already multiplied by the term's overall weight.
+#[derive(Debug)]
+struct EdgeTerm {
+    rest: Vec<Vec3>,
+    edges: Vec<[usize; 2]>,
+    weights: Vec<f64>,
+}
 
 /// Factorised inverse of the 1-ring fit for one reference mesh.
 #[derive(Debug)]
@@ -51,26 +75,16 @@ pub struct FitInverse {
     /// Per vertex: h_i/‖h_i‖ with h_i = A_i⁻¹ a_n (zero when h_i = 0).
     h: Vec<Vec3>,
     system: PinnedSystem,
-    /// Optional edge term: reference positions, edges, and per-edge weights already multiplied
-    /// by the term's overall weight.
-    edge_term: Option<(Vec<Vec3>, Vec<[usize; 2]>, Vec<f64>)>,
+    edge_term: Option<EdgeTerm>,
 }
 
 impl FitInverse {
-    /// Precomputes and factorises. Inputs as stored by the encoder: rings in CSR form, per ring
-    /// entry the row scale s_k and reference row a_k, per vertex the reference normal row and
-    /// A_i⁻¹; `edges` (undirected) define the components.
-    pub fn new(
-        rest: &[Vec3],
-        edges: &[[usize; 2]],
-        ring_offsets: &[usize],
-        ring: &[usize],
-        row_scale: &[f64],
-        ref_rows: &[Vec3],
-        ref_normal_rows: &[Vec3],
-        inv_ata: &[Mat3],
-        edge_term: Option<(&[f64], f64)>,
-    ) -> Result<Self> {
+    /// Precomputes and factorises for reference positions `rest` (N), undirected `edges`
+    /// (defining the components) and the encoder's fit data. `edge_term = Some((c, μ))` adds
+    /// μ × the edge least squares Σ c_ij ‖(p_i − p_j) − ½(T_i + T_j)(q_i − q_j)‖² (c per edge,
+    /// μ ≥ 0; μ = 0 or `None` leaves it out).
+    pub fn new(rest: &[Vec3], edges: &[[usize; 2]], fit: RingFit<'_>, edge_term: Option<(&[f64], f64)>) -> Result<Self> {
+        let RingFit { ring_offsets, ring, row_scale, ref_rows, ref_normal_rows, inv_ata } = fit;
         let n = rest.len();
         if ring_offsets.len() != n + 1 || ring.len() != row_scale.len() || ring.len() != ref_rows.len() {
             return Err(Error::Invalid("fit inverse: inconsistent ring arrays".into()));
@@ -117,12 +131,12 @@ impl FitInverse {
                 if w.len() != edges.len() {
                     return Err(Error::Invalid("fit inverse: edge weights do not match edges".into()));
                 }
-                Some((rest.to_vec(), edges.to_vec(), w.iter().map(|c| c * mu).collect::<Vec<f64>>()))
+                Some(EdgeTerm { rest: rest.to_vec(), edges: edges.to_vec(), weights: w.iter().map(|c| c * mu).collect() })
             }
             _ => None,
         };
-        let laplacian = edge_term.iter().flat_map(|(_, e, w)| {
-            e.iter().zip(w).flat_map(|(&[i, j], &c)| [(i, i, c), (j, j, c), (i, j, -c), (j, i, -c)])
+        let laplacian = edge_term.iter().flat_map(|t| {
+            t.edges.iter().zip(&t.weights).flat_map(|(&[i, j], &c)| [(i, i, c), (j, j, c), (i, j, -c), (j, i, -c)])
         });
         let system = PinnedSystem::new(rest, edges, entries.chain(laplacian), "ACAP fit inverse")?;
         Ok(FitInverse { ring_offsets: ring_offsets.to_vec(), ring: ring.to_vec(), g, g_sum, h, system, edge_term })
@@ -159,8 +173,8 @@ impl FitInverse {
                 }
             }
         }
-        if let Some((rest, edges, w)) = &self.edge_term {
-            for (&[i, j], &c) in edges.iter().zip(w) {
+        if let Some(EdgeTerm { rest, edges, weights }) = &self.edge_term {
+            for (&[i, j], &c) in edges.iter().zip(weights) {
                 let (ti, tj) = (&transforms[i], &transforms[j]);
                 let e = [rest[i][0] - rest[j][0], rest[i][1] - rest[j][1], rest[i][2] - rest[j][2]];
                 let (ri, rj) = (self.system.row(i), self.system.row(j));

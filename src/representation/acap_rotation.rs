@@ -13,6 +13,8 @@
 //! so that `[ω]× v = ω × v`; a rotation by angle θ (right-hand rule) about the unit axis `a` is
 //! `exp(θ [a]×)`.
 
+
+#![allow(clippy::needless_range_loop)] // index loops over 3-vectors read like the formulas
 use crate::mesh::Vec3;
 use nalgebra::Matrix3;
 
@@ -222,9 +224,8 @@ mod tests {
     #[test]
     fn axis_angle_inverts_exp_everywhere() {
         let axis = {
-            let a = [0.3, -0.5, 0.8];
-            let n = (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]) as f64;
-            let n = n.sqrt();
+            let a: [f64; 3] = [0.3, -0.5, 0.8];
+            let n = (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt();
             [a[0] / n, a[1] / n, a[2] / n]
         };
         for &theta in &[1e-9, 1e-4, 0.3, 1.5, 2.2, 3.0, std::f64::consts::PI - 1e-7, std::f64::consts::PI - 1e-3] {
