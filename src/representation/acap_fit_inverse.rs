@@ -1,0 +1,203 @@
+//! Exact inverse of the ACAP 1-ring fit: positions whose per-vertex deformation gradients,
+//! computed the way the encoder computes them, equal given ones (least squares when they are not
+//! exactly realisable).
+//!
+//! The encoder computes, for vertex i with ring rows a_k = s_k (q_j − q_i) (s_k = sqrt(w_ij)),
+//! normal row a_n and A_i = Σ a aᵀ (reference only),
+//!
+//! ```text
+//! T_i(p) = ( Σ_k s_k (p_j − p_i) a_kᵀ + β_i(p) a_nᵀ ) A_i⁻¹,
+//! ```
+//!
+//! with β_i(p) the deformed normal row (unit normal × 0.3 × mean 1-ring edge length of p). For a
+//! fixed β this is linear in p, and each row c (x, y, z) of T_i involves only coordinate c of
+//! p. So, per coordinate c,
+//!
+//! ```text
+//! min_p  Σ_i Σ_m ( Σ_k g_k,m (p_j,c − p_i,c) − (T_i[c][m] − β_i,c h_i,m) )²,
+//!        g_k = s_k A_i⁻¹ a_k,  h_i = A_i⁻¹ a_n,
+//! ```
+//!
+//! i.e. the residual is measured in T-space. β_i is not known (it depends on the unknown
+//! positions through their normals and edge lengths), but it enters vertex i's residual only
+//! along h_i: minimising over β_i too amounts to projecting every residual of vertex i with
+//! P_i = I − h_i h_iᵀ/‖h_i‖². The problem becomes linear in p with a matrix that depends on the
+//! reference only:
+//!
+//! ```text
+//! min_p  Σ_i Σ_c ‖ Σ_k (P_i g_k)(p_j,c − p_i,c) − P_i T_i[c] ‖²        (T_i[c] = row c of T_i)
+//! ```
+//!
+//! The normal matrix couples 2-ring neighbours; it is factorised once, with one pinned vertex per
+//! component and the reference centroid restored afterwards as in [`super::acap_reconstruct`].
+//! When the T_i were computed by the encoder from positions x, x (up to translation) has zero
+//! residual, so the round trip is exact to rounding. (On a flat 1-ring, h_i is the normal and
+//! the removed component of the residual does not depend on p at all, so nothing is lost.)
+
+#![allow(clippy::needless_range_loop)] // index loops over 3-vectors read like the formulas
+
+use crate::mesh::Vec3;
+use crate::representation::acap_reconstruct::PinnedSystem;
+use crate::representation::acap_rotation::{Mat3, mat_vec};
+use crate::{Error, Result};
+
+/// The encoder's 1-ring fit data (reference only): rings in CSR form (`ring[ring_offsets[i]..
+/// ring_offsets[i+1]]`), per ring entry the row scale s_k = sqrt(w_ij) and reference row a_k,
+/// per vertex the reference normal row a_n and A_i⁻¹.
+#[derive(Debug, Clone, Copy)]
+pub struct RingFit<'a> {
+    pub ring_offsets: &'a [usize],
+    pub ring: &'a [usize],
+    pub row_scale: &'a [f64],
+    pub ref_rows: &'a [Vec3],
+    pub ref_normal_rows: &'a [Vec3],
+    pub inv_ata: &'a [Mat3],
+}
+
+/// The optional edge least-squares term: reference positions, undirected edges and their
+/// weights, already multiplied by the term's overall weight.
+#[derive(Debug)]
+struct EdgeTerm {
+    rest: Vec<Vec3>,
+    edges: Vec<[usize; 2]>,
+    weights: Vec<f64>,
+}
+
+/// Factorised inverse of the 1-ring fit for one reference mesh.
+#[derive(Debug)]
+pub struct FitInverse {
+    ring_offsets: Vec<usize>,
+    ring: Vec<usize>,
+    /// Per ring entry: P_i g_k, g_k = s_k A_i⁻¹ a_k.
+    g: Vec<Vec3>,
+    /// Per vertex: Σ_k P_i g_k (the coefficient of p_i, negated).
+    g_sum: Vec<Vec3>,
+    /// Per vertex: h_i/‖h_i‖ with h_i = A_i⁻¹ a_n (zero when h_i = 0).
+    h: Vec<Vec3>,
+    system: PinnedSystem,
+    edge_term: Option<EdgeTerm>,
+}
+
+impl FitInverse {
+    /// Precomputes and factorises for reference positions `rest` (N), undirected `edges`
+    /// (defining the components) and the encoder's fit data. `edge_term = Some((c, μ))` adds
+    /// μ × the edge least squares Σ c_ij ‖(p_i − p_j) − ½(T_i + T_j)(q_i − q_j)‖² (c per edge,
+    /// μ ≥ 0; μ = 0 or `None` leaves it out).
+    pub fn new(rest: &[Vec3], edges: &[[usize; 2]], fit: RingFit<'_>, edge_term: Option<(&[f64], f64)>) -> Result<Self> {
+        let RingFit { ring_offsets, ring, row_scale, ref_rows, ref_normal_rows, inv_ata } = fit;
+        let n = rest.len();
+        if ring_offsets.len() != n + 1 || ring.len() != row_scale.len() || ring.len() != ref_rows.len() {
+            return Err(Error::Invalid("fit inverse: inconsistent ring arrays".into()));
+        }
+        let mut g = Vec::with_capacity(ring.len());
+        let mut g_sum = Vec::with_capacity(n);
+        let mut h = Vec::with_capacity(n);
+        for i in 0..n {
+            let hi = mat_vec(&inv_ata[i], ref_normal_rows[i]);
+            let hn = (hi[0] * hi[0] + hi[1] * hi[1] + hi[2] * hi[2]).sqrt();
+            let u = if hn > 0.0 && hn.is_finite() { [hi[0] / hn, hi[1] / hn, hi[2] / hn] } else { [0.0; 3] };
+            let mut sum = [0.0; 3];
+            for k in ring_offsets[i]..ring_offsets[i + 1] {
+                let ai = mat_vec(&inv_ata[i], ref_rows[k]);
+                let gk = project(u, [row_scale[k] * ai[0], row_scale[k] * ai[1], row_scale[k] * ai[2]]);
+                for m in 0..3 {
+                    sum[m] += gk[m];
+                }
+                g.push(gk);
+            }
+            g_sum.push(sum);
+            h.push(u);
+        }
+        // Normal matrix Σ_{i,m} r_{i,m} r_{i,m}ᵀ, r_{i,m} = Σ_k g_k,m (e_j − e_i).
+        let entries = (0..n).flat_map(|i| {
+            let (s, e) = (ring_offsets[i], ring_offsets[i + 1]);
+            let (g, g_sum) = (&g, &g_sum);
+            let coef = move |t: usize, m: usize| -> (usize, f64) {
+                if t == 0 { (i, -g_sum[i][m]) } else { (ring[s + t - 1], g[s + t - 1][m]) }
+            };
+            let d = e - s + 1;
+            (0..3).flat_map(move |m| {
+                (0..d).flat_map(move |a| {
+                    (0..d).map(move |b| {
+                        let (va, ca) = coef(a, m);
+                        let (vb, cb) = coef(b, m);
+                        (va, vb, ca * cb)
+                    })
+                })
+            })
+        });
+        let edge_term = match edge_term {
+            Some((w, mu)) if mu > 0.0 => {
+                if w.len() != edges.len() {
+                    return Err(Error::Invalid("fit inverse: edge weights do not match edges".into()));
+                }
+                Some(EdgeTerm { rest: rest.to_vec(), edges: edges.to_vec(), weights: w.iter().map(|c| c * mu).collect() })
+            }
+            _ => None,
+        };
+        let laplacian = edge_term.iter().flat_map(|t| {
+            t.edges.iter().zip(&t.weights).flat_map(|(&[i, j], &c)| [(i, i, c), (j, j, c), (i, j, -c), (j, i, -c)])
+        });
+        let system = PinnedSystem::new(rest, edges, entries.chain(laplacian), "ACAP fit inverse")?;
+        Ok(FitInverse { ring_offsets: ring_offsets.to_vec(), ring: ring.to_vec(), g, g_sum, h, system, edge_term })
+    }
+
+    /// Positions (N) whose encoder gradients best match `transforms` (N), centred on the
+    /// reference centroid.
+    pub fn solve(&self, transforms: &[Mat3]) -> Result<Vec<Vec3>> {
+        let n = self.g_sum.len();
+        if transforms.len() != n {
+            return Err(Error::Invalid(format!("fit inverse: {} transforms for {n} vertices", transforms.len())));
+        }
+        let mrows = self.system.n_reduced();
+        let mut rhs = vec![0.0; 3 * mrows];
+        for i in 0..n {
+            let (s, e) = (self.ring_offsets[i], self.ring_offsets[i + 1]);
+            if s == e {
+                continue;
+            }
+            for c in 0..3 {
+                // y = P_i T_i[c]
+                let y = project(self.h[i], transforms[i][c]);
+                let col = &mut rhs[c * mrows..(c + 1) * mrows];
+                let ri = self.system.row(i);
+                if ri != usize::MAX {
+                    col[ri] -= self.g_sum[i][0] * y[0] + self.g_sum[i][1] * y[1] + self.g_sum[i][2] * y[2];
+                }
+                for k in s..e {
+                    let rj = self.system.row(self.ring[k]);
+                    if rj != usize::MAX {
+                        let gk = self.g[k];
+                        col[rj] += gk[0] * y[0] + gk[1] * y[1] + gk[2] * y[2];
+                    }
+                }
+            }
+        }
+        if let Some(EdgeTerm { rest, edges, weights }) = &self.edge_term {
+            for (&[i, j], &c) in edges.iter().zip(weights) {
+                let (ti, tj) = (&transforms[i], &transforms[j]);
+                let e = [rest[i][0] - rest[j][0], rest[i][1] - rest[j][1], rest[i][2] - rest[j][2]];
+                let (ri, rj) = (self.system.row(i), self.system.row(j));
+                for k in 0..3 {
+                    let d = 0.5
+                        * c
+                        * ((ti[k][0] + tj[k][0]) * e[0] + (ti[k][1] + tj[k][1]) * e[1] + (ti[k][2] + tj[k][2]) * e[2]);
+                    if ri != usize::MAX {
+                        rhs[k * mrows + ri] += d;
+                    }
+                    if rj != usize::MAX {
+                        rhs[k * mrows + rj] -= d;
+                    }
+                }
+            }
+        }
+        self.system.solve(&mut rhs)
+    }
+}
+
+/// (I − u uᵀ) v for a unit (or zero) u.
+#[inline]
+fn project(u: Vec3, v: Vec3) -> Vec3 {
+    let d = u[0] * v[0] + u[1] * v[1] + u[2] * v[2];
+    [v[0] - d * u[0], v[1] - d * u[1], v[2] - d * u[2]]
+}

@@ -1,0 +1,334 @@
+//! Vertex positions from per-vertex deformation gradients T_i (ACAP decoding, DESIGN.md
+//! § acap "Reconstruction").
+//!
+//! Solves
+//!
+//! ```text
+//! min_p  Σ_{edges (i,j)} c_ij ‖(p_i − p_j) − ½(T_i + T_j)(q_i − q_j)‖²
+//! ```
+//!
+//! with q the reference positions and c_ij > 0 edge weights of the reference mesh. (This is also
+//! the minimiser of Σ_i Σ_{j∈N(i)} c_ij ‖(p_j − p_i) − T_i (q_j − q_i)‖², each vertex fitting
+//! its own 1-ring, since both differ by a constant.) The normal equations are L p = b with
+//! L = Σ c_ij (e_i − e_j)(e_i − e_j)ᵀ the weighted graph Laplacian and
+//! b_i = Σ_j c_ij ½(T_i + T_j)(q_i − q_j), one right-hand side per coordinate.
+//!
+//! Translation: L is singular (constants per connected component). One vertex per component
+//! (its smallest index) is pinned at the origin, the reduced SPD system is factorised once
+//! (sparse Cholesky, faer, sequential), and after each solve every component is translated so
+//! that its centroid equals that component's centroid in the reference mesh.
+
+
+#![allow(clippy::needless_range_loop)] // index loops over 3-vectors read like the formulas
+use crate::mesh::Vec3;
+use crate::representation::acap_rotation::Mat3;
+use crate::{Error, Result};
+use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::sparse::linalg::SupernodalThreshold;
+use faer::sparse::linalg::cholesky::{CholeskySymbolicParams, LltRef, SymbolicCholesky, factorize_symbolic_cholesky};
+use faer::sparse::{SparseColMat, Triplet};
+use faer::{Conj, MatMut, Par, Side};
+
+/// Reduced systems with fewer unknowns use a simplicial Cholesky factor.
+const SIMPLICIAL_BELOW: usize = 50_000;
+
+/// A sparse symmetric positive semi-definite system on the vertices whose null space is the
+/// translations of each connected component (a graph Laplacian or a Gram matrix of
+/// difference operators). One vertex per component (its smallest index) is pinned at the origin,
+/// the reduced SPD matrix is factorised once (sparse Cholesky, faer, `Par::Seq`), and every
+/// solution is translated so that each component's centroid equals its reference centroid.
+#[derive(Debug)]
+pub(crate) struct PinnedSystem {
+    /// Row of each vertex in the reduced system (`usize::MAX` for pinned vertices).
+    reduced: Vec<usize>,
+    /// Component label per vertex.
+    component: Vec<usize>,
+    /// Reference centroid and vertex count per component.
+    centroids: Vec<(Vec3, usize)>,
+    symbolic: Option<SymbolicCholesky<usize>>,
+    values: Vec<f64>,
+}
+
+impl PinnedSystem {
+    /// Components from `edges`; `entries` are the matrix entries `(i, j, value)` in full vertex
+    /// indices, both triangles (duplicates are summed; only the upper triangle of the reduced
+    /// matrix is used). `what` names the system in error messages.
+    pub(crate) fn new(
+        rest: &[Vec3],
+        edges: &[[usize; 2]],
+        entries: impl Iterator<Item = (usize, usize, f64)>,
+        what: &str,
+    ) -> Result<Self> {
+        let n = rest.len();
+        // Components by union–find; the smallest vertex of each is pinned.
+        let mut uf: Vec<usize> = (0..n).collect();
+        fn find(uf: &mut [usize], mut x: usize) -> usize {
+            while uf[x] != x {
+                uf[x] = uf[uf[x]];
+                x = uf[x];
+            }
+            x
+        }
+        for &[i, j] in edges {
+            let (a, b) = (find(&mut uf, i), find(&mut uf, j));
+            if a != b {
+                // Keep the smaller index as root so that roots are the smallest vertices.
+                let (lo, hi) = (a.min(b), a.max(b));
+                uf[hi] = lo;
+            }
+        }
+        let mut component = vec![usize::MAX; n];
+        let mut comp_of_root = vec![usize::MAX; n];
+        let mut centroids: Vec<(Vec3, usize)> = Vec::new();
+        let mut reduced = vec![usize::MAX; n];
+        let mut n_free = 0;
+        for v in 0..n {
+            let r = find(&mut uf, v);
+            if comp_of_root[r] == usize::MAX {
+                comp_of_root[r] = centroids.len();
+                centroids.push(([0.0; 3], 0));
+            }
+            let c = comp_of_root[r];
+            component[v] = c;
+            for k in 0..3 {
+                centroids[c].0[k] += rest[v][k];
+            }
+            centroids[c].1 += 1;
+            if r != v {
+                reduced[v] = n_free;
+                n_free += 1;
+            }
+        }
+        for (sum, cnt) in centroids.iter_mut() {
+            for s in sum.iter_mut() {
+                *s /= *cnt as f64;
+            }
+        }
+        let mut this = PinnedSystem { reduced, component, centroids, symbolic: None, values: Vec::new() };
+        if n_free == 0 {
+            return Ok(this);
+        }
+        let trip: Vec<Triplet<usize, usize, f64>> = entries
+            .filter_map(|(i, j, v)| {
+                let (ri, rj) = (this.reduced[i], this.reduced[j]);
+                (ri != usize::MAX && rj != usize::MAX && ri <= rj).then(|| Triplet::new(ri, rj, v))
+            })
+            .collect();
+        let a = SparseColMat::<usize, f64>::try_new_from_triplets(n_free, n_free, &trip)
+            .map_err(|e| Error::Numerical(format!("{what} matrix: {e:?}")))?;
+        // Simplicial factors solve faster than supernodal ones at these sizes (horse, 8431
+        // vertices, 2-ring fit-inverse matrix: 2.6 ms against 3.9 ms CPU time per decode);
+        // larger systems keep faer's automatic choice.
+        let mut params: CholeskySymbolicParams = Default::default();
+        if n_free < SIMPLICIAL_BELOW {
+            params.supernodal_flop_ratio_threshold = SupernodalThreshold::FORCE_SIMPLICIAL;
+        }
+        let symbolic = factorize_symbolic_cholesky(a.symbolic(), Side::Upper, Default::default(), params)
+            .map_err(|e| Error::Numerical(format!("{what}: symbolic factorisation: {e:?}")))?;
+        let mut values = vec![0.0; symbolic.len_val()];
+        let mut mem = MemBuffer::try_new(symbolic.factorize_numeric_llt_scratch::<f64>(Par::Seq, Default::default()))
+            .map_err(|e| Error::Numerical(format!("{what}: workspace: {e:?}")))?;
+        symbolic
+            .factorize_numeric_llt::<f64>(
+                &mut values,
+                a.as_ref(),
+                Side::Upper,
+                Default::default(),
+                Par::Seq,
+                MemStack::new(&mut mem),
+                Default::default(),
+            )
+            .map_err(|e| Error::Numerical(format!("{what}: Cholesky factorisation failed: {e:?}")))?;
+        this.symbolic = Some(symbolic);
+        this.values = values;
+        Ok(this)
+    }
+
+    /// Number of unknowns of the reduced system (rows of a right-hand-side column).
+    pub(crate) fn n_reduced(&self) -> usize {
+        self.symbolic.as_ref().map_or(0, |s| s.nrows())
+    }
+
+    /// Reduced row of vertex `v` (`usize::MAX` when pinned).
+    #[inline]
+    pub(crate) fn row(&self, v: usize) -> usize {
+        self.reduced[v]
+    }
+
+    /// Solves for three right-hand sides given column-major in `rhs` (3 × [`Self::n_reduced`],
+    /// overwritten) and returns the N positions, each component centred on its reference
+    /// centroid.
+    pub(crate) fn solve(&self, rhs: &mut [f64]) -> Result<Vec<Vec3>> {
+        let n = self.reduced.len();
+        let mut p = vec![[0.0; 3]; n];
+        if let Some(symbolic) = &self.symbolic {
+            let m = symbolic.nrows();
+            if rhs.iter().any(|v| !v.is_finite()) {
+                return Err(Error::Numerical("reconstruction: non-finite right-hand side (bad features?)".into()));
+            }
+            let llt = LltRef::new(symbolic, &self.values);
+            let mut mem = MemBuffer::new(symbolic.solve_in_place_scratch::<f64>(3, Par::Seq));
+            llt.solve_in_place_with_conj(
+                Conj::No,
+                MatMut::from_column_major_slice_mut(&mut rhs[..3 * m], m, 3),
+                Par::Seq,
+                MemStack::new(&mut mem),
+            );
+            for (v, pv) in p.iter_mut().enumerate() {
+                let r = self.reduced[v];
+                if r != usize::MAX {
+                    *pv = [rhs[r], rhs[m + r], rhs[2 * m + r]];
+                }
+            }
+        }
+        // Move each component's centroid onto the reference's.
+        let mut sums = vec![[0.0; 3]; self.centroids.len()];
+        for v in 0..n {
+            for k in 0..3 {
+                sums[self.component[v]][k] += p[v][k];
+            }
+        }
+        for v in 0..n {
+            let c = self.component[v];
+            let (target, cnt) = self.centroids[c];
+            for k in 0..3 {
+                p[v][k] += target[k] - sums[c][k] / cnt as f64;
+            }
+        }
+        Ok(p)
+    }
+}
+
+/// Factorised reconstruction for one reference mesh: build once, [`AcapReconstruction::solve`]
+/// for every frame.
+#[derive(Debug)]
+pub struct AcapReconstruction {
+    rest: Vec<Vec3>,
+    edges: Vec<[usize; 2]>,
+    weights: Vec<f64>,
+    system: PinnedSystem,
+}
+
+impl AcapReconstruction {
+    /// Factorises the system for reference positions `rest` (N), undirected `edges` (i ≠ j,
+    /// indices < N, each once) and their weights (`weights.len() == edges.len()`, all finite and
+    /// > 0).
+    pub fn new(rest: &[Vec3], edges: &[[usize; 2]], weights: &[f64]) -> Result<Self> {
+        let n = rest.len();
+        if weights.len() != edges.len() {
+            return Err(Error::Invalid(format!(
+                "reconstruction: {} weights for {} edges",
+                weights.len(),
+                edges.len()
+            )));
+        }
+        for (e, (&[i, j], &c)) in edges.iter().zip(weights).enumerate() {
+            if i >= n || j >= n || i == j {
+                return Err(Error::Invalid(format!("reconstruction: bad edge {e} = [{i}, {j}] for {n} vertices")));
+            }
+            if !(c.is_finite() && c > 0.0) {
+                return Err(Error::Invalid(format!("reconstruction: weight of edge [{i}, {j}] is {c}, must be > 0")));
+            }
+        }
+        let entries = edges
+            .iter()
+            .zip(weights)
+            .flat_map(|(&[i, j], &c)| [(i, i, c), (j, j, c), (i, j, -c), (j, i, -c)]);
+        let system = PinnedSystem::new(rest, edges, entries, "edge reconstruction")?;
+        Ok(AcapReconstruction { rest: rest.to_vec(), edges: edges.to_vec(), weights: weights.to_vec(), system })
+    }
+
+    /// Number of vertices N.
+    pub fn n_vertices(&self) -> usize {
+        self.rest.len()
+    }
+
+    /// Positions (N) from per-vertex deformation gradients `transforms` (N, row-major 3×3,
+    /// applied to reference edge vectors), each component centred on its reference centroid.
+    pub fn solve(&self, transforms: &[Mat3]) -> Result<Vec<Vec3>> {
+        let n = self.rest.len();
+        if transforms.len() != n {
+            return Err(Error::Invalid(format!(
+                "reconstruction: {} transforms for {n} vertices",
+                transforms.len()
+            )));
+        }
+        let m = self.system.n_reduced();
+        let mut rhs = vec![0.0; 3 * m];
+        for (&[i, j], &c) in self.edges.iter().zip(&self.weights) {
+            let (ti, tj) = (&transforms[i], &transforms[j]);
+            let e = [self.rest[i][0] - self.rest[j][0], self.rest[i][1] - self.rest[j][1], self.rest[i][2] - self.rest[j][2]];
+            let (ri, rj) = (self.system.row(i), self.system.row(j));
+            for k in 0..3 {
+                let d = 0.5
+                    * c
+                    * ((ti[k][0] + tj[k][0]) * e[0] + (ti[k][1] + tj[k][1]) * e[1] + (ti[k][2] + tj[k][2]) * e[2]);
+                if ri != usize::MAX {
+                    rhs[k * m + ri] += d;
+                }
+                if rj != usize::MAX {
+                    rhs[k * m + rj] -= d;
+                }
+            }
+        }
+        self.system.solve(&mut rhs)
+    }
+}
+
+/// One-shot helper: factorise and solve once (see [`AcapReconstruction`]).
+pub fn reconstruct(rest: &[Vec3], edges: &[[usize; 2]], weights: &[f64], transforms: &[Mat3]) -> Result<Vec<Vec3>> {
+    AcapReconstruction::new(rest, edges, weights)?.solve(transforms)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::representation::acap_rotation::{IDENTITY, exp_so3};
+
+    fn tetra() -> (Vec<Vec3>, Vec<[usize; 2]>) {
+        let p = vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+        let e = vec![[0, 1], [0, 2], [0, 3], [1, 2], [1, 3], [2, 3]];
+        (p, e)
+    }
+
+    #[test]
+    fn identity_returns_reference_and_rigid_motion_is_exact() {
+        let (p, e) = tetra();
+        let w = vec![1.0, 2.0, 0.5, 1.0, 1.0, 3.0];
+        let rec = AcapReconstruction::new(&p, &e, &w).unwrap();
+        let q = rec.solve(&vec![IDENTITY; 4]).unwrap();
+        for (a, b) in p.iter().zip(&q) {
+            for k in 0..3 {
+                assert!((a[k] - b[k]).abs() < 1e-14);
+            }
+        }
+        // A global rotation + scale: the exact result is R·s·(q − c) + c.
+        let r = exp_so3([0.3, -1.1, 0.4]);
+        let t: Mat3 = std::array::from_fn(|i| std::array::from_fn(|j| 1.5 * r[i][j]));
+        let q = rec.solve(&vec![t; 4]).unwrap();
+        let c = [0.25, 0.25, 0.25];
+        for (a, b) in p.iter().zip(&q) {
+            for i in 0..3 {
+                let want = c[i] + (0..3).map(|j| t[i][j] * (a[j] - c[j])).sum::<f64>();
+                assert!((b[i] - want).abs() < 1e-12);
+            }
+        }
+    }
+
+    #[test]
+    fn components_are_centred_separately_and_bad_input_rejected() {
+        let p = vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [5.0, 0.0, 0.0], [5.0, 2.0, 0.0], [9.0, 9.0, 9.0]];
+        let e = vec![[0, 1], [2, 3]];
+        let rec = AcapReconstruction::new(&p, &e, &[1.0, 1.0]).unwrap();
+        let q = rec.solve(&vec![IDENTITY; 5]).unwrap();
+        assert_eq!(q[4], [9.0, 9.0, 9.0]);
+        for (a, b) in p.iter().zip(&q) {
+            for k in 0..3 {
+                assert!((a[k] - b[k]).abs() < 1e-14);
+            }
+        }
+        assert!(AcapReconstruction::new(&p, &e, &[1.0, 0.0]).is_err());
+        assert!(AcapReconstruction::new(&p, &[[0, 7]], &[1.0]).is_err());
+        assert!(rec.solve(&[IDENTITY; 2]).is_err());
+    }
+}
