@@ -7,6 +7,7 @@ use anyhow::Result;
 use clap::{Parser, Subcommand};
 
 mod apply;
+mod features;
 mod geodesic;
 mod inspect;
 mod progress;
@@ -26,6 +27,10 @@ pub enum Command {
     Encode(apply::EncodeArgs),
     /// Build a shape from component weights ("index:weight,…").
     Synthesize(apply::SynthesizeArgs),
+    /// Compute a representation's features (ACAP in the reference's LOGRNEW.txt / S.txt layout).
+    Features(features::FeaturesArgs),
+    /// Encode → decode every frame and print per-frame and total Erms against the input.
+    Roundtrip(features::RoundtripArgs),
     /// Heat-method geodesic distances from source vertices, written as a coloured PLY.
     Geodesic(geodesic::GeodesicArgs),
     /// Summarise a mesh sequence: frames, vertices, faces, boundary loops, components, bounding
@@ -40,6 +45,8 @@ pub fn run(cli: Cli) -> Result<()> {
     match cli.command {
         Command::Encode(a) => apply::encode(a),
         Command::Synthesize(a) => apply::synthesize(a),
+        Command::Features(a) => features::features(a),
+        Command::Roundtrip(a) => features::roundtrip_cmd(a),
         Command::Geodesic(a) => geodesic::run(a),
         Command::Inspect(a) => inspect::run(a),
         Command::Train(a) => train::run(a),
