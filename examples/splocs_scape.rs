@@ -243,8 +243,9 @@ fn run(name: &str, dir: &Path, target_s: f64, target_erms: f64, o: &Opts) {
         fit.iterations
     );
     let t1 = Instant::now();
-    let pca = Pca::fit(dm, &PcaConfig { components: 50, ..Default::default() }).unwrap();
-    println!("  PCA (K 50, mean-centred): train Erms {:.3} ({:.3} s)", erms(&pca.reconstruct(), &x), t1.elapsed().as_secs_f64());
+    let kp = 50.min(nf);
+    let pca = Pca::fit(dm, &PcaConfig { components: kp, ..Default::default() }).unwrap();
+    println!("  PCA (K {kp}, mean-centred): train Erms {:.3} ({:.3} s)", erms(&pca.reconstruct(), &x), t1.elapsed().as_secs_f64());
     let shares: Vec<f64> = fit.locality.iter().map(|l| l.energy_share).collect();
     let sizes: Vec<f64> = fit.locality.iter().map(|l| l.support_size as f64).collect();
     let regions: Vec<f64> = fit.locality.iter().map(|l| l.region_size as f64).collect();

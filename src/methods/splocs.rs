@@ -42,7 +42,7 @@ use faer::linalg::solvers::DenseSolveCore;
 use faer::{Accum, Mat, MatMut, MatRef, Par, Side};
 use serde::{Deserialize, Serialize};
 
-use super::splocs_admm::{project_weights, prox_dual_step, update_weights};
+use super::splocs_admm::{AdmmAcc, AdmmShared, Blocks, admm_block, project_weights, update_weights};
 use super::support_map::{ComponentLocality, SupportCache, SupportDistances, component_locality};
 use super::{DataMatrix, LinearModel, WeightConstraint};
 use crate::{Error, Result};
@@ -198,18 +198,14 @@ pub struct SplocsSolver<'a, P: SupportDistances + ?Sized> {
     /// 1 / std(X).
     inv_scale: f64,
     x_norm2: f64,
-    /// K × D components (standardised units).
+    /// K × D components (standardised units), blocked layout (see `Blocks`).
     c: Vec<f64>,
     /// F × K weights.
     wts: Vec<f64>,
-    /// K × D scaled dual.
+    /// K × D scaled dual, blocked layout.
     u: Vec<f64>,
-    /// K × D workspace (Z − U).
-    t: Vec<f64>,
-    /// K × D workspace ((WᵀW + ρI)⁻¹ WᵀX).
-    b: Vec<f64>,
-    /// K × D workspace (WᵀX).
-    wx: Vec<f64>,
+    blocks: Blocks,
+    pool: Option<rayon::ThreadPool>,
     /// K × E regularisation weights Λ.
     lambda: Vec<f64>,
     centers: Vec<Vec<usize>>,
@@ -222,8 +218,10 @@ pub struct SplocsSolver<'a, P: SupportDistances + ?Sized> {
     history: Vec<f64>,
     iterations: usize,
     converged: bool,
-    par: Par,
 }
+
+/// Target columns per block of the blocked ADMM (a few K × 240 buffers stay in L2).
+const BLOCK_COLS: usize = 240;
 
 impl<'a, P: SupportDistances + ?Sized> SplocsSolver<'a, P> {
     /// Validates the config against the data and the provider, standardises, and runs the
@@ -270,9 +268,8 @@ impl<'a, P: SupportDistances + ?Sized> SplocsSolver<'a, P> {
             c: vec![0.0; k * d],
             wts: vec![0.0; f * k],
             u: vec![0.0; k * d],
-            t: vec![0.0; k * d],
-            b: vec![0.0; k * d],
-            wx: vec![0.0; k * d],
+            blocks: Blocks::new(e, width, k, BLOCK_COLS),
+            pool: None,
             lambda: vec![0.0; k * e],
             centers: Vec::with_capacity(k),
             cache: SupportCache::new(d_min, d_max, 8 * k + 64),
@@ -282,11 +279,20 @@ impl<'a, P: SupportDistances + ?Sized> SplocsSolver<'a, P> {
             history: Vec::new(),
             iterations: 0,
             converged: false,
-            par: config.par(),
         };
-        let e0 = s.initialize()?;
+        if config.threads != 1 {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(config.threads)
+                .build()
+                .map_err(|e| Error::config("threads", format!("cannot start {} threads: {e}", config.threads)))?;
+            s.pool = Some(pool);
+        }
+        // deflation on row-major C, then products and the blocked layout
+        let mut c_rm = vec![0.0; k * d];
+        let e0 = s.initialize(&mut c_rm)?;
         s.history.push(e0);
-        s.update_products();
+        s.update_products(&c_rm, config.par());
+        s.blocks.to_blocked(&c_rm, &mut s.c);
         Ok(s)
     }
 
@@ -324,17 +330,14 @@ impl<'a, P: SupportDistances + ?Sized> SplocsSolver<'a, P> {
     }
 
     /// Current components in standardised units (K × E·W, row-major).
-    pub fn components_standardised(&self) -> &[f64] {
-        &self.c
+    pub fn components_standardised(&self) -> Vec<f64> {
+        let mut out = vec![0.0; self.c.len()];
+        self.blocks.to_row_major(&self.c, &mut out);
+        out
     }
 
-    fn group_norm2(&self, k: usize, e: usize) -> f64 {
-        let g = &self.c[k * self.d + e * self.width..k * self.d + (e + 1) * self.width];
-        g.iter().map(|v| v * v).sum()
-    }
-
-    /// Deflation initialisation; returns E_0.
-    fn initialize(&mut self) -> Result<f64> {
+    /// Deflation initialisation into `c` (row-major K × D); returns E_0.
+    fn initialize(&mut self, c: &mut [f64]) -> Result<f64> {
         let (f, d, w, k) = (self.f, self.d, self.width, self.k);
         let e_count = self.x.n_elements();
         let constraint = self.config.weights;
@@ -383,7 +386,7 @@ impl<'a, P: SupportDistances + ?Sized> SplocsSolver<'a, P> {
             self.cache.ensure(self.provider, std::slice::from_ref(&set))?;
             let ramp = self.cache.ramp(&set);
             let ww: f64 = wk.iter().map(|v| v * v).sum();
-            let ck = &mut self.c[kk * d..(kk + 1) * d];
+            let ck = &mut c[kk * d..(kk + 1) * d];
             if ww > 0.0 {
                 acc.iter_mut().for_each(|a| *a = 0.0);
                 for (row, &wf) in wk.iter().enumerate() {
@@ -431,7 +434,8 @@ impl<'a, P: SupportDistances + ?Sized> SplocsSolver<'a, P> {
             for e in 0..e_count {
                 let lam = self.lambda[kk * e_count + e];
                 if lam > 0.0 {
-                    sparsity += lam * self.group_norm2(kk, e).sqrt();
+                    let g = &c[kk * d + e * w..kk * d + (e + 1) * w];
+                    sparsity += lam * g.iter().map(|v| v * v).sum::<f64>().sqrt();
                 }
             }
         }
@@ -452,20 +456,13 @@ impl<'a, P: SupportDistances + ?Sized> SplocsSolver<'a, P> {
         Ok(())
     }
 
-    /// X·Cᵀ/s and C·Cᵀ for the current C.
-    fn update_products(&mut self) {
+    /// X·Cᵀ/s and C·Cᵀ for a row-major C.
+    fn update_products(&mut self, c: &[f64], par: Par) {
         let (f, k, d) = (self.f, self.k, self.d);
         let x = MatRef::from_row_major_slice(self.x.data(), f, d);
-        let c = MatRef::from_row_major_slice(&self.c, k, d);
-        matmul(
-            MatMut::from_row_major_slice_mut(&mut self.xct, f, k),
-            Accum::Replace,
-            x,
-            c.transpose(),
-            self.inv_scale,
-            self.par,
-        );
-        matmul(MatMut::from_row_major_slice_mut(&mut self.cct, k, k), Accum::Replace, c, c.transpose(), 1.0, self.par);
+        let c = MatRef::from_row_major_slice(c, k, d);
+        matmul(MatMut::from_row_major_slice_mut(&mut self.xct, f, k), Accum::Replace, x, c.transpose(), self.inv_scale, par);
+        matmul(MatMut::from_row_major_slice_mut(&mut self.cct, k, k), Accum::Replace, c, c.transpose(), 1.0, par);
     }
 
     /// One outer iteration (weights, centres and support maps, ADMM on the components);
@@ -477,26 +474,17 @@ impl<'a, P: SupportDistances + ?Sized> SplocsSolver<'a, P> {
         update_weights(&mut self.wts, &self.xct, &self.cct, f, k, self.config.weights, 1e-8, &mut self.col);
         // (b) centres and Λ
         let n_fixed = self.config.fixed_centers.len();
-        for kk in n_fixed..k {
-            let mut best = 0;
-            let mut best_v = self.group_norm2(kk, 0);
-            for e in 1..e_count {
-                let v = self.group_norm2(kk, e);
-                if v > best_v {
-                    best_v = v;
-                    best = e;
-                }
-            }
-            if best_v > 0.0 {
+        for (kk, (best, n2)) in self.blocks.argmax_groups(&self.c).into_iter().enumerate().skip(n_fixed) {
+            if n2 > 0.0 {
                 self.centers[kk] = vec![best];
             }
         }
         self.set_lambda()?;
-        // (c) ADMM
+        // (c) ADMM, one factorisation of WᵀW + ρI, blocks of columns in parallel
         let rho = self.config.admm.rho;
         let wm = MatRef::from_row_major_slice(&self.wts, f, k);
         let mut wtw = Mat::<f64>::zeros(k, k);
-        matmul(wtw.as_mut(), Accum::Replace, wm.transpose(), wm, 1.0, self.par);
+        matmul(wtw.as_mut(), Accum::Replace, wm.transpose(), wm, 1.0, Par::Seq);
         let mut g = wtw.clone();
         for i in 0..k {
             g[(i, i)] += rho;
@@ -505,35 +493,61 @@ impl<'a, P: SupportDistances + ?Sized> SplocsSolver<'a, P> {
             .llt(Side::Lower)
             .map_err(|e| Error::Numerical(format!("SPLOCS: Cholesky of WᵀW + ρI failed: {e:?}")))?;
         let minv = llt.inverse();
-        let x = MatRef::from_row_major_slice(self.x.data(), f, d);
-        matmul(MatMut::from_row_major_slice_mut(&mut self.wx, k, d), Accum::Replace, wm.transpose(), x, self.inv_scale, self.par);
-        matmul(
-            MatMut::from_row_major_slice_mut(&mut self.b, k, d),
-            Accum::Replace,
-            minv.as_ref(),
-            MatRef::from_row_major_slice(&self.wx, k, d),
-            1.0,
-            self.par,
-        );
-        // Z = C  →  T = Z − U
-        for ((t, c), u) in self.t.iter_mut().zip(&self.c).zip(&self.u) {
-            *t = c - u;
-        }
-        let mut sparsity = 0.0;
-        for _ in 0..self.config.admm.iterations {
-            self.c.copy_from_slice(&self.b);
-            matmul(
-                MatMut::from_row_major_slice_mut(&mut self.c, k, d),
-                Accum::Add,
-                minv.as_ref(),
-                MatRef::from_row_major_slice(&self.t, k, d),
-                rho,
-                self.par,
-            );
-            sparsity = prox_dual_step(&mut self.c, &mut self.u, &mut self.t, &self.lambda, rho, w);
-        }
-        // C = Z (the prox step leaves Z in `c`); objective
-        self.update_products();
+        let shared = AdmmShared {
+            x: self.x.data(),
+            inv_scale: self.inv_scale,
+            weights: &self.wts,
+            minv: minv.as_ref(),
+            lambda: &self.lambda,
+            rho,
+            iterations: self.config.admm.iterations,
+            f,
+            d,
+            e: e_count,
+            k,
+            width: w,
+        };
+        let blocks = &self.blocks;
+        let max_cols = (0..blocks.len()).map(|b| blocks.cols(b).len()).max().unwrap_or(0);
+        let items: Vec<(usize, &mut [f64], &mut [f64])> = blocks
+            .split_mut(&mut self.c)
+            .into_iter()
+            .zip(blocks.split_mut(&mut self.u))
+            .enumerate()
+            .map(|(b, (c, u))| (b, c, u))
+            .collect();
+        let acc = match (&self.pool, self.config.threads) {
+            (None, 1) => {
+                let mut acc = AdmmAcc::new(f, k, max_cols);
+                for (b, c, u) in items {
+                    admm_block(&shared, blocks, b, c, u, &mut acc);
+                }
+                acc
+            }
+            (pool, _) => {
+                use rayon::prelude::*;
+                let run = || {
+                    items
+                        .into_par_iter()
+                        .fold(
+                            || AdmmAcc::new(f, k, max_cols),
+                            |mut acc, (b, c, u)| {
+                                admm_block(&shared, blocks, b, c, u, &mut acc);
+                                acc
+                            },
+                        )
+                        .reduce_with(AdmmAcc::merge)
+                        .unwrap_or_else(|| AdmmAcc::new(f, k, 0))
+                };
+                match pool {
+                    Some(p) => p.install(run),
+                    None => run(),
+                }
+            }
+        };
+        self.xct = acc.xct;
+        self.cct = acc.cct;
+        // objective ‖X − WC‖² + Ω(C) from the Gram products
         let mut cross = 0.0;
         for (wv, xv) in self.wts.iter().zip(&self.xct) {
             cross += wv * xv;
@@ -545,7 +559,7 @@ impl<'a, P: SupportDistances + ?Sized> SplocsSolver<'a, P> {
             }
         }
         let res2 = (self.x_norm2 - 2.0 * cross + quad).max(0.0);
-        let obj = res2 + sparsity;
+        let obj = res2 + acc.sparsity;
         if !obj.is_finite() {
             return Err(Error::Numerical(format!("SPLOCS: objective became {obj} at iteration {}", self.iterations + 1)));
         }
@@ -569,7 +583,9 @@ impl<'a, P: SupportDistances + ?Sized> SplocsSolver<'a, P> {
     pub fn finish(self) -> Result<SplocsFit> {
         let scale = 1.0 / self.inv_scale;
         let e = self.x.n_elements();
-        let components: Vec<f64> = self.c.iter().map(|v| v * scale).collect();
+        let mut components = vec![0.0; self.c.len()];
+        self.blocks.to_row_major(&self.c, &mut components);
+        components.iter_mut().for_each(|v| *v *= scale);
         let model = LinearModel {
             n_elements: e,
             width: self.width,
