@@ -14,3 +14,4 @@ pub mod mesh;
 pub mod representation;
 
 pub use error::{Error, Result};
+pub mod nn;
