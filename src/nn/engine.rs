@@ -42,8 +42,14 @@ pub struct Weights {
     pub n: usize,
 }
 
+/// Copies a float tensor's values out of Burn.
+///
+/// A parameter's tensor is shared with its `Param`, and burn-ndarray's `into_data` of a shared
+/// array copies element by element through a dynamic-rank iterator (≈ 80 ms for the 1M values
+/// of C at SCAPE size). A trivial elementwise op (× 1) first makes a fresh, uniquely owned
+/// array (a vectorised copy), whose `into_data` then hands over its buffer without copying.
 pub(crate) fn tensor_to_vec<const D: usize>(t: Tensor<D>) -> Vec<f32> {
-    t.inner().into_data().try_into_vec_as::<f32>().expect("float tensor data converts to f32")
+    t.inner().mul_scalar(1.0).into_data().try_into_vec_as::<f32>().expect("float tensor data converts to f32")
 }
 
 fn mat9(v: &[f32]) -> Mat9 {
@@ -199,21 +205,48 @@ impl Workspace {
     }
 }
 
-fn par() -> Par {
-    Par::rayon(0)
+/// `dst (+)= lhs · rhs` on the rayon pool: the larger output dimension is split in halves
+/// (recursively, one part per thread), each part a sequential faer GEMM. (faer's own parallel
+/// mode spin-waits, which wastes the shared cores.)
+fn gemm_mat(dst: MatMut<'_, f32>, add: bool, lhs: MatRef<'_, f32>, rhs: MatRef<'_, f32>, parts: usize) {
+    let (m, n) = (dst.nrows(), dst.ncols());
+    if parts <= 1 || m.max(n) < 64 {
+        matmul(dst, if add { Accum::Add } else { Accum::Replace }, lhs, rhs, 1.0f32, Par::Seq);
+        return;
+    }
+    let (p1, p2) = (parts / 2, parts - parts / 2);
+    if m >= n {
+        let mid = m * p1 / parts;
+        let (d1, d2) = dst.split_at_row_mut(mid);
+        let (l1, l2) = lhs.split_at_row(mid);
+        rayon::join(|| gemm_mat(d1, add, l1, rhs, p1), || gemm_mat(d2, add, l2, rhs, p2));
+    } else {
+        let mid = n * p1 / parts;
+        let (d1, d2) = dst.split_at_col_mut(mid);
+        let (r1, r2) = rhs.split_at_col(mid);
+        rayon::join(|| gemm_mat(d1, add, lhs, r1, p1), || gemm_mat(d2, add, lhs, r2, p2));
+    }
 }
 
-/// `dst (m × n) (+)= lhs · rhs`, `dst` row-major.
-fn gemm(dst: &mut [f32], m: usize, n: usize, add: bool, lhs: MatRef<'_, f32>, rhs: MatRef<'_, f32>) {
-    let dst = MatMut::from_row_major_slice_mut(dst, m, n);
-    matmul(dst, if add { Accum::Add } else { Accum::Replace }, lhs, rhs, 1.0f32, par());
+fn gemm(dst: MatMut<'_, f32>, add: bool, lhs: MatRef<'_, f32>, rhs: MatRef<'_, f32>) {
+    gemm_mat(dst, add, lhs, rhs, rayon::current_num_threads());
 }
 
-/// Encoder pass: fills the encoder buffers and `Zᵀ = C·Fᵀ`.
+/// The first `b` columns of a row-major `rows × bp` buffer (the real shapes of a batch; the GEMMs
+/// skip the padding lanes, which the kernels keep at zero gradient).
+fn cols(buf: &[f32], rows: usize, bp: usize, b: usize) -> MatRef<'_, f32> {
+    MatRef::from_row_major_slice(buf, rows, bp).subcols(0, b)
+}
+
+fn cols_mut(buf: &mut [f32], rows: usize, bp: usize, b: usize) -> MatMut<'_, f32> {
+    MatMut::from_row_major_slice_mut(buf, rows, bp).subcols_mut(0, b)
+}
+
+/// Encoder pass: fills the encoder buffers and `Zᵀ = C·Fᵀ` (for the first `b` lanes).
 ///
 /// # Shapes
 /// `x`: VCB, N rows of `9·bp`.
-pub fn encode(ws: &mut Workspace, w: &Weights, nb: &NeighborIndex, x: &[f32]) {
+pub fn encode(ws: &mut Workspace, w: &Weights, nb: &NeighborIndex, x: &[f32], b: usize) {
     let (n, bp, k) = (ws.n, ws.bp, ws.k);
     let r = 9 * bp;
     let l = w.layers.len();
@@ -226,29 +259,20 @@ pub fn encode(ws: &mut Workspace, w: &Weights, nb: &NeighborIndex, x: &[f32]) {
         kernels::conv_rows(&lw.wp, input, &lw.wn, &ws.enc_mean[i], &lw.b, &mut rest[0], bp, tanh);
     }
     let f = &ws.enc_out[l - 1];
-    gemm(
-        &mut ws.zt,
-        k,
-        bp,
-        false,
-        MatRef::from_row_major_slice(&w.c, k, 9 * n),
-        MatRef::from_row_major_slice(f, 9 * n, bp),
-    );
+    gemm(cols_mut(&mut ws.zt, k, bp, b), false, MatRef::from_row_major_slice(&w.c, k, 9 * n), cols(f, 9 * n, bp, b));
 }
 
-/// Decoder pass from the codes in the workspace (`Zᵀ`, `[K, bp]`): `F̂ᵀ = Cᵀ·Zᵀ`, then the tied
-/// convolutions. The result is [`Workspace::output`].
-pub fn decode(ws: &mut Workspace, w: &Weights, nb: &NeighborIndex) {
+/// Decoder pass from the codes in the workspace (`Zᵀ`, `[K, bp]`, first `b` lanes):
+/// `F̂ᵀ = Cᵀ·Zᵀ`, then the tied convolutions. The result is [`Workspace::output`].
+pub fn decode(ws: &mut Workspace, w: &Weights, nb: &NeighborIndex, b: usize) {
     let (n, bp, k) = (ws.n, ws.bp, ws.k);
     let r = 9 * bp;
     let l = w.layers.len();
     gemm(
-        &mut ws.dec[0],
-        9 * n,
-        bp,
+        cols_mut(&mut ws.dec[0], 9 * n, bp, b),
         false,
         MatRef::from_row_major_slice(&w.c, k, 9 * n).transpose(),
-        MatRef::from_row_major_slice(&ws.zt, k, bp),
+        cols(&ws.zt, k, bp, b),
     );
     for d in 0..l {
         let lw = &w.layers[l - 1 - d];
@@ -284,8 +308,8 @@ pub fn loss_and_grad(
     let r = 9 * bp;
     let l = w.layers.len();
     assert!(b_real >= 1 && b_real <= bp);
-    encode(ws, w, nb, x);
-    decode(ws, w, nb);
+    encode(ws, w, nb, x, b_real);
+    decode(ws, w, nb, b_real);
     ws.ensure_backward();
     for (j, m) in ws.mask.iter_mut().enumerate() {
         *m = if j < b_real { 1.0 } else { 0.0 };
@@ -318,7 +342,7 @@ pub fn loss_and_grad(
     // ws.d_a = ∂L/∂F̂ᵀ (9N × bp).
     let c_ref = MatRef::from_row_major_slice(&w.c, k, 9 * n);
     // dZᵀ = C·dF̂ᵀ.
-    gemm(&mut ws.dzt, k, bp, false, c_ref, MatRef::from_row_major_slice(&ws.d_a, 9 * n, bp));
+    gemm(cols_mut(&mut ws.dzt, k, bp, b_real), false, c_ref, cols(&ws.d_a, 9 * n, bp, b_real));
     // Hinge on the real lanes.
     let mut hinge = 0.0f64;
     let hscale = (cfg.lambda2 / k as f64) as f32;
@@ -343,24 +367,20 @@ pub fn loss_and_grad(
         grads.c = vec![0.0; w.c.len()];
     }
     gemm(
-        &mut grads.c,
-        k,
-        9 * n,
+        MatMut::from_row_major_slice_mut(&mut grads.c, k, 9 * n),
         false,
-        MatRef::from_row_major_slice(&ws.zt, k, bp),
-        MatRef::from_row_major_slice(&ws.d_a, 9 * n, bp).transpose(),
+        cols(&ws.zt, k, bp, b_real),
+        cols(&ws.d_a, 9 * n, bp, b_real).transpose(),
     );
     let f = &ws.enc_out[l - 1];
     gemm(
-        &mut grads.c,
-        k,
-        9 * n,
+        MatMut::from_row_major_slice_mut(&mut grads.c, k, 9 * n),
         true,
-        MatRef::from_row_major_slice(&ws.dzt, k, bp),
-        MatRef::from_row_major_slice(f, 9 * n, bp).transpose(),
+        cols(&ws.dzt, k, bp, b_real),
+        cols(f, 9 * n, bp, b_real).transpose(),
     );
-    // dFᵀ = Cᵀ·dZᵀ.
-    gemm(&mut ws.d_a, 9 * n, bp, false, c_ref.transpose(), MatRef::from_row_major_slice(&ws.dzt, k, bp));
+    // dFᵀ = Cᵀ·dZᵀ (the padding lanes of ws.d_a stay zero from the decoder pass).
+    gemm(cols_mut(&mut ws.d_a, 9 * n, bp, b_real), false, c_ref.transpose(), cols(&ws.dzt, k, bp, b_real));
 
     // Encoder backward.
     for li in (0..l).rev() {

@@ -203,7 +203,7 @@ impl Autoencoder {
             let bp = padded_width(b);
             let mut ws = Workspace::new(n, k, self.weights.layers.len(), bp);
             let x = vcb_from_shapes(chunk.iter().map(|s| s.as_slice()), b, n);
-            engine::encode(&mut ws, &self.weights, &self.neighbors, &x);
+            engine::encode(&mut ws, &self.weights, &self.neighbors, &x, b);
             let zt = ws.latent_t();
             for j in 0..b {
                 out.push((0..k).map(|kk| zt[kk * bp + j] as f64).collect());
@@ -236,7 +236,7 @@ impl Autoencoder {
                     }
                 }
             }
-            engine::decode(&mut ws, &self.weights, &self.neighbors);
+            engine::decode(&mut ws, &self.weights, &self.neighbors, b);
             for j in 0..b {
                 let v = shape_from_vcb(ws.output(), bp, j);
                 out.frame_mut(ci * INFER_BATCH + j).copy_from_slice(&v);

@@ -48,7 +48,33 @@ fn avx2_available() -> bool {
     std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma")
 }
 
-/// Defines `$name` as a run-time dispatcher to `$imp` compiled for AVX2+FMA or for the baseline.
+/// Multiply-add policy of a kernel instance: fused (`vfmadd`, in the AVX2+FMA build) or plain
+/// `a·b + c` (baseline build, where a fused multiply-add would be a slow library call).
+pub trait MulAdd {
+    /// `a·b + c`.
+    fn mul_add(a: f32, b: f32, c: f32) -> f32;
+}
+
+/// Fused multiply-add (one rounding).
+pub struct Fused;
+impl MulAdd for Fused {
+    #[inline(always)]
+    fn mul_add(a: f32, b: f32, c: f32) -> f32 {
+        a.mul_add(b, c)
+    }
+}
+
+/// Separate multiply and add.
+pub struct Plain;
+impl MulAdd for Plain {
+    #[inline(always)]
+    fn mul_add(a: f32, b: f32, c: f32) -> f32 {
+        a * b + c
+    }
+}
+
+/// Defines `$name` as a run-time dispatcher to `$imp::<Fused>` compiled for AVX2+FMA, or to
+/// `$imp::<Plain>` for the baseline target.
 macro_rules! dispatch {
     ($(#[$attr:meta])* $vis:vis fn $name:ident($($arg:ident: $ty:ty),* $(,)?) $(-> $ret:ty)? => $imp:ident) => {
         $(#[$attr])*
@@ -57,16 +83,26 @@ macro_rules! dispatch {
             {
                 #[target_feature(enable = "avx2,fma")]
                 fn fast($($arg: $ty),*) $(-> $ret)? {
-                    $imp($($arg),*)
+                    $imp::<Fused>($($arg),*)
                 }
                 if avx2_available() {
                     // SAFETY: the CPU supports the features `fast` was compiled for.
                     return unsafe { fast($($arg),*) };
                 }
             }
-            $imp($($arg),*)
+            $imp::<Plain>($($arg),*)
         }
     };
+}
+
+/// One SIMD block.
+type V = [f32; LANES];
+
+#[inline(always)]
+fn axpy<M: MulAdd>(acc: &mut V, w: f32, x: &V) {
+    for l in 0..LANES {
+        acc[l] = M::mul_add(w, x[l], acc[l]);
+    }
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -110,22 +146,16 @@ pub fn tanh_f32(x: f32) -> f32 {
 }
 
 #[inline(always)]
-fn tanh_block(v: &mut [f32; LANES]) {
+fn tanh_in_place(v: &mut [f32]) {
+    // A plain loop over a slice: the loop vectoriser turns it into straight SIMD code.
     for x in v.iter_mut() {
         *x = tanh_f32(*x);
     }
 }
 
 #[inline(always)]
-fn tanh_slice_impl(v: &mut [f32]) {
-    let mut it = v.chunks_exact_mut(LANES);
-    for c in &mut it {
-        let c: &mut [f32; LANES] = c.try_into().unwrap();
-        tanh_block(c);
-    }
-    for x in it.into_remainder() {
-        *x = tanh_f32(*x);
-    }
+fn tanh_slice_impl<M: MulAdd>(v: &mut [f32]) {
+    tanh_in_place(v);
 }
 
 dispatch! {
@@ -138,26 +168,40 @@ dispatch! {
 // ---------------------------------------------------------------------------------------------
 
 #[inline(always)]
-fn add_scaled_row(dst: &mut [f32], src: &[f32], w: f32) {
+fn add_row(dst: &mut [V], src: &[V]) {
     debug_assert_eq!(dst.len(), src.len());
-    for (d, s) in dst.chunks_exact_mut(LANES).zip(src.chunks_exact(LANES)) {
-        let d: &mut [f32; LANES] = d.try_into().unwrap();
-        let s: &[f32; LANES] = s.try_into().unwrap();
+    for (d, s) in dst.iter_mut().zip(src) {
         for l in 0..LANES {
-            d[l] += w * s[l];
+            d[l] += s[l];
         }
     }
 }
 
 #[inline(always)]
-fn mean_rows_impl(nb: &NeighborIndex, src: &[f32], dst: &mut [f32], first_row: usize, r: usize) {
+fn add_scaled_row<M: MulAdd>(dst: &mut [V], src: &[V], w: f32) {
+    debug_assert_eq!(dst.len(), src.len());
+    for (d, s) in dst.iter_mut().zip(src) {
+        axpy::<M>(d, w, s);
+    }
+}
+
+#[inline(always)]
+fn mean_rows_impl<M: MulAdd>(nb: &NeighborIndex, src: &[f32], dst: &mut [f32], first_row: usize, r: usize) {
+    let (sv, _) = src.as_chunks::<LANES>();
+    let rv = r / LANES;
     for (k, out) in dst.chunks_exact_mut(r).enumerate() {
+        let (out, _) = out.as_chunks_mut::<LANES>();
         let i = first_row + k;
-        out.fill(0.0);
-        let w = nb.inv_degree(i);
+        out.fill([0.0; LANES]);
         for &j in nb.neighbors(i) {
             let j = j as usize;
-            add_scaled_row(out, &src[j * r..(j + 1) * r], w);
+            add_row(out, &sv[j * rv..(j + 1) * rv]);
+        }
+        let w = nb.inv_degree(i);
+        for v in out.iter_mut() {
+            for x in v.iter_mut() {
+                *x *= w;
+            }
         }
     }
 }
@@ -167,13 +211,16 @@ dispatch! {
 }
 
 #[inline(always)]
-fn mean_rows_t_add_impl(nb: &NeighborIndex, src: &[f32], dst: &mut [f32], first_row: usize, r: usize) {
+fn mean_rows_t_add_impl<M: MulAdd>(nb: &NeighborIndex, src: &[f32], dst: &mut [f32], first_row: usize, r: usize) {
+    let (sv, _) = src.as_chunks::<LANES>();
+    let rv = r / LANES;
     for (k, out) in dst.chunks_exact_mut(r).enumerate() {
+        let (out, _) = out.as_chunks_mut::<LANES>();
         let j = first_row + k;
         let (idx, w) = nb.transposed(j);
         for (&i, &w) in idx.iter().zip(w) {
             let i = i as usize;
-            add_scaled_row(out, &src[i * r..(i + 1) * r], w);
+            add_scaled_row::<M>(out, &sv[i * rv..(i + 1) * rv], w);
         }
     }
 }
@@ -212,7 +259,8 @@ pub fn mean_rows_transpose_add(nb: &NeighborIndex, src: &[f32], dst: &mut [f32],
 // ---------------------------------------------------------------------------------------------
 
 #[inline(always)]
-fn conv_rows_impl(
+#[allow(clippy::too_many_arguments)]
+fn conv_rows_impl<M: MulAdd>(
     ws: &Mat9,
     x: &[f32],
     wn: &Mat9,
@@ -223,23 +271,31 @@ fn conv_rows_impl(
     tanh: bool,
 ) {
     let r = 9 * bp;
+    let nb = bp / LANES;
     for ((xr, mr), or) in x.chunks_exact(r).zip(m.chunks_exact(r)).zip(out.chunks_exact_mut(r)) {
-        for o in 0..9 {
-            for c in (0..bp).step_by(LANES) {
-                let mut acc = [bias[o]; LANES];
-                for a in 0..9 {
-                    let xa: &[f32; LANES] = xr[a * bp + c..a * bp + c + LANES].try_into().unwrap();
-                    let ma: &[f32; LANES] = mr[a * bp + c..a * bp + c + LANES].try_into().unwrap();
-                    let (s, n) = (ws[o][a], wn[o][a]);
-                    for l in 0..LANES {
-                        acc[l] += s * xa[l] + n * ma[l];
-                    }
-                }
-                if tanh {
-                    tanh_block(&mut acc);
-                }
-                or[o * bp + c..o * bp + c + LANES].copy_from_slice(&acc);
+        let (xv, _) = xr.as_chunks::<LANES>();
+        let (mv, _) = mr.as_chunks::<LANES>();
+        let (ov, _) = or.as_chunks_mut::<LANES>();
+        for j in 0..nb {
+            // Nine independent accumulators (one per output channel) keep the FMA pipes busy.
+            let mut acc = [[0.0f32; LANES]; 9];
+            for (o, a) in acc.iter_mut().enumerate() {
+                *a = [bias[o]; LANES];
             }
+            for a in 0..9 {
+                let xa = &xv[a * nb + j];
+                let ma = &mv[a * nb + j];
+                for (o, acc_o) in acc.iter_mut().enumerate() {
+                    axpy::<M>(acc_o, ws[o][a], xa);
+                    axpy::<M>(acc_o, wn[o][a], ma);
+                }
+            }
+            for (o, acc_o) in acc.iter().enumerate() {
+                ov[o * nb + j] = *acc_o;
+            }
+        }
+        if tanh {
+            tanh_in_place(or);
         }
     }
 }
@@ -265,25 +321,29 @@ pub fn conv_rows(ws: &Mat9, x: &[f32], wn: &Mat9, m: &[f32], bias: &[f32; 9], ou
 }
 
 #[inline(always)]
-fn input_grad_rows_impl(wst: &Mat9, wnt: &Mat9, dy: &[f32], dx: &mut [f32], dm: &mut [f32], bp: usize) {
-    let r = 9 * bp;
-    for ((dyr, dxr), dmr) in dy.chunks_exact(r).zip(dx.chunks_exact_mut(r)).zip(dm.chunks_exact_mut(r)) {
-        for a in 0..9 {
-            for c in (0..bp).step_by(LANES) {
-                let mut ax = [0.0f32; LANES];
-                let mut am = [0.0f32; LANES];
-                for o in 0..9 {
-                    let d: &[f32; LANES] = dyr[o * bp + c..o * bp + c + LANES].try_into().unwrap();
-                    let (s, n) = (wst[a][o], wnt[a][o]);
-                    for l in 0..LANES {
-                        ax[l] += s * d[l];
-                        am[l] += n * d[l];
-                    }
-                }
-                dxr[a * bp + c..a * bp + c + LANES].copy_from_slice(&ax);
-                dmr[a * bp + c..a * bp + c + LANES].copy_from_slice(&am);
+fn mat_rows<M: MulAdd>(wt: &Mat9, dyv: &[V], outv: &mut [V], nb: usize) {
+    for j in 0..nb {
+        let mut acc = [[0.0f32; LANES]; 9];
+        for o in 0..9 {
+            let d = &dyv[o * nb + j];
+            for (a, acc_a) in acc.iter_mut().enumerate() {
+                axpy::<M>(acc_a, wt[a][o], d);
             }
         }
+        for (a, acc_a) in acc.iter().enumerate() {
+            outv[a * nb + j] = *acc_a;
+        }
+    }
+}
+
+#[inline(always)]
+fn input_grad_rows_impl<M: MulAdd>(wst: &Mat9, wnt: &Mat9, dy: &[f32], dx: &mut [f32], dm: &mut [f32], bp: usize) {
+    let r = 9 * bp;
+    let nb = bp / LANES;
+    for ((dyr, dxr), dmr) in dy.chunks_exact(r).zip(dx.chunks_exact_mut(r)).zip(dm.chunks_exact_mut(r)) {
+        let (dyv, _) = dyr.as_chunks::<LANES>();
+        mat_rows::<M>(wst, dyv, dxr.as_chunks_mut::<LANES>().0, nb);
+        mat_rows::<M>(wnt, dyv, dmr.as_chunks_mut::<LANES>().0, nb);
     }
 }
 
@@ -335,37 +395,41 @@ impl ConvGrad {
 }
 
 #[inline(always)]
-fn outer_acc(dy: &[f32], x: &[f32], bp: usize, out: &mut Acc9) {
+fn outer_acc<M: MulAdd>(dy: &[f32], x: &[f32], bp: usize, out: &mut Acc9) {
     let r = 9 * bp;
-    for o in 0..9 {
+    let nb = bp / LANES;
+    for (o, out_o) in out.iter_mut().enumerate() {
         let mut acc = [[0.0f32; LANES]; 9];
         for (dyr, xr) in dy.chunks_exact(r).zip(x.chunks_exact(r)) {
-            for c in (0..bp).step_by(LANES) {
-                let d: &[f32; LANES] = dyr[o * bp + c..o * bp + c + LANES].try_into().unwrap();
+            let (dyv, _) = dyr.as_chunks::<LANES>();
+            let (xv, _) = xr.as_chunks::<LANES>();
+            for j in 0..nb {
+                let d = &dyv[o * nb + j];
                 for (a, acc_a) in acc.iter_mut().enumerate() {
-                    let xa: &[f32; LANES] = xr[a * bp + c..a * bp + c + LANES].try_into().unwrap();
+                    let xa = &xv[a * nb + j];
                     for l in 0..LANES {
-                        acc_a[l] += d[l] * xa[l];
+                        acc_a[l] = M::mul_add(d[l], xa[l], acc_a[l]);
                     }
                 }
             }
         }
-        for a in 0..9 {
-            out[o][a] += acc[a].iter().map(|&v| v as f64).sum::<f64>();
+        for (a, acc_a) in acc.iter().enumerate() {
+            out_o[a] += acc_a.iter().map(|&v| v as f64).sum::<f64>();
         }
     }
 }
 
 #[inline(always)]
-fn weight_grad_rows_impl(dy: &[f32], x: &[f32], m: &[f32], bp: usize, g: &mut ConvGrad) {
-    outer_acc(dy, x, bp, &mut g.ws);
-    outer_acc(dy, m, bp, &mut g.wn);
+fn weight_grad_rows_impl<M: MulAdd>(dy: &[f32], x: &[f32], m: &[f32], bp: usize, g: &mut ConvGrad) {
+    outer_acc::<M>(dy, x, bp, &mut g.ws);
+    outer_acc::<M>(dy, m, bp, &mut g.wn);
     let r = 9 * bp;
+    let nb = bp / LANES;
     for o in 0..9 {
         let mut acc = [0.0f32; LANES];
         for dyr in dy.chunks_exact(r) {
-            for c in (0..bp).step_by(LANES) {
-                let d: &[f32; LANES] = dyr[o * bp + c..o * bp + c + LANES].try_into().unwrap();
+            let (dyv, _) = dyr.as_chunks::<LANES>();
+            for d in &dyv[o * nb..(o + 1) * nb] {
                 for l in 0..LANES {
                     acc[l] += d[l];
                 }
@@ -408,7 +472,7 @@ pub fn weight_grad_rows(dy: &[f32], x: &[f32], m: &[f32], bp: usize) -> ConvGrad
 // ---------------------------------------------------------------------------------------------
 
 #[inline(always)]
-fn tanh_backward_impl(y: &[f32], dy: &mut [f32]) {
+fn tanh_backward_impl<M: MulAdd>(y: &[f32], dy: &mut [f32]) {
     for (d, v) in dy.chunks_exact_mut(LANES).zip(y.chunks_exact(LANES)) {
         let d: &mut [f32; LANES] = d.try_into().unwrap();
         let v: &[f32; LANES] = v.try_into().unwrap();
@@ -432,7 +496,7 @@ pub fn tanh_backward(y: &[f32], dy: &mut [f32]) {
 }
 
 #[inline(always)]
-fn sq_err_impl(xhat: &[f32], x: &[f32], mask: &[f32], scale: f32, grad: &mut [f32]) -> f64 {
+fn sq_err_impl<M: MulAdd>(xhat: &[f32], x: &[f32], mask: &[f32], scale: f32, grad: &mut [f32]) -> f64 {
     let bp = mask.len();
     let mut total = 0.0f64;
     for ((xh, xr), gr) in xhat.chunks_exact(bp).zip(x.chunks_exact(bp)).zip(grad.chunks_exact_mut(bp)) {

@@ -273,7 +273,9 @@ impl<'a> Trainer<'a> {
                 self.iteration + 1
             )));
         }
-        let grads = self.gradient_params();
+        // Hand ∂L/∂C to Burn without a copy; the snapshot's buffer becomes the next gradient buffer.
+        let grad_c = std::mem::replace(&mut self.grads.c, w.c);
+        let grads = self.gradient_params(grad_c);
         let module = self.module.take().unwrap();
         self.module = Some(self.optimizer.step(self.config.learning_rate, module, grads));
         self.iteration += 1;
@@ -293,7 +295,7 @@ impl<'a> Trainer<'a> {
         self.timings
     }
 
-    fn gradient_params(&self) -> GradientsParams {
+    fn gradient_params(&self, grad_c: Vec<f32>) -> GradientsParams {
         let dev = self.device.clone().inner();
         let m = self.module();
         let mut gp = GradientsParams::new();
@@ -313,7 +315,7 @@ impl<'a> Trainer<'a> {
         let [k, nc] = m.components_shape();
         gp.register(
             m.components.id,
-            Tensor::<2>::from_data(TensorData::new(self.grads.c.clone(), [k, nc]), &dev),
+            Tensor::<2>::from_data(TensorData::new(grad_c, [k, nc]), &dev),
         );
         gp
     }
