@@ -132,7 +132,7 @@ fn gradient_check(layers: usize) {
     ] {
         assert!((a - b).abs() <= 1e-5 * b.abs().max(1e-3), "loss terms differ: hand {terms:?} vs burn {ref_terms:?}");
     }
-    let gc = to_vec(module.components.val().grad(&grads).unwrap());
+    let gc: Vec<f32> = module.components.iter().flat_map(|p| to_vec(p.val().grad(&grads).unwrap())).collect();
     let e = rel_err(&g.c, &gc);
     eprintln!("L = {layers}: loss {terms:?}; C gradient relative error {e:.2e}");
     assert!(e <= 1e-4, "components gradient relative error {e}");
@@ -287,7 +287,7 @@ fn resume_reproduces_the_uninterrupted_run() {
     let data = TrainingData::from_features(&feats).unwrap();
     // Mini-batches so that the generator state matters too.
     let cfg = AutoencoderConfig {
-        components: 5,
+        components: 10, // two row blocks of C, two Adam instances for them
         layers: 2,
         iterations: 40,
         batch_size: Some(6),
@@ -328,7 +328,7 @@ fn resume_reproduces_the_uninterrupted_run() {
     assert!(max_diff <= 1e-6, "resumed run differs by {max_diff}");
 
     // A checkpoint with other hyperparameters is refused.
-    let other = AutoencoderConfig { components: 6, ..cfg };
+    let other = AutoencoderConfig { components: 11, ..cfg };
     assert!(Trainer::resume(&ck, other, &data, &nb, &dist).is_err());
     let _ = std::fs::remove_dir_all(&dir);
 }

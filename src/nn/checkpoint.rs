@@ -6,7 +6,9 @@
 //! b"MDAECKPT"  u32 format version
 //! u64 n, n bytes   JSON header (CheckpointHeader)
 //! u64 n, n bytes   module record (burnpack, Burn's ModuleRecord)
-//! u64 n, n bytes   optimizer record (burnpack, Burn's ModuleOptimizer)
+//! u64 m            number of optimizer records
+//! m × (u64 n, n bytes)  optimizer records (burnpack, Burn's ModuleOptimizer): the layers' Adam,
+//!                  then one per row block of C
 //! ```
 
 use std::io::Write;
@@ -47,8 +49,8 @@ pub struct Checkpoint {
     pub header: CheckpointHeader,
     /// Burnpack bytes of the module record.
     pub module: Vec<u8>,
-    /// Burnpack bytes of the optimizer record.
-    pub optimizer: Vec<u8>,
+    /// Burnpack bytes of the optimizer records (layers, then each block of `C`).
+    pub optimizers: Vec<Vec<u8>>,
 }
 
 /// Writes `bytes` to `path` atomically: a temporary file next to it, flushed and synced, then
@@ -79,10 +81,16 @@ impl Checkpoint {
     /// Serialises and writes the checkpoint atomically.
     pub fn save(&self, path: &Path) -> Result<()> {
         let header = serde_json::to_vec(&self.header).map_err(|e| Error::Invalid(format!("checkpoint header: {e}")))?;
-        let mut out = Vec::with_capacity(32 + header.len() + self.module.len() + self.optimizer.len());
+        let total: usize = self.optimizers.iter().map(|o| o.len() + 8).sum();
+        let mut out = Vec::with_capacity(40 + header.len() + self.module.len() + total);
         out.extend_from_slice(MAGIC);
         out.extend_from_slice(&VERSION.to_le_bytes());
-        for part in [&header[..], &self.module[..], &self.optimizer[..]] {
+        for part in [&header[..], &self.module[..]] {
+            out.extend_from_slice(&(part.len() as u64).to_le_bytes());
+            out.extend_from_slice(part);
+        }
+        out.extend_from_slice(&(self.optimizers.len() as u64).to_le_bytes());
+        for part in &self.optimizers {
             out.extend_from_slice(&(part.len() as u64).to_le_bytes());
             out.extend_from_slice(part);
         }
@@ -101,23 +109,33 @@ impl Checkpoint {
             return Err(corrupt(&format!("format version {version}, this build reads {VERSION}")));
         }
         let mut pos = 12;
-        let mut parts = Vec::with_capacity(3);
-        for _ in 0..3 {
+        let mut take = |len_only: bool| -> Result<Vec<u8>> {
             if bytes.len() < pos + 8 {
                 return Err(corrupt("truncated"));
             }
             let n = u64::from_le_bytes(bytes[pos..pos + 8].try_into().unwrap()) as usize;
             pos += 8;
+            if len_only {
+                return Ok(n.to_le_bytes().to_vec());
+            }
             if bytes.len() < pos + n {
                 return Err(corrupt("truncated"));
             }
-            parts.push(bytes[pos..pos + n].to_vec());
+            let v = bytes[pos..pos + n].to_vec();
             pos += n;
+            Ok(v)
+        };
+        let header = take(false)?;
+        let module = take(false)?;
+        let count = usize::from_le_bytes(take(true)?.try_into().unwrap());
+        if count > 1 << 20 {
+            return Err(corrupt("implausible number of optimizer records"));
         }
-        let header: CheckpointHeader =
-            serde_json::from_slice(&parts[0]).map_err(|e| corrupt(&format!("header: {e}")))?;
-        let optimizer = parts.pop().unwrap();
-        let module = parts.pop().unwrap();
-        Ok(Checkpoint { header, module, optimizer })
+        let optimizers = (0..count).map(|_| take(false)).collect::<Result<Vec<_>>>()?;
+        if pos != bytes.len() {
+            return Err(corrupt("trailing bytes"));
+        }
+        let header: CheckpointHeader = serde_json::from_slice(&header).map_err(|e| corrupt(&format!("header: {e}")))?;
+        Ok(Checkpoint { header, module, optimizers })
     }
 }

@@ -8,11 +8,12 @@
 use burn::tensor::Tensor;
 use faer::linalg::matmul::matmul;
 use faer::{Accum, MatMut, MatRef, Par};
+use rayon::prelude::*;
 
 use super::config::AutoencoderConfig;
 use super::kernels::{self, Acc9, Mat9, transpose9};
 use super::loss::{LossTerms, SupportMaps, sparsity_with_grad};
-use super::model::AutoencoderModule;
+use super::model::{AutoencoderModule, COMPONENT_BLOCK};
 use super::neighbors::NeighborIndex;
 use crate::error::{Error, Result};
 
@@ -70,7 +71,15 @@ fn check_finite(name: &str, v: &[f32]) -> Result<()> {
 impl Weights {
     /// Reads the module's parameters; errors if any is non-finite.
     pub fn from_module(m: &AutoencoderModule) -> Result<Self> {
-        let mut layers = Vec::with_capacity(m.layers.len());
+        let mut w = Weights { layers: Vec::new(), c: Vec::new(), k: 0, n: 0 };
+        w.read_module(m)?;
+        Ok(w)
+    }
+
+    /// Re-reads the module's parameters into this snapshot (reusing the buffer of `C`); errors
+    /// if any is non-finite.
+    pub fn read_module(&mut self, m: &AutoencoderModule) -> Result<()> {
+        self.layers.clear();
         for (l, layer) in m.layers.iter().enumerate() {
             let wp = tensor_to_vec(layer.weight_point.val());
             let wn = tensor_to_vec(layer.weight_neighbor.val());
@@ -80,7 +89,7 @@ impl Weights {
             check_finite(&format!("layers.{l}.weight_neighbor"), &wn)?;
             check_finite(&format!("layers.{l}.bias"), &b)?;
             check_finite(&format!("layers.{l}.decoder_bias"), &bd)?;
-            layers.push(LayerWeights {
+            self.layers.push(LayerWeights {
                 wp: mat9(&wp),
                 wn: mat9(&wn),
                 b: b.try_into().expect("bias of 9"),
@@ -88,9 +97,15 @@ impl Weights {
             });
         }
         let [k, nc] = m.components_shape();
-        let c = tensor_to_vec(m.components.val());
-        check_finite("components", &c)?;
-        Ok(Weights { layers, c, k, n: nc / 9 })
+        self.k = k;
+        self.n = nc / 9;
+        self.c.resize(k * nc, 0.0);
+        // Blocks in parallel, each an elementwise copy out of Burn plus a copy into place.
+        self.c
+            .par_chunks_mut(COMPONENT_BLOCK * nc)
+            .zip(m.components.par_iter())
+            .for_each(|(dst, p)| dst.copy_from_slice(&tensor_to_vec(p.val())));
+        check_finite("components", &self.c)
     }
 }
 

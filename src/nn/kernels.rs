@@ -536,6 +536,47 @@ pub fn squared_error(xhat: &[f32], x: &[f32], mask: &[f32], scale: f32, grad: &m
     parts.iter().sum()
 }
 
+#[inline(always)]
+fn vertex_sq_norms_impl<M: MulAdd>(row: &[f32], out: &mut [f32]) {
+    for (v, o) in row.chunks_exact(9).zip(out.iter_mut()) {
+        let mut s = 0.0f32;
+        for &x in v {
+            s = M::mul_add(x, x, s);
+        }
+        *o = s;
+    }
+}
+
+dispatch! {
+    /// Squared norms of consecutive 9-vectors: `out[i] = ‖row[9i..9i+9]‖²`.
+    pub fn vertex_sq_norms(row: &[f32], out: &mut [f32]) => vertex_sq_norms_impl
+}
+
+#[inline(always)]
+fn group_sparsity_impl<M: MulAdd>(row: &[f32], sq_norms: &[f32], lambda: &[f32], eps2: f32, scale: f32, grad: &mut [f32]) -> f64 {
+    let mut total = 0.0f64;
+    for (((v, g), &s), &l) in row.chunks_exact(9).zip(grad.chunks_exact_mut(9)).zip(sq_norms).zip(lambda) {
+        if l == 0.0 {
+            continue;
+        }
+        let nrm = s.max(eps2).sqrt();
+        total += (l * nrm) as f64;
+        if s > eps2 {
+            let f = scale * l / nrm;
+            for (gq, &vq) in g.iter_mut().zip(v) {
+                *gq = M::mul_add(f, vq, *gq);
+            }
+        }
+    }
+    total
+}
+
+dispatch! {
+    /// One component's weighted group norm `Σ_i Λ_i ‖v_i‖_ε` (returned) and its gradient
+    /// `grad_i += scale·Λ_i·v_i/‖v_i‖` (zero where `‖v_i‖² ≤ eps2`), for 9-vectors `v_i`.
+    pub fn group_sparsity(row: &[f32], sq_norms: &[f32], lambda: &[f32], eps2: f32, scale: f32, grad: &mut [f32]) -> f64 => group_sparsity_impl
+}
+
 /// Returns the first non-finite value's index, if any (parallel scan).
 pub fn first_non_finite(v: &[f32]) -> Option<usize> {
     const CH: usize = 1 << 15;

@@ -15,6 +15,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use super::config::AutoencoderConfig;
+use super::kernels;
 use super::model::{AutoencoderModule, NeighborTensors};
 use super::neighbors::NeighborIndex;
 use crate::error::{Error, Result};
@@ -144,12 +145,14 @@ pub struct SupportMaps {
     centers: Vec<usize>,
     weights: Vec<Vec<f32>>,
     valid: Vec<bool>,
+    /// `‖C_k,i‖²` of the `C` of the last update, `[K, N]`.
+    sq_norms: Vec<f32>,
 }
 
 impl SupportMaps {
     /// Empty maps for `k` components on `n` vertices.
     pub fn new(k: usize, n: usize) -> Self {
-        SupportMaps { k, n, centers: vec![0; k], weights: vec![Vec::new(); k], valid: vec![false; k] }
+        SupportMaps { k, n, centers: vec![0; k], weights: vec![Vec::new(); k], valid: vec![false; k], sq_norms: vec![0.0; k * n] }
     }
 
     /// Current centres `c_k` (valid after [`Self::update`]).
@@ -168,10 +171,11 @@ impl SupportMaps {
         let n = self.n;
         let centers: Vec<usize> = c
             .par_chunks(9 * n)
-            .map(|row| {
+            .zip(self.sq_norms.par_chunks_mut(n))
+            .map(|(row, sq)| {
+                kernels::vertex_sq_norms(row, sq);
                 let mut best = (0usize, -1.0f32);
-                for (i, v) in row.chunks_exact(9).enumerate() {
-                    let s: f32 = v.iter().map(|x| x * x).sum();
+                for (i, &s) in sq.iter().enumerate() {
                     if s > best.1 {
                         best = (i, s);
                     }
@@ -206,7 +210,8 @@ impl SupportMaps {
 }
 
 /// Sparsity term `(1/K) Σ_k Σ_i Λ_ik ‖C_k,i‖_ε` and its gradient: adds `scale·Λ_ik·C_k,i/‖C_k,i‖`
-/// to `grad` (zero where `‖C_k,i‖ ≤ ε`). Returns the unweighted term.
+/// to `grad` (zero where `‖C_k,i‖ ≤ ε`). Returns the unweighted term. `maps` must have been
+/// updated with this same `c` (its squared norms are reused).
 ///
 /// # Shapes
 /// `c`, `grad`: `[K, 9N]` row-major, vertex-major columns.
@@ -216,27 +221,9 @@ pub fn sparsity_with_grad(c: &[f32], maps: &SupportMaps, scale: f32, grad: &mut 
     let sums: Vec<f64> = grad
         .par_chunks_mut(9 * n)
         .zip(c.par_chunks(9 * n))
+        .zip(maps.sq_norms.par_chunks(n))
         .enumerate()
-        .map(|(kk, (g, row))| {
-            let lam = &maps.weights[kk];
-            let mut total = 0.0f64;
-            for (i, (gv, v)) in g.chunks_exact_mut(9).zip(row.chunks_exact(9)).enumerate() {
-                let l = lam[i];
-                if l == 0.0 {
-                    continue;
-                }
-                let s: f32 = v.iter().map(|x| x * x).sum();
-                let nrm = s.max(NORM_EPS * NORM_EPS).sqrt();
-                total += (l * nrm) as f64;
-                if s > NORM_EPS * NORM_EPS {
-                    let f = scale * l / nrm;
-                    for (gq, vq) in gv.iter_mut().zip(v) {
-                        *gq += f * vq;
-                    }
-                }
-            }
-            total
-        })
+        .map(|(kk, ((g, row), sq))| kernels::group_sparsity(row, sq, &maps.weights[kk], NORM_EPS * NORM_EPS, scale, g))
         .collect();
     sums.iter().sum::<f64>() / k as f64
 }
@@ -259,7 +246,7 @@ pub fn reference_loss(
     let (xh, z) = module.forward(x.clone(), nb);
     let recon = (xh - x).square().sum().div_scalar(b as f32);
     let [k, _] = module.components_shape();
-    let c = module.components.val().reshape([k, n, 9]);
+    let c = module.components_tensor().reshape([k, n, 9]);
     let norms = c.square().sum_dim(2).reshape([k, n]).clamp_min(NORM_EPS * NORM_EPS).sqrt();
     let sparsity = (norms * maps.to_tensor(&device)).sum().div_scalar(k as f32);
     let hinge = z.abs().max_dim(0).sub_scalar(cfg.theta as f32).clamp_min(0.0).sum().div_scalar(k as f32);

@@ -7,7 +7,8 @@
 //! - convolution `y_i = W_point·x_i + W_nb·mean_{j∈N(i)} x_j + b` with `W ∈ R^{9×9}` stored
 //!   `[out, in]`;
 //! - encoder: L layers, tanh (the last one linear when L > 1); flatten vertex-major
-//!   (`f[i·9 + c] = x_i,c`); `z = C·f`, `C ∈ R^{K×9N}`;
+//!   (`f[i·9 + c] = x_i,c`); `z = C·f`, `C ∈ R^{K×9N}` (stored as row blocks of
+//!   [`COMPONENT_BLOCK`] components so that Burn's optimizer can update the blocks in parallel);
 //! - decoder: `f̂ = Cᵀz`, then the layers in reverse order with the transposed weights
 //!   (`y_i = W_pointᵀ·x_i + W_nbᵀ·mean x_j + b_dec`), tanh on every layer.
 
@@ -31,13 +32,17 @@ pub struct MeshConv {
     pub decoder_bias: Param<Tensor<1>>,
 }
 
+/// Rows (components) per parameter block of `C`.
+pub const COMPONENT_BLOCK: usize = 8;
+
 /// All trainable parameters of the autoencoder.
 #[derive(Module, Debug)]
 pub struct AutoencoderModule {
     /// Encoder layers in forward order (the decoder runs them in reverse).
     pub layers: Vec<MeshConv>,
-    /// Latent map `C`, shape `[K, 9N]`, columns in vertex-major order (`i·9 + c`).
-    pub components: Param<Tensor<2>>,
+    /// Latent map `C` `[K, 9N]` (columns in vertex-major order `i·9 + c`) as consecutive row
+    /// blocks: block `j` holds components `j·COMPONENT_BLOCK ..`, shape `[≤ COMPONENT_BLOCK, 9N]`.
+    pub components: Vec<Param<Tensor<2>>>,
 }
 
 impl AutoencoderConfig {
@@ -59,10 +64,11 @@ impl AutoencoderConfig {
             });
         }
         let c = rng.normal_vec(self.components * 9 * n_vertices, std);
-        AutoencoderModule {
-            layers,
-            components: Param::from_data(TensorData::new(c, [self.components, 9 * n_vertices]), device),
-        }
+        let components = c
+            .chunks(COMPONENT_BLOCK * 9 * n_vertices)
+            .map(|rows| Param::from_data(TensorData::new(rows.to_vec(), [rows.len() / (9 * n_vertices), 9 * n_vertices]), device))
+            .collect();
+        AutoencoderModule { layers, components }
     }
 }
 
@@ -144,7 +150,22 @@ impl AutoencoderModule {
 
     /// `[K, 9N]`, the shape of `C`.
     pub fn components_shape(&self) -> [usize; 2] {
-        self.components.val().dims()
+        let mut k = 0;
+        let mut nc = 0;
+        for p in &self.components {
+            let [r, c] = p.lazy_shape().dims::<2>();
+            k += r;
+            nc = c;
+        }
+        [k, nc]
+    }
+
+    /// `C` as one tensor (the blocks concatenated).
+    ///
+    /// # Shapes
+    /// output: `[K, 9N]`
+    pub fn components_tensor(&self) -> Tensor<2> {
+        Tensor::cat(self.components.iter().map(|p| p.val()).collect(), 0)
     }
 
     /// Encoder: convolutions, flatten, `z = C·f`.
@@ -160,7 +181,7 @@ impl AutoencoderModule {
             h = layer.forward_encoder(h, nb, tanh);
         }
         let [b, n, c] = h.dims();
-        h.reshape([b, n * c]).matmul(self.components.val().transpose())
+        h.reshape([b, n * c]).matmul(self.components_tensor().transpose())
     }
 
     /// Decoder: `f̂ = Cᵀz`, then the tied convolutions in reverse order.
@@ -170,7 +191,7 @@ impl AutoencoderModule {
     /// - output: `[B, N, 9]`
     pub fn decode(&self, z: Tensor<2>, nb: &NeighborTensors) -> Tensor<3> {
         let [b, _] = z.dims();
-        let f = z.matmul(self.components.val());
+        let f = z.matmul(self.components_tensor());
         let [_, nc] = f.dims();
         let mut h = f.reshape([b, nc / 9, 9]);
         for layer in self.layers.iter().rev() {

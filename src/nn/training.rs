@@ -24,7 +24,8 @@ use super::engine::{self, Grads, Weights, Workspace};
 use super::inference::Autoencoder;
 use super::kernels::padded_width;
 use super::loss::{CenterDistances, LossTerms, SupportMaps};
-use super::model::AutoencoderModule;
+use super::model::{AutoencoderModule, COMPONENT_BLOCK};
+use rayon::prelude::*;
 use super::neighbors::NeighborIndex;
 use super::rng::Rng;
 use crate::error::{Error, Result};
@@ -95,7 +96,10 @@ pub struct Trainer<'a> {
     distances: &'a dyn CenterDistances,
     device: Device,
     module: Option<AutoencoderModule>,
+    /// Adam for the convolution layers, and one Adam per row block of `C` (run in parallel).
     optimizer: ModuleOptimizer,
+    block_optimizers: Vec<ModuleOptimizer>,
+    weights: Weights,
     iteration: usize,
     rng: Rng,
     maps: SupportMaps,
@@ -141,8 +145,11 @@ impl<'a> Trainer<'a> {
         let b = config.batch_size.unwrap_or(data.n_shapes()).min(data.n_shapes());
         let workspace = Workspace::new(data.n_vertices(), config.components, config.layers, padded_width(b));
         let full_batch = (b == data.n_shapes()).then(|| data.batch_vcb(&(0..b).collect::<Vec<_>>()));
+        let n_blocks = module.components.len();
         Ok(Trainer {
             optimizer: adam(&config),
+            block_optimizers: (0..n_blocks).map(|_| adam(&config)).collect(),
+            weights: Weights { layers: Vec::new(), c: Vec::new(), k: 0, n: 0 },
             rng: batch_rng(config.seed),
             maps: SupportMaps::new(config.components, data.n_vertices()),
             grads: Grads { layers: Vec::new(), c: Vec::new() },
@@ -196,9 +203,23 @@ impl<'a> Trainer<'a> {
             .try_load_record(record)
             .map_err(|e| Error::parse(checkpoint, None, format!("module record: {e}")))?;
         t.module = Some(module);
-        t.optimizer = adam(&t.config)
-            .from_bytes(Bytes::from_bytes_vec(ck.optimizer))
-            .map_err(|e| Error::parse(checkpoint, None, format!("optimizer record: {e}")))?;
+        if ck.optimizers.len() != 1 + t.block_optimizers.len() {
+            return Err(Error::parse(
+                checkpoint,
+                None,
+                format!("expected {} optimizer records, found {}", 1 + t.block_optimizers.len(), ck.optimizers.len()),
+            ));
+        }
+        let mut records = ck.optimizers.into_iter();
+        let load = |bytes: Vec<u8>, cfg: &AutoencoderConfig| {
+            adam(cfg)
+                .from_bytes(Bytes::from_bytes_vec(bytes))
+                .map_err(|e| Error::parse(checkpoint, None, format!("optimizer record: {e}")))
+        };
+        t.optimizer = load(records.next().unwrap(), &t.config)?;
+        for (o, r) in t.block_optimizers.iter_mut().zip(records) {
+            *o = load(r, &t.config)?;
+        }
         t.iteration = ck.header.iteration;
         t.rng = Rng { state: ck.header.rng_state };
         t.last_loss = ck.header.last_loss;
@@ -229,9 +250,9 @@ impl<'a> Trainer<'a> {
     /// gradient is not finite.
     pub fn step(&mut self) -> Result<LossTerms> {
         let t0 = Instant::now();
-        let w = Weights::from_module(self.module()).map_err(|e| {
-            Error::Numerical(format!("before iteration {}: {e}", self.iteration + 1))
-        })?;
+        let mut w = std::mem::replace(&mut self.weights, Weights { layers: Vec::new(), c: Vec::new(), k: 0, n: 0 });
+        w.read_module(self.module())
+            .map_err(|e| Error::Numerical(format!("before iteration {}: {e}", self.iteration + 1)))?;
         let t1 = Instant::now();
         self.maps.update(&w.c, &self.config, self.distances)?;
         let t2 = Instant::now();
@@ -273,11 +294,8 @@ impl<'a> Trainer<'a> {
                 self.iteration + 1
             )));
         }
-        // Hand ∂L/∂C to Burn without a copy; the snapshot's buffer becomes the next gradient buffer.
-        let grad_c = std::mem::replace(&mut self.grads.c, w.c);
-        let grads = self.gradient_params(grad_c);
-        let module = self.module.take().unwrap();
-        self.module = Some(self.optimizer.step(self.config.learning_rate, module, grads));
+        self.weights = w;
+        self.apply_gradients();
         self.iteration += 1;
         self.last_loss = Some(terms);
         let t4 = Instant::now();
@@ -295,9 +313,12 @@ impl<'a> Trainer<'a> {
         self.timings
     }
 
-    fn gradient_params(&self, grad_c: Vec<f32>) -> GradientsParams {
+    /// Registers the hand-computed gradients with Burn and runs Burn's Adam: the layers and
+    /// every row block of `C` are separate modules for separate optimizers, stepped in parallel.
+    fn apply_gradients(&mut self) {
         let dev = self.device.clone().inner();
-        let m = self.module();
+        let lr = self.config.learning_rate;
+        let AutoencoderModule { layers, components } = self.module.take().expect("module present between steps");
         let mut gp = GradientsParams::new();
         let t9x9 = |a: &[[f64; 9]; 9]| -> Tensor<2> {
             let v: Vec<f32> = a.iter().flatten().map(|&x| x as f32).collect();
@@ -306,18 +327,34 @@ impl<'a> Trainer<'a> {
         let t9 = |a: &[f64; 9]| -> Tensor<1> {
             Tensor::from_data(TensorData::new(a.iter().map(|&x| x as f32).collect::<Vec<f32>>(), [9]), &dev)
         };
-        for (layer, g) in m.layers.iter().zip(&self.grads.layers) {
+        for (layer, g) in layers.iter().zip(&self.grads.layers) {
             gp.register(layer.weight_point.id, t9x9(&g.wp));
             gp.register(layer.weight_neighbor.id, t9x9(&g.wn));
             gp.register(layer.bias.id, t9(&g.b));
             gp.register(layer.decoder_bias.id, t9(&g.bd));
         }
-        let [k, nc] = m.components_shape();
-        gp.register(
-            m.components.id,
-            Tensor::<2>::from_data(TensorData::new(grad_c, [k, nc]), &dev),
+        let nc = 9 * self.neighbors.n_vertices();
+        let grad_c = &self.grads.c;
+        let opt = &mut self.optimizer;
+        let (layers, components) = rayon::join(
+            || opt.step(lr, layers, gp),
+            || {
+                components
+                    .into_par_iter()
+                    .zip(self.block_optimizers.par_iter_mut())
+                    .enumerate()
+                    .map(|(j, (p, o))| {
+                        let rows = p.lazy_shape().dims::<2>()[0];
+                        let start = j * COMPONENT_BLOCK * nc;
+                        let g = grad_c[start..start + rows * nc].to_vec();
+                        let mut gp = GradientsParams::new();
+                        gp.register(p.id, Tensor::<2>::from_data(TensorData::new(g, [rows, nc]), &dev));
+                        o.step(lr, p, gp)
+                    })
+                    .collect::<Vec<_>>()
+            },
         );
-        gp
+        self.module = Some(AutoencoderModule { layers, components });
     }
 
     /// The current state as a checkpoint (errors if a parameter is not finite).
@@ -331,7 +368,11 @@ impl<'a> Trainer<'a> {
             .into_record()
             .into_bytes()
             .map_err(|e| Error::Invalid(format!("module record: {e}")))?;
-        let optimizer = self.optimizer.into_bytes().map_err(|e| Error::Invalid(format!("optimizer record: {e}")))?;
+        let mut optimizers = Vec::with_capacity(1 + self.block_optimizers.len());
+        for o in std::iter::once(&self.optimizer).chain(&self.block_optimizers) {
+            let b = o.into_bytes().map_err(|e| Error::Invalid(format!("optimizer record: {e}")))?;
+            optimizers.push(b.to_vec());
+        }
         Ok(Checkpoint {
             header: CheckpointHeader {
                 iteration: self.iteration,
@@ -343,7 +384,7 @@ impl<'a> Trainer<'a> {
                 last_loss: self.last_loss,
             },
             module: module.to_vec(),
-            optimizer: optimizer.to_vec(),
+            optimizers,
         })
     }
 
