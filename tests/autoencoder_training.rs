@@ -45,7 +45,10 @@ fn random_features(n_frames: usize, n: usize, amp: f64, seed: u64) -> Features {
 
 /// Ten shapes: a smooth global field plus two planted localized bumps (around vertices `c1`,
 /// `c2`) whose amplitudes vary independently across the shapes.
-fn planted(nx: usize, ny: usize) -> (Vec<[f64; 3]>, Vec<[usize; 3]>, Features, [usize; 2]) {
+/// Rest positions, faces, features and the two planted centres.
+type Planted = (Vec<[f64; 3]>, Vec<[usize; 3]>, Features, [usize; 2]);
+
+fn planted(nx: usize, ny: usize) -> Planted {
     let (p, f) = grid(nx, ny);
     let n = p.len();
     let c1 = (ny / 4) * nx + nx / 4;

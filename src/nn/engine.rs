@@ -170,7 +170,7 @@ impl Workspace {
     /// Buffers for `n` vertices, `k` components, `layers` layers and batch width `bp` (a
     /// multiple of [`kernels::LANES`]).
     pub fn new(n: usize, k: usize, layers: usize, bp: usize) -> Self {
-        assert!(bp % kernels::LANES == 0 && bp > 0);
+        assert!(bp.is_multiple_of(kernels::LANES) && bp > 0);
         let sz = n * 9 * bp;
         let z = || vec![0.0f32; sz];
         Workspace {
@@ -309,6 +309,7 @@ fn acc9_add_transposed(dst: &mut Acc9, src: &Acc9) {
 ///
 /// `x` is the batch in VCB layout with `b_real` real shapes in lanes `0..b_real` (the rest zero);
 /// `maps` must already be updated for `w.c`. Returns the loss terms; `grads` is overwritten.
+#[allow(clippy::too_many_arguments)]
 pub fn loss_and_grad(
     ws: &mut Workspace,
     w: &Weights,

@@ -114,11 +114,11 @@ fn axpy<M: MulAdd>(acc: &mut V, w: f32, x: &V) {
 ///
 /// |x| < 0.25: odd Taylor series of tanh up to x⁹ (truncation < 3e-9 relative). Otherwise
 /// tanh|x| = 1 − 2/(e^{2|x|} + 1) with e^y = 2ⁿ·e^r, n = round(y/ln2), |r| ≤ ln2/2, e^r by its
-/// degree-7 Taylor polynomial (error < 5e-9); |x| is clamped at 9 (tanh 9 rounds to 1 in f32).
+/// degree-7 Taylor polynomial (error < 5e-9); |x| is clamped at 10 (tanh 10 rounds to 1 in f32).
 #[inline(always)]
 pub fn tanh_f32(x: f32) -> f32 {
     let ax = x.abs();
-    let ax = if ax > 9.0 { 9.0 } else { ax }; // keeps NaN
+    let ax = if ax > 10.0 { 10.0 } else { ax }; // keeps NaN
     // Small-argument branch.
     let x2 = ax * ax;
     let small = ax
@@ -154,6 +154,7 @@ fn tanh_in_place(v: &mut [f32]) {
 }
 
 #[inline(always)]
+#[allow(clippy::extra_unused_type_parameters)]
 fn tanh_slice_impl<M: MulAdd>(v: &mut [f32]) {
     tanh_in_place(v);
 }
@@ -186,6 +187,7 @@ fn add_scaled_row<M: MulAdd>(dst: &mut [V], src: &[V], w: f32) {
 }
 
 #[inline(always)]
+#[allow(clippy::extra_unused_type_parameters)]
 fn mean_rows_impl<M: MulAdd>(nb: &NeighborIndex, src: &[f32], dst: &mut [f32], first_row: usize, r: usize) {
     let (sv, _) = src.as_chunks::<LANES>();
     let rv = r / LANES;
@@ -472,6 +474,7 @@ pub fn weight_grad_rows(dy: &[f32], x: &[f32], m: &[f32], bp: usize) -> ConvGrad
 // ---------------------------------------------------------------------------------------------
 
 #[inline(always)]
+#[allow(clippy::extra_unused_type_parameters)]
 fn tanh_backward_impl<M: MulAdd>(y: &[f32], dy: &mut [f32]) {
     for (d, v) in dy.chunks_exact_mut(LANES).zip(y.chunks_exact(LANES)) {
         let d: &mut [f32; LANES] = d.try_into().unwrap();
@@ -496,6 +499,7 @@ pub fn tanh_backward(y: &[f32], dy: &mut [f32]) {
 }
 
 #[inline(always)]
+#[allow(clippy::extra_unused_type_parameters)]
 fn sq_err_impl<M: MulAdd>(xhat: &[f32], x: &[f32], mask: &[f32], scale: f32, grad: &mut [f32]) -> f64 {
     let bp = mask.len();
     let mut total = 0.0f64;
@@ -588,6 +592,107 @@ pub fn first_non_finite(v: &[f32]) -> Option<usize> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::nn::rng::Rng;
+
+    fn rand_vec(rng: &mut Rng, n: usize) -> Vec<f32> {
+        (0..n).map(|_| rng.uniform() as f32 * 2.0 - 1.0).collect()
+    }
+
+    fn rand_mat(rng: &mut Rng) -> Mat9 {
+        let mut m = [[0.0; 9]; 9];
+        for row in m.iter_mut() {
+            for v in row.iter_mut() {
+                *v = rng.uniform() as f32 - 0.5;
+            }
+        }
+        m
+    }
+
+    fn ring_index(n: usize) -> NeighborIndex {
+        // A ring with chords and one isolated vertex (n − 1) and one asymmetric list.
+        let mut rings: Vec<Vec<usize>> = (0..n - 1).map(|i| vec![(i + 1) % (n - 1), (i + n - 2) % (n - 1)]).collect();
+        rings[0].push(5);
+        rings.push(vec![]);
+        NeighborIndex::new(&rings).unwrap()
+    }
+
+    #[test]
+    fn neighbour_mean_and_its_transpose_are_adjoint() {
+        let n = 70; // more than two row chunks
+        let bp = 16;
+        let r = 9 * bp;
+        let nb = ring_index(n);
+        let mut rng = Rng::new(3);
+        let x = rand_vec(&mut rng, n * r);
+        let y = rand_vec(&mut rng, n * r);
+        let mut mx = vec![0.0; n * r];
+        mean_rows(&nb, &x, &mut mx, r);
+        // Naive check of one entry per vertex.
+        for i in 0..n {
+            let deg = nb.neighbors(i).len();
+            let want: f32 = if deg == 0 {
+                0.0
+            } else {
+                nb.neighbors(i).iter().map(|&j| x[j as usize * r + 7]).sum::<f32>() / deg as f32
+            };
+            assert!((mx[i * r + 7] - want).abs() < 1e-6);
+        }
+        let mut mty = vec![0.0; n * r];
+        mean_rows_transpose_add(&nb, &y, &mut mty, r);
+        let a: f64 = mx.iter().zip(&y).map(|(p, q)| (*p as f64) * (*q as f64)).sum();
+        let b: f64 = x.iter().zip(&mty).map(|(p, q)| (*p as f64) * (*q as f64)).sum();
+        assert!((a - b).abs() < 1e-4 * a.abs().max(1.0), "<Mx, y> = {a}, <x, Mᵀy> = {b}");
+    }
+
+    #[test]
+    fn conv_and_its_gradients_match_naive_loops() {
+        let n = 40;
+        let bp = 16;
+        let r = 9 * bp;
+        let mut rng = Rng::new(4);
+        let (ws, wn) = (rand_mat(&mut rng), rand_mat(&mut rng));
+        let bias: [f32; 9] = std::array::from_fn(|i| i as f32 * 0.1 - 0.4);
+        let x = rand_vec(&mut rng, n * r);
+        let m = rand_vec(&mut rng, n * r);
+        let dy = rand_vec(&mut rng, n * r);
+        let at = |v: &[f32], i: usize, c: usize, b: usize| v[(i * 9 + c) * bp + b];
+        for tanh in [false, true] {
+            let mut out = vec![0.0; n * r];
+            conv_rows(&ws, &x, &wn, &m, &bias, &mut out, bp, tanh);
+            for (i, c, b) in [(0, 0, 0), (17, 4, 9), (39, 8, 15)] {
+                let mut h = bias[c];
+                for a in 0..9 {
+                    h += ws[c][a] * at(&x, i, a, b) + wn[c][a] * at(&m, i, a, b);
+                }
+                let want = if tanh { h.tanh() } else { h };
+                assert!((at(&out, i, c, b) - want).abs() < 1e-5);
+            }
+        }
+        let (mut dx, mut dm) = (vec![0.0; n * r], vec![0.0; n * r]);
+        input_grad_rows(&transpose9(&ws), &transpose9(&wn), &dy, &mut dx, &mut dm, bp);
+        let g = weight_grad_rows(&dy, &x, &m, bp);
+        for (i, a, b) in [(3, 2, 5), (38, 7, 12)] {
+            let want_x: f32 = (0..9).map(|o| ws[o][a] * at(&dy, i, o, b)).sum();
+            let want_m: f32 = (0..9).map(|o| wn[o][a] * at(&dy, i, o, b)).sum();
+            assert!((at(&dx, i, a, b) - want_x).abs() < 1e-5);
+            assert!((at(&dm, i, a, b) - want_m).abs() < 1e-5);
+        }
+        for (o, a) in [(0, 0), (4, 7), (8, 8)] {
+            let mut sx = 0.0f64;
+            let mut sm = 0.0f64;
+            let mut sb = 0.0f64;
+            for i in 0..n {
+                for b in 0..bp {
+                    sx += (at(&dy, i, o, b) * at(&x, i, a, b)) as f64;
+                    sm += (at(&dy, i, o, b) * at(&m, i, a, b)) as f64;
+                    sb += at(&dy, i, o, b) as f64;
+                }
+            }
+            assert!((g.ws[o][a] - sx).abs() < 1e-4, "{} vs {sx}", g.ws[o][a]);
+            assert!((g.wn[o][a] - sm).abs() < 1e-4);
+            assert!((g.bias[o] - sb).abs() < 1e-4);
+        }
+    }
 
     #[test]
     fn tanh_matches_std_to_f32_precision() {

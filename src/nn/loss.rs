@@ -183,20 +183,20 @@ impl SupportMaps {
                 best.0
             })
             .collect();
-        for k in 0..self.k {
-            if self.valid[k] && self.centers[k] == centers[k] {
+        for (k, &center) in centers.iter().enumerate() {
+            if self.valid[k] && self.centers[k] == center {
                 continue;
             }
-            let d = dist.distances(centers[k]);
+            let d = dist.distances(center);
             if d.len() != n {
                 return Err(Error::Invalid(format!(
                     "centre distances: expected {n} values for centre {}, got {}",
-                    centers[k],
+                    center,
                     d.len()
                 )));
             }
             self.weights[k] = d.iter().map(|&d| cfg.support_weight(d) as f32).collect();
-            self.centers[k] = centers[k];
+            self.centers[k] = center;
             self.valid[k] = true;
         }
         Ok(())

@@ -414,7 +414,7 @@ impl<'a> Trainer<'a> {
             let every = self.config.checkpoint_every;
             let mut checkpointed = false;
             if let Some(path) = &options.checkpoint
-                && ((every > 0 && self.iteration % every == 0) || self.iteration == total)
+                && ((every > 0 && self.iteration.is_multiple_of(every)) || self.iteration == total)
             {
                 self.save_checkpoint(path)?;
                 checkpointed = true;
