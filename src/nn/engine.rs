@@ -79,8 +79,22 @@ impl Weights {
     /// Re-reads the module's parameters into this snapshot (reusing the buffer of `C`); errors
     /// if any is non-finite.
     pub fn read_module(&mut self, m: &AutoencoderModule) -> Result<()> {
+        self.read_layers(&m.layers)?;
+        let [k, nc] = m.components_shape();
+        self.k = k;
+        self.n = nc / 9;
+        self.c.resize(k * nc, 0.0);
+        // Blocks in parallel, each an elementwise copy out of Burn plus a copy into place.
+        self.c
+            .par_chunks_mut(COMPONENT_BLOCK * nc.max(1))
+            .zip(m.components.par_iter())
+            .for_each(|(dst, p)| dst.copy_from_slice(&tensor_to_vec(p.val())));
+        check_finite("components", &self.c)
+    }
+
+    fn read_layers(&mut self, layers: &[super::model::MeshConv]) -> Result<()> {
         self.layers.clear();
-        for (l, layer) in m.layers.iter().enumerate() {
+        for (l, layer) in layers.iter().enumerate() {
             let wp = tensor_to_vec(layer.weight_point.val());
             let wn = tensor_to_vec(layer.weight_neighbor.val());
             let b = tensor_to_vec(layer.bias.val());
@@ -96,16 +110,44 @@ impl Weights {
                 bd: bd.try_into().expect("bias of 9"),
             });
         }
-        let [k, nc] = m.components_shape();
+        Ok(())
+    }
+
+    /// Like [`Self::read_module`], but takes the module by value: each block of `C` is taken out
+    /// of its `Param` (then uniquely owned, so Burn hands its buffer over without a copy),
+    /// copied into the snapshot, and put back with the same id. Saves a pass and an allocation
+    /// per block. Returns the module in every case.
+    pub fn read_module_owned(&mut self, m: AutoencoderModule) -> (AutoencoderModule, Result<()>) {
+        let AutoencoderModule { layers, components } = m;
+        if let Err(e) = self.read_layers(&layers) {
+            return (AutoencoderModule { layers, components }, Err(e));
+        }
+        let shapes: Vec<[usize; 2]> = components.iter().map(|p| p.lazy_shape().dims::<2>()).collect();
+        let k: usize = shapes.iter().map(|s| s[0]).sum();
+        let nc = shapes.first().map(|s| s[1]).unwrap_or(0);
         self.k = k;
         self.n = nc / 9;
         self.c.resize(k * nc, 0.0);
-        // Blocks in parallel, each an elementwise copy out of Burn plus a copy into place.
-        self.c
-            .par_chunks_mut(COMPONENT_BLOCK * nc)
-            .zip(m.components.par_iter())
-            .for_each(|(dst, p)| dst.copy_from_slice(&tensor_to_vec(p.val())));
-        check_finite("components", &self.c)
+        let components: Vec<_> = components
+            .into_par_iter()
+            .zip(self.c.par_chunks_mut(COMPONENT_BLOCK * nc.max(1)))
+            .map(|(p, dst)| {
+                p.map(|t| {
+                    let device = t.device();
+                    let require_grad = t.is_require_grad();
+                    let data = t.inner().into_data();
+                    match data.as_slice::<f32>() {
+                        Ok(v) => dst.copy_from_slice(v),
+                        Err(_) => dst.copy_from_slice(&data.clone().convert::<f32>().try_into_vec_as::<f32>().expect("f32")),
+                    }
+                    let back = Tensor::from_data(data, &device);
+                    if require_grad { back.require_grad() } else { back }
+                })
+            })
+            .collect();
+        let m = AutoencoderModule { layers, components };
+        let r = check_finite("components", &self.c);
+        (m, r)
     }
 }
 
@@ -123,11 +165,12 @@ pub struct LayerGrads {
 }
 
 /// Gradients of the loss with respect to every parameter.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Default)]
 pub struct Grads {
     /// Per layer, encoder order.
     pub layers: Vec<LayerGrads>,
-    /// ∂L/∂C, `[K, 9N]`.
+    /// ∂L/∂C, `[K, 9N]` row-major (one buffer: per-block GEMMs would re-pack the shared
+    /// operand once per block, which costs more than copying the blocks out).
     pub c: Vec<f32>,
 }
 
@@ -379,9 +422,7 @@ pub fn loss_and_grad(
     }
     hinge /= k as f64;
     // dC = Zᵀ·dF̂ + dZᵀ·F.
-    if grads.c.len() != w.c.len() {
-        grads.c = vec![0.0; w.c.len()];
-    }
+    grads.c.resize(w.c.len(), 0.0);
     gemm(
         MatMut::from_row_major_slice_mut(&mut grads.c, k, 9 * n),
         false,

@@ -251,8 +251,9 @@ impl<'a> Trainer<'a> {
     pub fn step(&mut self) -> Result<LossTerms> {
         let t0 = Instant::now();
         let mut w = std::mem::replace(&mut self.weights, Weights { layers: Vec::new(), c: Vec::new(), k: 0, n: 0 });
-        w.read_module(self.module())
-            .map_err(|e| Error::Numerical(format!("before iteration {}: {e}", self.iteration + 1)))?;
+        let (module, read) = w.read_module_owned(self.module.take().expect("module present between steps"));
+        self.module = Some(module);
+        read.map_err(|e| Error::Numerical(format!("before iteration {}: {e}", self.iteration + 1)))?;
         let t1 = Instant::now();
         self.maps.update(&w.c, &self.config, self.distances)?;
         let t2 = Instant::now();
