@@ -581,12 +581,39 @@ dispatch! {
     pub fn group_sparsity(row: &[f32], sq_norms: &[f32], lambda: &[f32], eps2: f32, scale: f32, grad: &mut [f32]) -> f64 => group_sparsity_impl
 }
 
-/// Returns the first non-finite value's index, if any (parallel scan).
+#[inline(always)]
+#[allow(clippy::extra_unused_type_parameters)]
+fn max_exponent_impl<M: MulAdd>(v: &[f32]) -> u32 {
+    const EXP: u32 = 0x7f80_0000;
+    let (blocks, rest) = v.as_chunks::<LANES>();
+    let mut acc = [0u32; LANES];
+    for b in blocks {
+        for l in 0..LANES {
+            acc[l] = acc[l].max(b[l].to_bits() & EXP);
+        }
+    }
+    let mut m = acc.iter().copied().max().unwrap_or(0);
+    for x in rest {
+        m = m.max(x.to_bits() & EXP);
+    }
+    m
+}
+
+dispatch! {
+    /// Largest exponent field (bits 23..31, in place) of the values: `0x7f80_0000` iff some
+    /// value is infinite or NaN.
+    fn max_exponent(v: &[f32]) -> u32 => max_exponent_impl
+}
+
+/// Returns the first non-finite value's index, if any (vectorised parallel scan; the exact
+/// position is searched only when there is one).
 pub fn first_non_finite(v: &[f32]) -> Option<usize> {
     const CH: usize = 1 << 15;
-    v.par_chunks(CH)
-        .enumerate()
-        .find_map_first(|(ci, c)| c.iter().position(|x| !x.is_finite()).map(|p| ci * CH + p))
+    let bad = v.par_chunks(CH).any(|c| max_exponent(c) == 0x7f80_0000);
+    if !bad {
+        return None;
+    }
+    v.iter().position(|x| !x.is_finite())
 }
 
 #[cfg(test)]
@@ -692,6 +719,20 @@ mod tests {
             assert!((g.wn[o][a] - sm).abs() < 1e-4);
             assert!((g.bias[o] - sb).abs() < 1e-4);
         }
+    }
+
+    #[test]
+    fn non_finite_values_are_located() {
+        let mut v = vec![1.5f32; 100_003];
+        assert_eq!(first_non_finite(&v), None);
+        v[70_001] = f32::NAN;
+        v[99_999] = f32::INFINITY;
+        assert_eq!(first_non_finite(&v), Some(70_001));
+        v[70_001] = f32::MAX;
+        assert_eq!(first_non_finite(&v), Some(99_999));
+        v[99_999] = 0.0;
+        v[100_002] = f32::NEG_INFINITY; // in the unaligned tail
+        assert_eq!(first_non_finite(&v), Some(100_002));
     }
 
     #[test]
