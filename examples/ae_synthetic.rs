@@ -123,15 +123,24 @@ fn profile(obj: &str, shapes: usize, steps: usize) {
             *a += b;
         }
     }
+    let per_step = t0.elapsed().as_secs_f64() / steps as f64;
     let ms = |v: f64| v / steps as f64 * 1e3;
     println!(
         "N = {n}, {shapes} shapes, K = 50: {:.2} ms/step (snapshot {:.2}, support maps {:.2}, forward/backward {:.2}, Burn Adam {:.2})",
-        t0.elapsed().as_secs_f64() / steps as f64 * 1e3,
+        per_step * 1e3,
         ms(sum[0]),
         ms(sum[1]),
         ms(sum[2]),
         ms(sum[3])
     );
+    let ck = std::env::temp_dir().join(format!("ae_profile_{}.mdae", std::process::id()));
+    let t1 = Instant::now();
+    t.save_checkpoint(&ck).expect("checkpoint");
+    println!("checkpoint: {:.1} ms, {:.1} MB", t1.elapsed().as_secs_f64() * 1e3, std::fs::metadata(&ck).map(|m| m.len()).unwrap_or(0) as f64 / 1e6);
+    let t1 = Instant::now();
+    let _ = Trainer::resume(&ck, t.config().clone(), &data, &nb, &dist).expect("resume");
+    println!("resume: {:.1} ms", t1.elapsed().as_secs_f64() * 1e3);
+    let _ = std::fs::remove_file(&ck);
 }
 
 fn main() {
