@@ -19,7 +19,7 @@ use super::neighbors::NeighborIndex;
 /// SIMD block width (f32 lanes of an AVX2 register). The padded batch width is a multiple.
 pub const LANES: usize = 8;
 /// Vertices per parallel work item (fixed, so that reductions are deterministic).
-pub const ROW_CHUNK: usize = 32;
+pub const ROW_CHUNK: usize = 64;
 
 /// A 9 × 9 weight matrix, row-major `[out][in]`.
 pub type Mat9 = [[f32; 9]; 9];
