@@ -14,9 +14,10 @@ pub mod error;
 pub mod geometry;
 pub mod mesh;
 pub mod methods;
+pub mod nn;
+pub mod pipeline;
 pub mod preprocess;
 pub mod representation;
 pub mod synthetic;
 
 pub use error::{Error, Result};
-pub mod pipeline;

@@ -2,6 +2,7 @@
 //! compute the representation, fit the method, measure, and write the artefact directory
 //! (see [`crate::artifact`]).
 
+pub mod autoencoder;
 pub mod geodesic_support;
 pub mod linear;
 pub mod metrics_file;

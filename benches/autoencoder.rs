@@ -1,0 +1,122 @@
+//! One training step of the mesh autoencoder at SCAPE size (N = 2161, 36 shapes, K = 50, L = 1)
+//! and at horse-gallop size (N = 8431, 5 shapes: every 10th of 48 frames), ndarray backend.
+//!
+//! Connectivity comes from `../shared/data/{scape/1.obj, horse-gallop/0001.obj}` when present,
+//! otherwise from a subdivided icosahedron of similar size; features are random in
+//! [−0.95, 0.95] (the step costs the same for any values). Besides criterion's numbers the bench
+//! prints where a step's time goes.
+
+use std::collections::HashMap;
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+use criterion::{Criterion, criterion_group, criterion_main};
+use meshdeco::nn::rng::Rng;
+use meshdeco::nn::{AutoencoderConfig, HopDistances, NeighborIndex, Trainer, TrainingData};
+use meshdeco::representation::Features;
+
+fn load_faces(path: &Path) -> Option<(usize, Vec<[usize; 3]>)> {
+    let opts = tobj::LoadOptions { triangulate: true, single_index: false, ..Default::default() };
+    let (models, _) = tobj::load_obj(path, &opts).ok()?;
+    let m = &models.first()?.mesh;
+    let faces = m.indices.chunks_exact(3).map(|f| [f[0] as usize, f[1] as usize, f[2] as usize]).collect();
+    Some((m.positions.len() / 3, faces))
+}
+
+/// Icosahedron subdivided `levels` times (10·4^levels + 2 vertices).
+fn icosphere(levels: usize) -> (usize, Vec<[usize; 3]>) {
+    let t = (1.0 + 5f64.sqrt()) / 2.0;
+    let mut p: Vec<[f64; 3]> = vec![
+        [-1.0, t, 0.0], [1.0, t, 0.0], [-1.0, -t, 0.0], [1.0, -t, 0.0],
+        [0.0, -1.0, t], [0.0, 1.0, t], [0.0, -1.0, -t], [0.0, 1.0, -t],
+        [t, 0.0, -1.0], [t, 0.0, 1.0], [-t, 0.0, -1.0], [-t, 0.0, 1.0],
+    ];
+    let mut f: Vec<[usize; 3]> = vec![
+        [0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11], [1, 5, 9], [5, 11, 4],
+        [11, 10, 2], [10, 7, 6], [7, 1, 8], [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8],
+        [3, 8, 9], [4, 9, 5], [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1],
+    ];
+    for _ in 0..levels {
+        let mut mid: HashMap<(usize, usize), usize> = HashMap::new();
+        let mut nf = Vec::with_capacity(f.len() * 4);
+        for tri in &f {
+            let mut m = [0; 3];
+            for k in 0..3 {
+                let (a, b) = (tri[k], tri[(k + 1) % 3]);
+                let key = (a.min(b), a.max(b));
+                m[k] = *mid.entry(key).or_insert_with(|| {
+                    p.push([(p[a][0] + p[b][0]) / 2.0, (p[a][1] + p[b][1]) / 2.0, (p[a][2] + p[b][2]) / 2.0]);
+                    p.len() - 1
+                });
+            }
+            nf.push([tri[0], m[0], m[2]]);
+            nf.push([tri[1], m[1], m[0]]);
+            nf.push([tri[2], m[2], m[1]]);
+            nf.push(m);
+        }
+        f = nf;
+    }
+    (p.len(), f)
+}
+
+fn problem(obj: &str, fallback_levels: usize, shapes: usize) -> (NeighborIndex, TrainingData, String) {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data").join(obj);
+    let (n, faces, what) = match load_faces(&path) {
+        Some((n, f)) => (n, f, format!("{} ({n} vertices)", path.display())),
+        None => {
+            let (n, f) = icosphere(fallback_levels);
+            (n, f, format!("icosphere ({n} vertices; {} not found)", path.display()))
+        }
+    };
+    let nb = NeighborIndex::from_faces(n, &faces).expect("valid mesh");
+    let mut rng = Rng::new(1);
+    let mut feats = Features::zeros(shapes, n, 9);
+    for v in feats.data.iter_mut() {
+        *v = rng.uniform() * 1.9 - 0.95;
+    }
+    (nb, TrainingData::from_features(&feats).unwrap(), what)
+}
+
+fn bench_case(c: &mut Criterion, name: &str, obj: &str, levels: usize, shapes: usize) {
+    let (nb, data, what) = problem(obj, levels, shapes);
+    let dist = HopDistances::new(&nb);
+    let cfg = AutoencoderConfig { components: 50, layers: 1, ..Default::default() };
+    let mut trainer = Trainer::new(cfg, &data, &nb, &dist).unwrap();
+    // Phase breakdown over 30 steps (after 5 warm-up steps).
+    for _ in 0..5 {
+        trainer.step().unwrap();
+    }
+    let mut sum = [0.0f64; 4];
+    let steps = 30;
+    let t0 = Instant::now();
+    for _ in 0..steps {
+        trainer.step().unwrap();
+        let t = trainer.last_step_timings();
+        for (s, v) in sum.iter_mut().zip([t.snapshot, t.support, t.forward_backward, t.optimizer]) {
+            *s += v;
+        }
+    }
+    let total = t0.elapsed().as_secs_f64() / steps as f64;
+    let ms = |v: f64| v / steps as f64 * 1e3;
+    eprintln!(
+        "{name}: {what}, {} shapes, K = 50, L = 1: {:.2} ms/step = snapshot {:.2} + support maps {:.2} + forward/backward {:.2} + Burn Adam {:.2}",
+        data.n_shapes(),
+        total * 1e3,
+        ms(sum[0]),
+        ms(sum[1]),
+        ms(sum[2]),
+        ms(sum[3])
+    );
+    let mut g = c.benchmark_group("autoencoder");
+    g.sample_size(10).warm_up_time(Duration::from_secs(1)).measurement_time(Duration::from_secs(4));
+    g.bench_function(name, |b| b.iter(|| trainer.step().unwrap()));
+    g.finish();
+}
+
+fn benches(c: &mut Criterion) {
+    bench_case(c, "train_step_scape", "scape/1.obj", 4, 36);
+    bench_case(c, "train_step_horse", "horse-gallop/0001.obj", 5, 5);
+}
+
+criterion_group!(autoencoder, benches);
+criterion_main!(autoencoder);

@@ -1,0 +1,176 @@
+//! Hyperparameters of the mesh autoencoder (model, loss and training) in one struct, validated
+//! once.
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::{Error, Result};
+
+/// Every hyperparameter of the autoencoder method. Defaults are the reference implementation's
+/// (Tan et al. 2018; DESIGN.md § Mesh autoencoder).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct AutoencoderConfig {
+    /// Latent dimension K (number of deformation components).
+    pub components: usize,
+    /// Number L of 9 → 9 mesh-convolution layers in the encoder (mirrored in the decoder).
+    pub layers: usize,
+    /// Standard deviation of the normal initialisation of the convolution weights and of C.
+    pub init_std: f64,
+    /// Adam learning rate.
+    pub learning_rate: f64,
+    /// Adam β1.
+    pub beta1: f64,
+    /// Adam β2.
+    pub beta2: f64,
+    /// Adam ε.
+    pub epsilon: f64,
+    /// Number of optimisation steps.
+    pub iterations: usize,
+    /// Shapes per step; `None` (or ≥ the number of shapes) means full batch. Mini-batches are
+    /// drawn without replacement from the seeded generator, independently every step.
+    pub batch_size: Option<usize>,
+    /// Weight λ1 of the geodesic-weighted ℓ2,1 sparsity term on C.
+    pub lambda1: f64,
+    /// Weight λ2 of the hinge term on the latent codes.
+    pub lambda2: f64,
+    /// Threshold θ of the hinge `max(max_m |Z_km| − θ, 0)`.
+    pub theta: f64,
+    /// Normalised geodesic distance below which Λ = 0.
+    pub d_min: f64,
+    /// Normalised geodesic distance above which Λ = 1.
+    pub d_max: f64,
+    /// Write a checkpoint every this many iterations (0: only at the end / on stop).
+    pub checkpoint_every: usize,
+    /// Seed of the initialisation and of the mini-batch draws.
+    pub seed: u64,
+}
+
+impl Default for AutoencoderConfig {
+    fn default() -> Self {
+        AutoencoderConfig {
+            components: 50,
+            layers: 1,
+            init_std: 0.02,
+            learning_rate: 1e-3,
+            beta1: 0.9,
+            beta2: 0.999,
+            epsilon: 1e-8,
+            iterations: 2000,
+            batch_size: None,
+            lambda1: 0.5,
+            lambda2: 0.5,
+            theta: 5.0,
+            d_min: 0.2,
+            d_max: 0.4,
+            checkpoint_every: 200,
+            seed: 0,
+        }
+    }
+}
+
+fn bad(key: &str, message: String) -> Error {
+    Error::config(key, message)
+}
+
+impl AutoencoderConfig {
+    /// Checks every value; the error names the key and the bad value.
+    pub fn validate(&self) -> Result<()> {
+        if self.components == 0 {
+            return Err(bad("components", "must be at least 1 (got 0)".into()));
+        }
+        if self.layers == 0 || self.layers > 16 {
+            return Err(bad("layers", format!("must be in 1..=16 (got {})", self.layers)));
+        }
+        let pos = |key: &str, v: f64| -> Result<()> {
+            if v.is_finite() && v > 0.0 {
+                Ok(())
+            } else {
+                Err(bad(key, format!("must be a positive number (got {v})")))
+            }
+        };
+        let nonneg = |key: &str, v: f64| -> Result<()> {
+            if v.is_finite() && v >= 0.0 {
+                Ok(())
+            } else {
+                Err(bad(key, format!("must be a finite number ≥ 0 (got {v})")))
+            }
+        };
+        pos("init_std", self.init_std)?;
+        pos("learning_rate", self.learning_rate)?;
+        pos("epsilon", self.epsilon)?;
+        for (k, v) in [("beta1", self.beta1), ("beta2", self.beta2)] {
+            if !(v.is_finite() && (0.0..1.0).contains(&v)) {
+                return Err(bad(k, format!("must be in [0, 1) (got {v})")));
+            }
+        }
+        if self.batch_size == Some(0) {
+            return Err(bad("batch_size", "must be at least 1 (got 0)".into()));
+        }
+        nonneg("lambda1", self.lambda1)?;
+        nonneg("lambda2", self.lambda2)?;
+        nonneg("theta", self.theta)?;
+        nonneg("d_min", self.d_min)?;
+        nonneg("d_max", self.d_max)?;
+        if self.d_min >= self.d_max {
+            return Err(bad(
+                "d_min",
+                format!("d_min ({}) must be below d_max ({})", self.d_min, self.d_max),
+            ));
+        }
+        Ok(())
+    }
+
+    /// Checks that `other` describes the same model and loss (what a checkpoint must agree on to
+    /// be resumed; `iterations` and `checkpoint_every` may differ).
+    pub fn check_resumable(&self, other: &AutoencoderConfig) -> Result<()> {
+        let mut a = self.clone();
+        let mut b = other.clone();
+        a.iterations = 0;
+        b.iterations = 0;
+        a.checkpoint_every = 0;
+        b.checkpoint_every = 0;
+        if a != b {
+            let sa = serde_json::to_string(&a).unwrap_or_default();
+            let sb = serde_json::to_string(&b).unwrap_or_default();
+            return Err(Error::Invalid(format!(
+                "the checkpoint was written with different hyperparameters: checkpoint {sb}, now {sa}"
+            )));
+        }
+        Ok(())
+    }
+
+    /// The Λ ramp: 0 below `d_min`, 1 above `d_max`, linear between (non-finite d gives 1).
+    pub fn support_weight(&self, d: f64) -> f64 {
+        if !d.is_finite() || d > self.d_max {
+            1.0
+        } else if d < self.d_min {
+            0.0
+        } else {
+            (d - self.d_min) / (self.d_max - self.d_min)
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn validation_names_key_and_value() {
+        assert!(AutoencoderConfig::default().validate().is_ok());
+        let c = AutoencoderConfig { d_min: 0.8, d_max: 0.7, ..Default::default() };
+        let e = c.validate().unwrap_err().to_string();
+        assert!(e.contains("d_min (0.8) must be below d_max (0.7)"), "{e}");
+        let c = AutoencoderConfig { learning_rate: -1.0, ..Default::default() };
+        assert!(c.validate().unwrap_err().to_string().contains("learning_rate"));
+        let c: AutoencoderConfig = serde_json::from_str(r#"{"components": 7}"#).unwrap();
+        assert_eq!(c.components, 7);
+        assert_eq!(c.iterations, 2000);
+        assert!(serde_json::from_str::<AutoencoderConfig>(r#"{"componets": 7}"#).is_err());
+        let cfg = AutoencoderConfig::default();
+        assert_eq!(cfg.support_weight(0.1), 0.0);
+        assert_eq!(cfg.support_weight(0.5), 1.0);
+        assert!((cfg.support_weight(0.3) - 0.5).abs() < 1e-12);
+        assert_eq!(cfg.support_weight(f64::INFINITY), 1.0);
+    }
+}

@@ -1,0 +1,429 @@
+//! A trained autoencoder: encode, decode, component analysis, synthesis, interpolation, and
+//! saving/loading (Burn burnpack record + JSON hyperparameters).
+//!
+//! Inference runs the same hand-written kernels as training ([`super::engine`]); the codes `Z`
+//! and features are `f64` at the interface (`N × 9` per shape, vertex-major).
+
+use std::path::Path;
+
+use burn::module::Module;
+use burn::store::ModuleRecord;
+use burn::tensor::Bytes;
+use serde::{Deserialize, Serialize};
+
+use super::checkpoint::{Checkpoint, write_atomic};
+use super::config::AutoencoderConfig;
+use super::data::{WIDTH, shape_from_vcb, vcb_from_shapes};
+use super::engine::{self, Weights, Workspace};
+use super::kernels::padded_width;
+use super::model::AutoencoderModule;
+use super::neighbors::NeighborIndex;
+use super::training::default_device;
+use crate::error::{Error, Result};
+use crate::representation::Features;
+
+/// File name of the parameters inside a model directory.
+pub const MODEL_FILE: &str = "autoencoder.bpk";
+/// File name of the hyperparameters inside a model directory.
+pub const META_FILE: &str = "autoencoder.json";
+
+/// Hyperparameters and mesh identity stored next to the parameters.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ModelMeta {
+    /// Format tag.
+    pub format: String,
+    /// Hyperparameters of the training run.
+    pub config: AutoencoderConfig,
+    /// Number of vertices N.
+    pub n_vertices: usize,
+    /// [`NeighborIndex::fingerprint`] of the rest mesh.
+    pub neighbor_fingerprint: u64,
+}
+
+const FORMAT: &str = "meshdeco-autoencoder-1";
+
+/// Shapes processed per inference pass.
+const INFER_BATCH: usize = 32;
+
+/// A trained mesh autoencoder.
+#[derive(Debug)]
+pub struct Autoencoder {
+    config: AutoencoderConfig,
+    module: AutoencoderModule,
+    neighbors: NeighborIndex,
+    weights: Weights,
+}
+
+/// One latent dimension's extreme shape (see [`Autoencoder::analyze_components`]).
+#[derive(Debug, Clone, Serialize)]
+pub struct ComponentExtreme {
+    /// Latent dimension k.
+    pub dim: usize,
+    /// Rank by `distance` (0 = largest).
+    pub rank: usize,
+    /// Minimum of `Z_k` over the data.
+    pub z_min: f64,
+    /// Maximum of `Z_k` over the data.
+    pub z_max: f64,
+    /// The extreme kept (`z_min` or `z_max`), i.e. `Z_h,k`.
+    pub z_extreme: f64,
+    /// Feature-space distance ‖decode(z_h) − decode(z_r)‖ (Frobenius over N × 9).
+    pub distance: f64,
+    /// Decoded features of the extreme shape, `N × 9` vertex-major.
+    pub features: Vec<f64>,
+    /// Per-vertex feature change ‖Δx_i‖ against the decoded reference (N values).
+    pub vertex_change: Vec<f64>,
+    /// Centre vertex `argmax_i ‖C_k,i‖`.
+    pub center: usize,
+    /// Number of vertices whose change is at least 10 % of the largest change.
+    pub support_size: usize,
+}
+
+/// Result of the component analysis.
+#[derive(Debug, Clone, Serialize)]
+pub struct ComponentAnalysis {
+    /// Index of the reference shape in the analysed data.
+    pub reference: usize,
+    /// Code of the reference shape `Z_r` (K values).
+    pub z_reference: Vec<f64>,
+    /// Decoded reference features, `N × 9`.
+    pub reference_features: Vec<f64>,
+    /// Components ordered by rank (largest distance first).
+    pub components: Vec<ComponentExtreme>,
+}
+
+impl ComponentAnalysis {
+    /// The extreme code `Z_h,k` of every dimension k (K values, indexed by dimension).
+    pub fn extremes_by_dim(&self) -> Vec<f64> {
+        let mut v = vec![0.0; self.z_reference.len()];
+        for c in &self.components {
+            v[c.dim] = c.z_extreme;
+        }
+        v
+    }
+}
+
+impl Autoencoder {
+    /// Wraps trained parameters (errors if a parameter is not finite or sizes disagree).
+    pub fn new(config: AutoencoderConfig, module: AutoencoderModule, neighbors: NeighborIndex) -> Result<Self> {
+        let weights = Weights::from_module(&module)?;
+        if weights.n != neighbors.n_vertices() || weights.k != config.components || weights.layers.len() != config.layers {
+            return Err(Error::Invalid(format!(
+                "model parameters (N = {}, K = {}, L = {}) do not match the mesh (N = {}) / config (K = {}, L = {})",
+                weights.n,
+                weights.k,
+                weights.layers.len(),
+                neighbors.n_vertices(),
+                config.components,
+                config.layers
+            )));
+        }
+        Ok(Autoencoder { config, module, neighbors, weights })
+    }
+
+    /// Hyperparameters.
+    pub fn config(&self) -> &AutoencoderConfig {
+        &self.config
+    }
+
+    /// The Burn module.
+    pub fn module(&self) -> &AutoencoderModule {
+        &self.module
+    }
+
+    /// The neighbour index.
+    pub fn neighbors(&self) -> &NeighborIndex {
+        &self.neighbors
+    }
+
+    /// Latent dimension K.
+    pub fn n_components(&self) -> usize {
+        self.weights.k
+    }
+
+    /// Number of vertices N.
+    pub fn n_vertices(&self) -> usize {
+        self.weights.n
+    }
+
+    /// Latent map `C` as `[K, 9N]` row-major (vertex-major columns).
+    pub fn components_matrix(&self) -> &[f32] {
+        &self.weights.c
+    }
+
+    /// Centre vertex `argmax_i ‖C_k,i‖` of every component.
+    pub fn centers(&self) -> Vec<usize> {
+        let n = self.weights.n;
+        self.weights
+            .c
+            .chunks_exact(9 * n)
+            .map(|row| {
+                let mut best = (0, -1.0f32);
+                for (i, v) in row.chunks_exact(9).enumerate() {
+                    let s: f32 = v.iter().map(|x| x * x).sum();
+                    if s > best.1 {
+                        best = (i, s);
+                    }
+                }
+                best.0
+            })
+            .collect()
+    }
+
+    fn check_features(&self, f: &Features) -> Result<()> {
+        if f.width != WIDTH || f.n_elements != self.weights.n || f.data.len() != f.n_frames * f.n_elements * f.width {
+            return Err(Error::Invalid(format!(
+                "features are {} frames × {} elements × {} (len {}), the model needs N = {} × 9",
+                f.n_frames,
+                f.n_elements,
+                f.width,
+                f.data.len(),
+                self.weights.n
+            )));
+        }
+        if let Some(p) = f.data.iter().position(|v| !v.is_finite()) {
+            return Err(Error::Numerical(format!("features are not finite at flat index {p} ({})", f.data[p])));
+        }
+        Ok(())
+    }
+
+    /// Latent codes of every frame.
+    ///
+    /// # Shapes
+    /// `features`: F × N × 9 → output F codes of K values.
+    pub fn encode(&self, features: &Features) -> Result<Vec<Vec<f64>>> {
+        self.check_features(features)?;
+        let n = self.weights.n;
+        let k = self.weights.k;
+        let mut out = Vec::with_capacity(features.n_frames);
+        let shapes: Vec<Vec<f32>> =
+            (0..features.n_frames).map(|f| features.frame(f).iter().map(|&v| v as f32).collect()).collect();
+        for chunk in shapes.chunks(INFER_BATCH) {
+            let b = chunk.len();
+            let bp = padded_width(b);
+            let mut ws = Workspace::new(n, k, self.weights.layers.len(), bp);
+            let x = vcb_from_shapes(chunk.iter().map(|s| s.as_slice()), b, n);
+            engine::encode(&mut ws, &self.weights, &self.neighbors, &x, b);
+            let zt = ws.latent_t();
+            for j in 0..b {
+                out.push((0..k).map(|kk| zt[kk * bp + j] as f64).collect());
+            }
+        }
+        Ok(out)
+    }
+
+    /// Features decoded from latent codes.
+    ///
+    /// # Shapes
+    /// `codes`: F codes of K values → F × N × 9.
+    pub fn decode(&self, codes: &[Vec<f64>]) -> Result<Features> {
+        let n = self.weights.n;
+        let k = self.weights.k;
+        if let Some((i, z)) = codes.iter().enumerate().find(|(_, z)| z.len() != k || z.iter().any(|v| !v.is_finite())) {
+            return Err(Error::Invalid(format!("latent code {i} must be {k} finite numbers (got {} values)", z.len())));
+        }
+        let mut out = Features::zeros(codes.len(), n, WIDTH);
+        for (ci, chunk) in codes.chunks(INFER_BATCH).enumerate() {
+            let b = chunk.len();
+            let bp = padded_width(b);
+            let mut ws = Workspace::new(n, k, self.weights.layers.len(), bp);
+            {
+                let zt = ws.latent_t_mut();
+                zt.fill(0.0);
+                for (j, z) in chunk.iter().enumerate() {
+                    for kk in 0..k {
+                        zt[kk * bp + j] = z[kk] as f32;
+                    }
+                }
+            }
+            engine::decode(&mut ws, &self.weights, &self.neighbors, b);
+            for j in 0..b {
+                let v = shape_from_vcb(ws.output(), bp, j);
+                out.frame_mut(ci * INFER_BATCH + j).copy_from_slice(&v);
+            }
+        }
+        Ok(out)
+    }
+
+    /// Encode then decode.
+    pub fn reconstruct(&self, features: &Features) -> Result<Features> {
+        self.decode(&self.encode(features)?)
+    }
+
+    /// Component analysis (Tan et al.): for each latent dimension k, the min and max of `Z_k`
+    /// over `data` are put in turn into the code of the reference frame `reference`, both are
+    /// decoded, and the one farther (Frobenius distance in feature space) from the decoded
+    /// reference is kept; components are ranked by that distance, largest first.
+    pub fn analyze_components(&self, data: &Features, reference: usize) -> Result<ComponentAnalysis> {
+        if reference >= data.n_frames {
+            return Err(Error::Invalid(format!(
+                "reference frame {reference} is out of range (the data have {} frames)",
+                data.n_frames
+            )));
+        }
+        let z = self.encode(data)?;
+        let k = self.weights.k;
+        let n = self.weights.n;
+        let zr = z[reference].clone();
+        let mut codes = vec![zr.clone()];
+        let mut ranges = Vec::with_capacity(k);
+        for kk in 0..k {
+            let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+            for zf in &z {
+                lo = lo.min(zf[kk]);
+                hi = hi.max(zf[kk]);
+            }
+            ranges.push((lo, hi));
+            for v in [lo, hi] {
+                let mut c = zr.clone();
+                c[kk] = v;
+                codes.push(c);
+            }
+        }
+        let dec = self.decode(&codes)?;
+        let reference_features = dec.frame(0).to_vec();
+        let centers = self.centers();
+        let mut comps = Vec::with_capacity(k);
+        for (kk, &(lo, hi)) in ranges.iter().enumerate() {
+            let change = |f: usize| -> Vec<f64> {
+                dec.frame(f)
+                    .chunks_exact(WIDTH)
+                    .zip(reference_features.chunks_exact(WIDTH))
+                    .map(|(a, b)| a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum::<f64>().sqrt())
+                    .collect()
+            };
+            let (c_lo, c_hi) = (change(1 + 2 * kk), change(2 + 2 * kk));
+            let norm = |c: &[f64]| c.iter().map(|v| v * v).sum::<f64>().sqrt();
+            let (d_lo, d_hi) = (norm(&c_lo), norm(&c_hi));
+            let (z_extreme, distance, frame, vertex_change) =
+                if d_hi >= d_lo { (hi, d_hi, 2 + 2 * kk, c_hi) } else { (lo, d_lo, 1 + 2 * kk, c_lo) };
+            let peak = vertex_change.iter().copied().fold(0.0, f64::max);
+            let support_size = if peak > 0.0 { vertex_change.iter().filter(|&&v| v >= 0.1 * peak).count() } else { 0 };
+            debug_assert_eq!(vertex_change.len(), n);
+            comps.push(ComponentExtreme {
+                dim: kk,
+                rank: 0,
+                z_min: lo,
+                z_max: hi,
+                z_extreme,
+                distance,
+                features: dec.frame(frame).to_vec(),
+                vertex_change,
+                center: centers[kk],
+                support_size,
+            });
+        }
+        comps.sort_by(|a, b| b.distance.total_cmp(&a.distance).then(a.dim.cmp(&b.dim)));
+        for (r, c) in comps.iter_mut().enumerate() {
+            c.rank = r;
+        }
+        Ok(ComponentAnalysis { reference, z_reference: zr, reference_features, components: comps })
+    }
+
+    /// Synthesis code `z_k = Z_r,k + (Z_h,k − Z_r,k)·w_k` for the given `(dimension, weight)`
+    /// pairs (other dimensions keep the reference's value).
+    pub fn synthesis_code(&self, analysis: &ComponentAnalysis, weights: &[(usize, f64)]) -> Result<Vec<f64>> {
+        let k = self.weights.k;
+        let zh = analysis.extremes_by_dim();
+        let mut z = analysis.z_reference.clone();
+        for &(d, w) in weights {
+            if d >= k || !w.is_finite() {
+                return Err(Error::Invalid(format!(
+                    "synthesis weight {d}:{w}: the dimension must be below {k} and the weight finite"
+                )));
+            }
+            z[d] = analysis.z_reference[d] + (zh[d] - analysis.z_reference[d]) * w;
+        }
+        Ok(z)
+    }
+
+    /// Decoded synthesis (see [`Self::synthesis_code`]); one frame `N × 9`.
+    pub fn synthesize(&self, analysis: &ComponentAnalysis, weights: &[(usize, f64)]) -> Result<Features> {
+        let z = self.synthesis_code(analysis, weights)?;
+        self.decode(&[z])
+    }
+
+    /// Linear interpolation in latent space from `za` to `zb` in `steps` frames (both ends
+    /// included, `steps ≥ 2`), decoded.
+    pub fn interpolate(&self, za: &[f64], zb: &[f64], steps: usize) -> Result<Features> {
+        if steps < 2 {
+            return Err(Error::Invalid(format!("interpolation needs at least 2 steps (got {steps})")));
+        }
+        if za.len() != zb.len() {
+            return Err(Error::Invalid(format!("latent codes differ in length ({} vs {})", za.len(), zb.len())));
+        }
+        let codes: Vec<Vec<f64>> = (0..steps)
+            .map(|s| {
+                let t = s as f64 / (steps - 1) as f64;
+                za.iter().zip(zb).map(|(a, b)| a + (b - a) * t).collect()
+            })
+            .collect();
+        self.decode(&codes)
+    }
+
+    /// Saves `autoencoder.bpk` (Burn burnpack record of the parameters) and `autoencoder.json`
+    /// (hyperparameters and mesh fingerprint) into `dir` (created if needed), atomically.
+    pub fn save(&self, dir: &Path) -> Result<()> {
+        std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+        let bytes = self
+            .module
+            .clone()
+            .into_record()
+            .into_bytes()
+            .map_err(|e| Error::Invalid(format!("module record: {e}")))?;
+        let meta = ModelMeta {
+            format: FORMAT.into(),
+            config: self.config.clone(),
+            n_vertices: self.weights.n,
+            neighbor_fingerprint: self.neighbors.fingerprint(),
+        };
+        let json = serde_json::to_vec_pretty(&meta).map_err(|e| Error::Invalid(format!("model metadata: {e}")))?;
+        write_atomic(&dir.join(MODEL_FILE), &bytes)?;
+        write_atomic(&dir.join(META_FILE), &json)
+    }
+
+    /// Loads a model saved by [`Self::save`]; `neighbors` must be rebuilt from the stored rest
+    /// mesh (checked against the saved fingerprint).
+    pub fn load(dir: &Path, neighbors: NeighborIndex) -> Result<Self> {
+        let meta_path = dir.join(META_FILE);
+        let text = std::fs::read(&meta_path).map_err(|e| Error::io(&meta_path, e))?;
+        let meta: ModelMeta =
+            serde_json::from_slice(&text).map_err(|e| Error::parse(&meta_path, None, e.to_string()))?;
+        if meta.format != FORMAT {
+            return Err(Error::parse(&meta_path, None, format!("unknown model format `{}`", meta.format)));
+        }
+        meta.config.validate()?;
+        Self::check_mesh(&meta_path, meta.n_vertices, meta.neighbor_fingerprint, &neighbors)?;
+        let path = dir.join(MODEL_FILE);
+        let bytes = std::fs::read(&path).map_err(|e| Error::io(&path, e))?;
+        Self::from_record_bytes(&path, meta.config, bytes, neighbors)
+    }
+
+    /// The model stored in a training checkpoint.
+    pub fn from_checkpoint(path: &Path, neighbors: NeighborIndex) -> Result<Self> {
+        let ck = Checkpoint::load(path)?;
+        Self::check_mesh(path, ck.header.n_vertices, ck.header.neighbor_fingerprint, &neighbors)?;
+        Self::from_record_bytes(path, ck.header.config, ck.module, neighbors)
+    }
+
+    fn check_mesh(path: &Path, n: usize, fp: u64, neighbors: &NeighborIndex) -> Result<()> {
+        if n != neighbors.n_vertices() || fp != neighbors.fingerprint() {
+            return Err(Error::Invalid(format!(
+                "{}: the model was trained on a mesh with {n} vertices and other connectivity than the given rest mesh ({} vertices)",
+                path.display(),
+                neighbors.n_vertices()
+            )));
+        }
+        Ok(())
+    }
+
+    fn from_record_bytes(path: &Path, config: AutoencoderConfig, bytes: Vec<u8>, neighbors: NeighborIndex) -> Result<Self> {
+        let record = ModuleRecord::from_bytes(Bytes::from_bytes_vec(bytes))
+            .map_err(|e| Error::parse(path, None, format!("module record: {e}")))?;
+        let module = config
+            .init(neighbors.n_vertices(), &default_device())
+            .try_load_record(record)
+            .map_err(|e| Error::parse(path, None, format!("module record: {e}")))?;
+        Self::new(config, module, neighbors)
+    }
+}

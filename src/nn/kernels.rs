@@ -1,0 +1,759 @@
+//! Hand-written numeric kernels of the autoencoder's training step (plain Rust, `f32`).
+//!
+//! # Layout ("VCB")
+//! Per-vertex activations of a batch are stored vertex-major, then channel, then shape:
+//! element `(i, c, b)` at `(i * 9 + c) * bp + b`, where `bp` is the batch width padded to a
+//! multiple of [`LANES`]. One vertex is one row of `9 * bp` numbers. Read as a matrix, a buffer
+//! is `Fᵀ ∈ R^{9N × bp}` with rows in the vertex-major flatten order `i * 9 + c` of the
+//! reference implementation, so the latent product `Zᵀ = C·Fᵀ` is a plain GEMM.
+//!
+//! Every kernel works on the `bp` lanes of a channel in blocks of [`LANES`] with fixed-size
+//! arrays, which the compiler turns into SIMD; each kernel is compiled twice (baseline and
+//! AVX2+FMA) and picks one at run time. Reductions use a fixed chunking of the vertices, so
+//! results do not depend on the number of threads or on scheduling (bit-reproducible runs).
+
+use rayon::prelude::*;
+
+use super::neighbors::NeighborIndex;
+
+/// SIMD block width (f32 lanes of an AVX2 register). The padded batch width is a multiple.
+pub const LANES: usize = 8;
+/// Vertices per parallel work item (fixed, so that reductions are deterministic).
+pub const ROW_CHUNK: usize = 64;
+
+/// A 9 × 9 weight matrix, row-major `[out][in]`.
+pub type Mat9 = [[f32; 9]; 9];
+/// A 9 × 9 accumulator in `f64`.
+pub type Acc9 = [[f64; 9]; 9];
+
+/// Rounds a batch size up to a multiple of [`LANES`].
+pub fn padded_width(b: usize) -> usize {
+    b.div_ceil(LANES).max(1) * LANES
+}
+
+/// Transpose of a 9 × 9 matrix.
+pub fn transpose9(w: &Mat9) -> Mat9 {
+    let mut t = [[0.0; 9]; 9];
+    for (o, row) in w.iter().enumerate() {
+        for (a, &v) in row.iter().enumerate() {
+            t[a][o] = v;
+        }
+    }
+    t
+}
+
+#[cfg(target_arch = "x86_64")]
+#[inline]
+fn avx2_available() -> bool {
+    std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma")
+}
+
+/// Multiply-add policy of a kernel instance: fused (`vfmadd`, in the AVX2+FMA build) or plain
+/// `a·b + c` (baseline build, where a fused multiply-add would be a slow library call).
+pub trait MulAdd {
+    /// `a·b + c`.
+    fn mul_add(a: f32, b: f32, c: f32) -> f32;
+}
+
+/// Fused multiply-add (one rounding).
+pub struct Fused;
+impl MulAdd for Fused {
+    #[inline(always)]
+    fn mul_add(a: f32, b: f32, c: f32) -> f32 {
+        a.mul_add(b, c)
+    }
+}
+
+/// Separate multiply and add.
+pub struct Plain;
+impl MulAdd for Plain {
+    #[inline(always)]
+    fn mul_add(a: f32, b: f32, c: f32) -> f32 {
+        a * b + c
+    }
+}
+
+/// Defines `$name` as a run-time dispatcher to `$imp::<Fused>` compiled for AVX2+FMA, or to
+/// `$imp::<Plain>` for the baseline target.
+macro_rules! dispatch {
+    ($(#[$attr:meta])* $vis:vis fn $name:ident($($arg:ident: $ty:ty),* $(,)?) $(-> $ret:ty)? => $imp:ident) => {
+        $(#[$attr])*
+        $vis fn $name($($arg: $ty),*) $(-> $ret)? {
+            #[cfg(target_arch = "x86_64")]
+            {
+                #[target_feature(enable = "avx2,fma")]
+                fn fast($($arg: $ty),*) $(-> $ret)? {
+                    $imp::<Fused>($($arg),*)
+                }
+                if avx2_available() {
+                    // SAFETY: the CPU supports the features `fast` was compiled for.
+                    return unsafe { fast($($arg),*) };
+                }
+            }
+            $imp::<Plain>($($arg),*)
+        }
+    };
+}
+
+/// One SIMD block.
+type V = [f32; LANES];
+
+#[inline(always)]
+fn axpy<M: MulAdd>(acc: &mut V, w: f32, x: &V) {
+    for l in 0..LANES {
+        acc[l] = M::mul_add(w, x[l], acc[l]);
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// tanh
+// ---------------------------------------------------------------------------------------------
+
+/// tanh of one value, branch-free so that blocks of it vectorise. Relative error ≲ 5e-7 in f32;
+/// NaN propagates (the training loop relies on it to detect divergence).
+///
+/// |x| < 0.25: odd Taylor series of tanh up to x⁹ (truncation < 3e-9 relative). Otherwise
+/// tanh|x| = 1 − 2/(e^{2|x|} + 1) with e^y = 2ⁿ·e^r, n = round(y/ln2), |r| ≤ ln2/2, e^r by its
+/// degree-7 Taylor polynomial (error < 5e-9); |x| is clamped at 10 (tanh 10 rounds to 1 in f32).
+#[inline(always)]
+pub fn tanh_f32(x: f32) -> f32 {
+    let ax = x.abs();
+    let ax = if ax > 10.0 { 10.0 } else { ax }; // keeps NaN
+    // Small-argument branch.
+    let x2 = ax * ax;
+    let small = ax
+        * (1.0
+            + x2 * (-1.0 / 3.0 + x2 * (2.0 / 15.0 + x2 * (-17.0 / 315.0 + x2 * (62.0 / 2835.0)))));
+    // e^{2|x|} by range reduction.
+    let y = 2.0 * ax;
+    const MAGIC: f32 = 12_582_912.0; // 1.5·2²³: adding it rounds to an integer in the low bits
+    let t = y * std::f32::consts::LOG2_E + MAGIC;
+    let n = t - MAGIC;
+    let ni = (t.to_bits() as i32).wrapping_sub(MAGIC.to_bits() as i32);
+    const LN2_HI: f32 = 0.693_359_4;
+    const LN2_LO: f32 = -2.121_944_4e-4;
+    let r = (y - n * LN2_HI) - n * LN2_LO;
+    let p = 1.0
+        + r * (1.0
+            + r * (0.5
+                + r * (1.0 / 6.0
+                    + r * (1.0 / 24.0 + r * (1.0 / 120.0 + r * (1.0 / 720.0 + r * (1.0 / 5040.0)))))));
+    let scale = f32::from_bits((ni.wrapping_add(127) as u32) << 23);
+    let e = p * scale;
+    let large = 1.0 - 2.0 / (e + 1.0);
+    let v = if ax < 0.25 { small } else { large };
+    v.copysign(x)
+}
+
+#[inline(always)]
+fn tanh_in_place(v: &mut [f32]) {
+    // A plain loop over a slice: the loop vectoriser turns it into straight SIMD code.
+    for x in v.iter_mut() {
+        *x = tanh_f32(*x);
+    }
+}
+
+#[inline(always)]
+#[allow(clippy::extra_unused_type_parameters)]
+fn tanh_slice_impl<M: MulAdd>(v: &mut [f32]) {
+    tanh_in_place(v);
+}
+
+dispatch! {
+    /// Applies [`tanh_f32`] in place.
+    pub fn tanh_slice(v: &mut [f32]) => tanh_slice_impl
+}
+
+// ---------------------------------------------------------------------------------------------
+// Neighbour means
+// ---------------------------------------------------------------------------------------------
+
+#[inline(always)]
+fn add_row(dst: &mut [V], src: &[V]) {
+    debug_assert_eq!(dst.len(), src.len());
+    for (d, s) in dst.iter_mut().zip(src) {
+        for l in 0..LANES {
+            d[l] += s[l];
+        }
+    }
+}
+
+#[inline(always)]
+fn add_scaled_row<M: MulAdd>(dst: &mut [V], src: &[V], w: f32) {
+    debug_assert_eq!(dst.len(), src.len());
+    for (d, s) in dst.iter_mut().zip(src) {
+        axpy::<M>(d, w, s);
+    }
+}
+
+#[inline(always)]
+#[allow(clippy::extra_unused_type_parameters)]
+fn mean_rows_impl<M: MulAdd>(nb: &NeighborIndex, src: &[f32], dst: &mut [f32], first_row: usize, r: usize) {
+    let (sv, _) = src.as_chunks::<LANES>();
+    let rv = r / LANES;
+    for (k, out) in dst.chunks_exact_mut(r).enumerate() {
+        let (out, _) = out.as_chunks_mut::<LANES>();
+        let i = first_row + k;
+        out.fill([0.0; LANES]);
+        for &j in nb.neighbors(i) {
+            let j = j as usize;
+            add_row(out, &sv[j * rv..(j + 1) * rv]);
+        }
+        let w = nb.inv_degree(i);
+        for v in out.iter_mut() {
+            for x in v.iter_mut() {
+                *x *= w;
+            }
+        }
+    }
+}
+
+dispatch! {
+    fn mean_rows_chunk(nb: &NeighborIndex, src: &[f32], dst: &mut [f32], first_row: usize, r: usize) => mean_rows_impl
+}
+
+#[inline(always)]
+fn mean_rows_t_add_impl<M: MulAdd>(nb: &NeighborIndex, src: &[f32], dst: &mut [f32], first_row: usize, r: usize) {
+    let (sv, _) = src.as_chunks::<LANES>();
+    let rv = r / LANES;
+    for (k, out) in dst.chunks_exact_mut(r).enumerate() {
+        let (out, _) = out.as_chunks_mut::<LANES>();
+        let j = first_row + k;
+        let (idx, w) = nb.transposed(j);
+        for (&i, &w) in idx.iter().zip(w) {
+            let i = i as usize;
+            add_scaled_row::<M>(out, &sv[i * rv..(i + 1) * rv], w);
+        }
+    }
+}
+
+dispatch! {
+    fn mean_rows_t_add_chunk(nb: &NeighborIndex, src: &[f32], dst: &mut [f32], first_row: usize, r: usize) => mean_rows_t_add_impl
+}
+
+/// Neighbour mean `dst_i = (1/|N(i)|) Σ_{j∈N(i)} src_j` (zero for a vertex without neighbours).
+///
+/// # Shapes
+/// `src`, `dst`: N rows of `r` numbers (`r` a multiple of [`LANES`]).
+pub fn mean_rows(nb: &NeighborIndex, src: &[f32], dst: &mut [f32], r: usize) {
+    debug_assert_eq!(src.len(), nb.n_vertices() * r);
+    debug_assert_eq!(dst.len(), src.len());
+    dst.par_chunks_mut(ROW_CHUNK * r)
+        .enumerate()
+        .for_each(|(ci, chunk)| mean_rows_chunk(nb, src, chunk, ci * ROW_CHUNK, r));
+}
+
+/// Adds the transpose of [`mean_rows`]: `dst_j += Σ_{i : j∈N(i)} src_i / |N(i)|` (the
+/// back-propagation of a neighbour mean).
+///
+/// # Shapes
+/// `src`, `dst`: N rows of `r` numbers.
+pub fn mean_rows_transpose_add(nb: &NeighborIndex, src: &[f32], dst: &mut [f32], r: usize) {
+    debug_assert_eq!(src.len(), nb.n_vertices() * r);
+    debug_assert_eq!(dst.len(), src.len());
+    dst.par_chunks_mut(ROW_CHUNK * r)
+        .enumerate()
+        .for_each(|(ci, chunk)| mean_rows_t_add_chunk(nb, src, chunk, ci * ROW_CHUNK, r));
+}
+
+// ---------------------------------------------------------------------------------------------
+// Per-vertex 9 → 9 maps
+// ---------------------------------------------------------------------------------------------
+
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn conv_rows_impl<M: MulAdd>(
+    ws: &Mat9,
+    x: &[f32],
+    wn: &Mat9,
+    m: &[f32],
+    bias: &[f32; 9],
+    out: &mut [f32],
+    bp: usize,
+    tanh: bool,
+) {
+    let r = 9 * bp;
+    let nb = bp / LANES;
+    for ((xr, mr), or) in x.chunks_exact(r).zip(m.chunks_exact(r)).zip(out.chunks_exact_mut(r)) {
+        let (xv, _) = xr.as_chunks::<LANES>();
+        let (mv, _) = mr.as_chunks::<LANES>();
+        let (ov, _) = or.as_chunks_mut::<LANES>();
+        for j in 0..nb {
+            // Nine independent accumulators (one per output channel) keep the FMA pipes busy.
+            let mut acc = [[0.0f32; LANES]; 9];
+            for (o, a) in acc.iter_mut().enumerate() {
+                *a = [bias[o]; LANES];
+            }
+            for a in 0..9 {
+                let xa = &xv[a * nb + j];
+                let ma = &mv[a * nb + j];
+                for (o, acc_o) in acc.iter_mut().enumerate() {
+                    axpy::<M>(acc_o, ws[o][a], xa);
+                    axpy::<M>(acc_o, wn[o][a], ma);
+                }
+            }
+            for (o, acc_o) in acc.iter().enumerate() {
+                ov[o * nb + j] = *acc_o;
+            }
+        }
+        if tanh {
+            tanh_in_place(or);
+        }
+    }
+}
+
+dispatch! {
+    #[allow(clippy::too_many_arguments)]
+    fn conv_rows_chunk(ws: &Mat9, x: &[f32], wn: &Mat9, m: &[f32], bias: &[f32; 9], out: &mut [f32], bp: usize, tanh: bool) => conv_rows_impl
+}
+
+/// Mesh convolution on rows: `out_i = act(ws·x_i + wn·m_i + bias)` per shape, where `m` is the
+/// neighbour mean of `x` and act is tanh or the identity.
+///
+/// # Shapes
+/// `x`, `m`, `out`: N rows of `9·bp` (VCB layout); `ws`, `wn`: `[out][in]`.
+#[allow(clippy::too_many_arguments)]
+pub fn conv_rows(ws: &Mat9, x: &[f32], wn: &Mat9, m: &[f32], bias: &[f32; 9], out: &mut [f32], bp: usize, tanh: bool) {
+    let r = 9 * bp;
+    out.par_chunks_mut(ROW_CHUNK * r).enumerate().for_each(|(ci, chunk)| {
+        let s = ci * ROW_CHUNK * r;
+        let e = s + chunk.len();
+        conv_rows_chunk(ws, &x[s..e], wn, &m[s..e], bias, chunk, bp, tanh);
+    });
+}
+
+#[inline(always)]
+fn mat_rows<M: MulAdd>(wt: &Mat9, dyv: &[V], outv: &mut [V], nb: usize) {
+    for j in 0..nb {
+        let mut acc = [[0.0f32; LANES]; 9];
+        for o in 0..9 {
+            let d = &dyv[o * nb + j];
+            for (a, acc_a) in acc.iter_mut().enumerate() {
+                axpy::<M>(acc_a, wt[a][o], d);
+            }
+        }
+        for (a, acc_a) in acc.iter().enumerate() {
+            outv[a * nb + j] = *acc_a;
+        }
+    }
+}
+
+#[inline(always)]
+fn input_grad_rows_impl<M: MulAdd>(wst: &Mat9, wnt: &Mat9, dy: &[f32], dx: &mut [f32], dm: &mut [f32], bp: usize) {
+    let r = 9 * bp;
+    let nb = bp / LANES;
+    for ((dyr, dxr), dmr) in dy.chunks_exact(r).zip(dx.chunks_exact_mut(r)).zip(dm.chunks_exact_mut(r)) {
+        let (dyv, _) = dyr.as_chunks::<LANES>();
+        mat_rows::<M>(wst, dyv, dxr.as_chunks_mut::<LANES>().0, nb);
+        mat_rows::<M>(wnt, dyv, dmr.as_chunks_mut::<LANES>().0, nb);
+    }
+}
+
+dispatch! {
+    fn input_grad_rows_chunk(wst: &Mat9, wnt: &Mat9, dy: &[f32], dx: &mut [f32], dm: &mut [f32], bp: usize) => input_grad_rows_impl
+}
+
+/// Back-propagation of [`conv_rows`] to its inputs: `dx_i = wsᵀ·dy_i`, `dm_i = wnᵀ·dy_i`
+/// (`wst`, `wnt` are the transposes, passed pre-transposed). The caller adds the transposed
+/// neighbour mean of `dm` to `dx`.
+///
+/// # Shapes
+/// `dy`, `dx`, `dm`: N rows of `9·bp`.
+pub fn input_grad_rows(wst: &Mat9, wnt: &Mat9, dy: &[f32], dx: &mut [f32], dm: &mut [f32], bp: usize) {
+    let r = 9 * bp;
+    dx.par_chunks_mut(ROW_CHUNK * r)
+        .zip(dm.par_chunks_mut(ROW_CHUNK * r))
+        .enumerate()
+        .for_each(|(ci, (cx, cm))| {
+            let s = ci * ROW_CHUNK * r;
+            input_grad_rows_chunk(wst, wnt, &dy[s..s + cx.len()], cx, cm, bp);
+        });
+}
+
+/// Gradient accumulators of one convolution (oriented like the matrices it was run with).
+#[derive(Debug, Clone, Copy)]
+pub struct ConvGrad {
+    /// ∂L/∂ws, `[out][in]`.
+    pub ws: Acc9,
+    /// ∂L/∂wn, `[out][in]`.
+    pub wn: Acc9,
+    /// ∂L/∂bias.
+    pub bias: [f64; 9],
+}
+
+impl ConvGrad {
+    fn zero() -> Self {
+        ConvGrad { ws: [[0.0; 9]; 9], wn: [[0.0; 9]; 9], bias: [0.0; 9] }
+    }
+    fn add(&mut self, o: &ConvGrad) {
+        for p in 0..9 {
+            for q in 0..9 {
+                self.ws[p][q] += o.ws[p][q];
+                self.wn[p][q] += o.wn[p][q];
+            }
+            self.bias[p] += o.bias[p];
+        }
+    }
+}
+
+#[inline(always)]
+fn outer_acc<M: MulAdd>(dy: &[f32], x: &[f32], bp: usize, out: &mut Acc9) {
+    let r = 9 * bp;
+    let nb = bp / LANES;
+    for (o, out_o) in out.iter_mut().enumerate() {
+        let mut acc = [[0.0f32; LANES]; 9];
+        for (dyr, xr) in dy.chunks_exact(r).zip(x.chunks_exact(r)) {
+            let (dyv, _) = dyr.as_chunks::<LANES>();
+            let (xv, _) = xr.as_chunks::<LANES>();
+            for j in 0..nb {
+                let d = &dyv[o * nb + j];
+                for (a, acc_a) in acc.iter_mut().enumerate() {
+                    let xa = &xv[a * nb + j];
+                    for l in 0..LANES {
+                        acc_a[l] = M::mul_add(d[l], xa[l], acc_a[l]);
+                    }
+                }
+            }
+        }
+        for (a, acc_a) in acc.iter().enumerate() {
+            out_o[a] += acc_a.iter().map(|&v| v as f64).sum::<f64>();
+        }
+    }
+}
+
+#[inline(always)]
+fn weight_grad_rows_impl<M: MulAdd>(dy: &[f32], x: &[f32], m: &[f32], bp: usize, g: &mut ConvGrad) {
+    outer_acc::<M>(dy, x, bp, &mut g.ws);
+    outer_acc::<M>(dy, m, bp, &mut g.wn);
+    let r = 9 * bp;
+    let nb = bp / LANES;
+    for o in 0..9 {
+        let mut acc = [0.0f32; LANES];
+        for dyr in dy.chunks_exact(r) {
+            let (dyv, _) = dyr.as_chunks::<LANES>();
+            for d in &dyv[o * nb..(o + 1) * nb] {
+                for l in 0..LANES {
+                    acc[l] += d[l];
+                }
+            }
+        }
+        g.bias[o] += acc.iter().map(|&v| v as f64).sum::<f64>();
+    }
+}
+
+dispatch! {
+    fn weight_grad_rows_chunk(dy: &[f32], x: &[f32], m: &[f32], bp: usize, g: &mut ConvGrad) => weight_grad_rows_impl
+}
+
+/// Weight gradients of [`conv_rows`]: `∂ws = Σ_i dy_i x_iᵀ`, `∂wn = Σ_i dy_i m_iᵀ`,
+/// `∂bias = Σ_i dy_i` (sums over vertices and shapes). Padded lanes must hold `dy = 0`.
+///
+/// # Shapes
+/// `dy`, `x`, `m`: N rows of `9·bp`.
+pub fn weight_grad_rows(dy: &[f32], x: &[f32], m: &[f32], bp: usize) -> ConvGrad {
+    let r = 9 * bp;
+    let parts: Vec<ConvGrad> = dy
+        .par_chunks(ROW_CHUNK * r)
+        .enumerate()
+        .map(|(ci, cdy)| {
+            let s = ci * ROW_CHUNK * r;
+            let mut g = ConvGrad::zero();
+            weight_grad_rows_chunk(cdy, &x[s..s + cdy.len()], &m[s..s + cdy.len()], bp, &mut g);
+            g
+        })
+        .collect();
+    let mut g = ConvGrad::zero();
+    for p in &parts {
+        g.add(p);
+    }
+    g
+}
+
+// ---------------------------------------------------------------------------------------------
+// Elementwise
+// ---------------------------------------------------------------------------------------------
+
+#[inline(always)]
+#[allow(clippy::extra_unused_type_parameters)]
+fn tanh_backward_impl<M: MulAdd>(y: &[f32], dy: &mut [f32]) {
+    for (d, v) in dy.chunks_exact_mut(LANES).zip(y.chunks_exact(LANES)) {
+        let d: &mut [f32; LANES] = d.try_into().unwrap();
+        let v: &[f32; LANES] = v.try_into().unwrap();
+        for l in 0..LANES {
+            d[l] *= 1.0 - v[l] * v[l];
+        }
+    }
+}
+
+dispatch! {
+    fn tanh_backward_chunk(y: &[f32], dy: &mut [f32]) => tanh_backward_impl
+}
+
+/// `dy ⊙= 1 − y²` (back-propagation through `y = tanh(h)`).
+pub fn tanh_backward(y: &[f32], dy: &mut [f32]) {
+    const CH: usize = 1 << 14;
+    dy.par_chunks_mut(CH).enumerate().for_each(|(ci, c)| {
+        let s = ci * CH;
+        tanh_backward_chunk(&y[s..s + c.len()], c);
+    });
+}
+
+#[inline(always)]
+#[allow(clippy::extra_unused_type_parameters)]
+fn sq_err_impl<M: MulAdd>(xhat: &[f32], x: &[f32], mask: &[f32], scale: f32, grad: &mut [f32]) -> f64 {
+    let bp = mask.len();
+    let mut total = 0.0f64;
+    for ((xh, xr), gr) in xhat.chunks_exact(bp).zip(x.chunks_exact(bp)).zip(grad.chunks_exact_mut(bp)) {
+        let mut acc = [0.0f32; LANES];
+        for c in (0..bp).step_by(LANES) {
+            for l in 0..LANES {
+                let d = (xh[c + l] - xr[c + l]) * mask[c + l];
+                acc[l] += d * d;
+                gr[c + l] = scale * d;
+            }
+        }
+        total += acc.iter().map(|&v| v as f64).sum::<f64>();
+    }
+    total
+}
+
+dispatch! {
+    fn sq_err_chunk(xhat: &[f32], x: &[f32], mask: &[f32], scale: f32, grad: &mut [f32]) -> f64 => sq_err_impl
+}
+
+/// Sum of squared errors over the real lanes (`mask` 1 for real shapes, 0 for padding) and its
+/// gradient scaled: `grad = scale·mask·(xhat − x)`. Returns Σ mask·(xhat − x)².
+///
+/// # Shapes
+/// `xhat`, `x`, `grad`: rows of `bp = mask.len()` numbers.
+pub fn squared_error(xhat: &[f32], x: &[f32], mask: &[f32], scale: f32, grad: &mut [f32]) -> f64 {
+    let bp = mask.len();
+    let ch = 512 * bp;
+    let parts: Vec<f64> = grad
+        .par_chunks_mut(ch)
+        .enumerate()
+        .map(|(ci, g)| {
+            let s = ci * ch;
+            sq_err_chunk(&xhat[s..s + g.len()], &x[s..s + g.len()], mask, scale, g)
+        })
+        .collect();
+    parts.iter().sum()
+}
+
+#[inline(always)]
+fn vertex_sq_norms_impl<M: MulAdd>(row: &[f32], out: &mut [f32]) {
+    for (v, o) in row.chunks_exact(9).zip(out.iter_mut()) {
+        let mut s = 0.0f32;
+        for &x in v {
+            s = M::mul_add(x, x, s);
+        }
+        *o = s;
+    }
+}
+
+dispatch! {
+    /// Squared norms of consecutive 9-vectors: `out[i] = ‖row[9i..9i+9]‖²`.
+    pub fn vertex_sq_norms(row: &[f32], out: &mut [f32]) => vertex_sq_norms_impl
+}
+
+#[inline(always)]
+fn group_sparsity_impl<M: MulAdd>(row: &[f32], sq_norms: &[f32], lambda: &[f32], eps2: f32, scale: f32, grad: &mut [f32]) -> f64 {
+    let mut total = 0.0f64;
+    for (((v, g), &s), &l) in row.chunks_exact(9).zip(grad.chunks_exact_mut(9)).zip(sq_norms).zip(lambda) {
+        if l == 0.0 {
+            continue;
+        }
+        let nrm = s.max(eps2).sqrt();
+        total += (l * nrm) as f64;
+        if s > eps2 {
+            let f = scale * l / nrm;
+            for (gq, &vq) in g.iter_mut().zip(v) {
+                *gq = M::mul_add(f, vq, *gq);
+            }
+        }
+    }
+    total
+}
+
+dispatch! {
+    /// One component's weighted group norm `Σ_i Λ_i ‖v_i‖_ε` (returned) and its gradient
+    /// `grad_i += scale·Λ_i·v_i/‖v_i‖` (zero where `‖v_i‖² ≤ eps2`), for 9-vectors `v_i`.
+    pub fn group_sparsity(row: &[f32], sq_norms: &[f32], lambda: &[f32], eps2: f32, scale: f32, grad: &mut [f32]) -> f64 => group_sparsity_impl
+}
+
+#[inline(always)]
+#[allow(clippy::extra_unused_type_parameters)]
+fn max_exponent_impl<M: MulAdd>(v: &[f32]) -> u32 {
+    const EXP: u32 = 0x7f80_0000;
+    let (blocks, rest) = v.as_chunks::<LANES>();
+    let mut acc = [0u32; LANES];
+    for b in blocks {
+        for l in 0..LANES {
+            acc[l] = acc[l].max(b[l].to_bits() & EXP);
+        }
+    }
+    let mut m = acc.iter().copied().max().unwrap_or(0);
+    for x in rest {
+        m = m.max(x.to_bits() & EXP);
+    }
+    m
+}
+
+dispatch! {
+    /// Largest exponent field (bits 23..31, in place) of the values: `0x7f80_0000` iff some
+    /// value is infinite or NaN.
+    fn max_exponent(v: &[f32]) -> u32 => max_exponent_impl
+}
+
+/// Returns the first non-finite value's index, if any (vectorised parallel scan; the exact
+/// position is searched only when there is one).
+pub fn first_non_finite(v: &[f32]) -> Option<usize> {
+    const CH: usize = 1 << 15;
+    let bad = v.par_chunks(CH).any(|c| max_exponent(c) == 0x7f80_0000);
+    if !bad {
+        return None;
+    }
+    v.iter().position(|x| !x.is_finite())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::nn::rng::Rng;
+
+    fn rand_vec(rng: &mut Rng, n: usize) -> Vec<f32> {
+        (0..n).map(|_| rng.uniform() as f32 * 2.0 - 1.0).collect()
+    }
+
+    fn rand_mat(rng: &mut Rng) -> Mat9 {
+        let mut m = [[0.0; 9]; 9];
+        for row in m.iter_mut() {
+            for v in row.iter_mut() {
+                *v = rng.uniform() as f32 - 0.5;
+            }
+        }
+        m
+    }
+
+    fn ring_index(n: usize) -> NeighborIndex {
+        // A ring with chords and one isolated vertex (n − 1) and one asymmetric list.
+        let mut rings: Vec<Vec<usize>> = (0..n - 1).map(|i| vec![(i + 1) % (n - 1), (i + n - 2) % (n - 1)]).collect();
+        rings[0].push(5);
+        rings.push(vec![]);
+        NeighborIndex::new(&rings).unwrap()
+    }
+
+    #[test]
+    fn neighbour_mean_and_its_transpose_are_adjoint() {
+        let n = 70; // more than two row chunks
+        let bp = 16;
+        let r = 9 * bp;
+        let nb = ring_index(n);
+        let mut rng = Rng::new(3);
+        let x = rand_vec(&mut rng, n * r);
+        let y = rand_vec(&mut rng, n * r);
+        let mut mx = vec![0.0; n * r];
+        mean_rows(&nb, &x, &mut mx, r);
+        // Naive check of one entry per vertex.
+        for i in 0..n {
+            let deg = nb.neighbors(i).len();
+            let want: f32 = if deg == 0 {
+                0.0
+            } else {
+                nb.neighbors(i).iter().map(|&j| x[j as usize * r + 7]).sum::<f32>() / deg as f32
+            };
+            assert!((mx[i * r + 7] - want).abs() < 1e-6);
+        }
+        let mut mty = vec![0.0; n * r];
+        mean_rows_transpose_add(&nb, &y, &mut mty, r);
+        let a: f64 = mx.iter().zip(&y).map(|(p, q)| (*p as f64) * (*q as f64)).sum();
+        let b: f64 = x.iter().zip(&mty).map(|(p, q)| (*p as f64) * (*q as f64)).sum();
+        assert!((a - b).abs() < 1e-4 * a.abs().max(1.0), "<Mx, y> = {a}, <x, Mᵀy> = {b}");
+    }
+
+    #[test]
+    fn conv_and_its_gradients_match_naive_loops() {
+        let n = 40;
+        let bp = 16;
+        let r = 9 * bp;
+        let mut rng = Rng::new(4);
+        let (ws, wn) = (rand_mat(&mut rng), rand_mat(&mut rng));
+        let bias: [f32; 9] = std::array::from_fn(|i| i as f32 * 0.1 - 0.4);
+        let x = rand_vec(&mut rng, n * r);
+        let m = rand_vec(&mut rng, n * r);
+        let dy = rand_vec(&mut rng, n * r);
+        let at = |v: &[f32], i: usize, c: usize, b: usize| v[(i * 9 + c) * bp + b];
+        for tanh in [false, true] {
+            let mut out = vec![0.0; n * r];
+            conv_rows(&ws, &x, &wn, &m, &bias, &mut out, bp, tanh);
+            for (i, c, b) in [(0, 0, 0), (17, 4, 9), (39, 8, 15)] {
+                let mut h = bias[c];
+                for a in 0..9 {
+                    h += ws[c][a] * at(&x, i, a, b) + wn[c][a] * at(&m, i, a, b);
+                }
+                let want = if tanh { h.tanh() } else { h };
+                assert!((at(&out, i, c, b) - want).abs() < 1e-5);
+            }
+        }
+        let (mut dx, mut dm) = (vec![0.0; n * r], vec![0.0; n * r]);
+        input_grad_rows(&transpose9(&ws), &transpose9(&wn), &dy, &mut dx, &mut dm, bp);
+        let g = weight_grad_rows(&dy, &x, &m, bp);
+        for (i, a, b) in [(3, 2, 5), (38, 7, 12)] {
+            let want_x: f32 = (0..9).map(|o| ws[o][a] * at(&dy, i, o, b)).sum();
+            let want_m: f32 = (0..9).map(|o| wn[o][a] * at(&dy, i, o, b)).sum();
+            assert!((at(&dx, i, a, b) - want_x).abs() < 1e-5);
+            assert!((at(&dm, i, a, b) - want_m).abs() < 1e-5);
+        }
+        for (o, a) in [(0, 0), (4, 7), (8, 8)] {
+            let mut sx = 0.0f64;
+            let mut sm = 0.0f64;
+            let mut sb = 0.0f64;
+            for i in 0..n {
+                for b in 0..bp {
+                    sx += (at(&dy, i, o, b) * at(&x, i, a, b)) as f64;
+                    sm += (at(&dy, i, o, b) * at(&m, i, a, b)) as f64;
+                    sb += at(&dy, i, o, b) as f64;
+                }
+            }
+            assert!((g.ws[o][a] - sx).abs() < 1e-4, "{} vs {sx}", g.ws[o][a]);
+            assert!((g.wn[o][a] - sm).abs() < 1e-4);
+            assert!((g.bias[o] - sb).abs() < 1e-4);
+        }
+    }
+
+    #[test]
+    fn non_finite_values_are_located() {
+        let mut v = vec![1.5f32; 100_003];
+        assert_eq!(first_non_finite(&v), None);
+        v[70_001] = f32::NAN;
+        v[99_999] = f32::INFINITY;
+        assert_eq!(first_non_finite(&v), Some(70_001));
+        v[70_001] = f32::MAX;
+        assert_eq!(first_non_finite(&v), Some(99_999));
+        v[99_999] = 0.0;
+        v[100_002] = f32::NEG_INFINITY; // in the unaligned tail
+        assert_eq!(first_non_finite(&v), Some(100_002));
+    }
+
+    #[test]
+    fn tanh_matches_std_to_f32_precision() {
+        let mut worst = 0.0f64;
+        let mut x = -12.0f32;
+        while x < 12.0 {
+            let a = tanh_f32(x) as f64;
+            let b = (x as f64).tanh();
+            let err = (a - b).abs() / b.abs().max(1e-30);
+            worst = worst.max(err);
+            x += 0.000_37;
+        }
+        assert!(worst < 1e-6, "worst relative error {worst}");
+        assert_eq!(tanh_f32(0.0), 0.0);
+        assert!(tanh_f32(f32::NAN).is_nan());
+        assert_eq!(tanh_f32(1e30), 1.0);
+        assert_eq!(tanh_f32(-1e30), -1.0);
+        let mut v: Vec<f32> = (0..37).map(|i| i as f32 * 0.1 - 1.8).collect();
+        let w: Vec<f32> = v.iter().map(|&x| tanh_f32(x)).collect();
+        tanh_slice(&mut v);
+        assert_eq!(v, w);
+    }
+}

@@ -1,0 +1,262 @@
+//! The training loss: reconstruction + λ1·(geodesic-weighted ℓ2,1 of C) + λ2·(hinge on Z).
+//!
+//! ```text
+//! L = (1/B) Σ_b ‖X̂_b − X_b‖²                                   (reconstruction)
+//!   + λ1 · (1/K) Σ_k Σ_i Λ_ik ‖C_k,i‖₂                          (sparsity, C_k,i ∈ R⁹)
+//!   + λ2 · (1/K) Σ_k max(max_m |Z_km| − θ, 0)                   (hinge, m over the batch)
+//! ```
+//! `Λ_ik` ramps from 0 (normalised geodesic distance to the centre `c_k` below `d_min`) to 1
+//! (above `d_max`), with `c_k = argmax_i ‖C_k,i‖` recomputed every step and treated as a
+//! constant (no gradient through it). The norm is ε-guarded: `‖v‖_ε = sqrt(max(‖v‖², ε²))`, with
+//! sub-gradient 0 where `‖v‖ ≤ ε`.
+
+use burn::tensor::{Device, Tensor, TensorData};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+use super::config::AutoencoderConfig;
+use super::kernels;
+use super::model::{AutoencoderModule, NeighborTensors};
+use super::neighbors::NeighborIndex;
+use crate::error::{Error, Result};
+
+/// ε of the guarded norm `sqrt(max(‖v‖², ε²))`.
+pub const NORM_EPS: f32 = 1e-8;
+
+/// Distances on the rest mesh from one centre vertex, normalised by the largest pairwise
+/// geodesic distance (so that the ramp `[d_min, d_max]` is scale-free).
+///
+/// Implementations may cache; the trainer asks only when a component's centre changes.
+pub trait CenterDistances {
+    /// Normalised distance of every vertex to `center` (N values, `0` at the centre). Non-finite
+    /// values (unreachable vertices) are treated as "far" (Λ = 1).
+    fn distances(&self, center: usize) -> Vec<f64>;
+}
+
+/// Hop distances on the neighbour graph (BFS), divided by the graph's diameter estimated with a
+/// double sweep (farthest vertex from the farthest vertex of vertex 0). For tests and synthetic
+/// data; the command line uses heat-method geodesics.
+#[derive(Debug, Clone)]
+pub struct HopDistances {
+    rings: Vec<Vec<usize>>,
+    scale: f64,
+}
+
+impl HopDistances {
+    /// Builds the BFS helper from the neighbour index.
+    pub fn new(nb: &NeighborIndex) -> Self {
+        let rings: Vec<Vec<usize>> =
+            (0..nb.n_vertices()).map(|i| nb.neighbors(i).iter().map(|&j| j as usize).collect()).collect();
+        let mut h = HopDistances { rings, scale: 1.0 };
+        let d0 = h.hops(0);
+        let far = argmax_finite(&d0);
+        let d1 = h.hops(far);
+        let diam = d1.iter().copied().filter(|d| d.is_finite()).fold(0.0, f64::max);
+        h.scale = if diam > 0.0 { diam } else { 1.0 };
+        h
+    }
+
+    fn hops(&self, s: usize) -> Vec<f64> {
+        let mut d = vec![f64::INFINITY; self.rings.len()];
+        let mut q = std::collections::VecDeque::new();
+        d[s] = 0.0;
+        q.push_back(s);
+        while let Some(u) = q.pop_front() {
+            for &v in &self.rings[u] {
+                if d[v].is_infinite() {
+                    d[v] = d[u] + 1.0;
+                    q.push_back(v);
+                }
+            }
+        }
+        d
+    }
+}
+
+impl CenterDistances for HopDistances {
+    fn distances(&self, center: usize) -> Vec<f64> {
+        self.hops(center).into_iter().map(|d| d / self.scale).collect()
+    }
+}
+
+/// Euclidean distances between rest positions, divided by the largest pairwise distance
+/// (exact, O(N²) once). For tests and small synthetic meshes.
+#[derive(Debug, Clone)]
+pub struct EuclideanDistances {
+    positions: Vec<[f64; 3]>,
+    scale: f64,
+}
+
+impl EuclideanDistances {
+    /// From rest positions.
+    pub fn new(positions: &[[f64; 3]]) -> Self {
+        let mut m: f64 = 0.0;
+        for (i, a) in positions.iter().enumerate() {
+            for b in &positions[i + 1..] {
+                m = m.max(crate::mesh::dist(*a, *b));
+            }
+        }
+        EuclideanDistances { positions: positions.to_vec(), scale: if m > 0.0 { m } else { 1.0 } }
+    }
+}
+
+impl CenterDistances for EuclideanDistances {
+    fn distances(&self, center: usize) -> Vec<f64> {
+        let c = self.positions[center];
+        self.positions.iter().map(|&p| crate::mesh::dist(p, c) / self.scale).collect()
+    }
+}
+
+fn argmax_finite(v: &[f64]) -> usize {
+    let mut best = 0;
+    for (i, &x) in v.iter().enumerate() {
+        if x.is_finite() && (!v[best].is_finite() || x > v[best]) {
+            best = i;
+        }
+    }
+    best
+}
+
+/// The loss terms of one step (unweighted terms and the weighted total).
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct LossTerms {
+    /// `L = reconstruction + λ1·sparsity + λ2·hinge`.
+    pub total: f64,
+    /// `(1/B) Σ_b ‖X̂_b − X_b‖²`.
+    pub reconstruction: f64,
+    /// `(1/K) Σ_k Σ_i Λ_ik ‖C_k,i‖`.
+    pub sparsity: f64,
+    /// `(1/K) Σ_k max(max_m |Z_km| − θ, 0)`.
+    pub hinge: f64,
+}
+
+impl LossTerms {
+    /// Whether every term is finite.
+    pub fn is_finite(&self) -> bool {
+        self.total.is_finite() && self.reconstruction.is_finite() && self.sparsity.is_finite() && self.hinge.is_finite()
+    }
+}
+
+/// Per-component centres and support weights Λ (`K × N`), refreshed from the current `C`.
+#[derive(Debug, Clone)]
+pub struct SupportMaps {
+    k: usize,
+    n: usize,
+    centers: Vec<usize>,
+    weights: Vec<Vec<f32>>,
+    valid: Vec<bool>,
+    /// `‖C_k,i‖²` of the `C` of the last update, `[K, N]`.
+    sq_norms: Vec<f32>,
+}
+
+impl SupportMaps {
+    /// Empty maps for `k` components on `n` vertices.
+    pub fn new(k: usize, n: usize) -> Self {
+        SupportMaps { k, n, centers: vec![0; k], weights: vec![Vec::new(); k], valid: vec![false; k], sq_norms: vec![0.0; k * n] }
+    }
+
+    /// Current centres `c_k` (valid after [`Self::update`]).
+    pub fn centers(&self) -> &[usize] {
+        &self.centers
+    }
+
+    /// Λ row of component `k` (N values).
+    pub fn weights(&self, k: usize) -> &[f32] {
+        &self.weights[k]
+    }
+
+    /// Recomputes the centres from `c` (`[K, 9N]`, vertex-major) and asks `dist` for the rows of
+    /// the centres that changed.
+    pub fn update(&mut self, c: &[f32], cfg: &AutoencoderConfig, dist: &dyn CenterDistances) -> Result<()> {
+        let n = self.n;
+        let centers: Vec<usize> = c
+            .par_chunks(9 * n)
+            .zip(self.sq_norms.par_chunks_mut(n))
+            .map(|(row, sq)| {
+                kernels::vertex_sq_norms(row, sq);
+                let mut best = (0usize, -1.0f32);
+                for (i, &s) in sq.iter().enumerate() {
+                    if s > best.1 {
+                        best = (i, s);
+                    }
+                }
+                best.0
+            })
+            .collect();
+        for (k, &center) in centers.iter().enumerate() {
+            if self.valid[k] && self.centers[k] == center {
+                continue;
+            }
+            let d = dist.distances(center);
+            if d.len() != n {
+                return Err(Error::Invalid(format!(
+                    "centre distances: expected {n} values for centre {}, got {}",
+                    center,
+                    d.len()
+                )));
+            }
+            self.weights[k] = d.iter().map(|&d| cfg.support_weight(d) as f32).collect();
+            self.centers[k] = center;
+            self.valid[k] = true;
+        }
+        Ok(())
+    }
+
+    /// Λ as a `[K, N]` tensor (for the Burn reference loss).
+    pub fn to_tensor(&self, device: &Device) -> Tensor<2> {
+        let flat: Vec<f32> = self.weights.iter().flat_map(|w| w.iter().copied()).collect();
+        Tensor::from_data(TensorData::new(flat, [self.k, self.n]), device)
+    }
+}
+
+/// Sparsity term `(1/K) Σ_k Σ_i Λ_ik ‖C_k,i‖_ε` and its gradient: adds `scale·Λ_ik·C_k,i/‖C_k,i‖`
+/// to `grad` (zero where `‖C_k,i‖ ≤ ε`). Returns the unweighted term. `maps` must have been
+/// updated with this same `c` (its squared norms are reused).
+///
+/// # Shapes
+/// `c`, `grad`: `[K, 9N]` row-major, vertex-major columns.
+pub fn sparsity_with_grad(c: &[f32], maps: &SupportMaps, scale: f32, grad: &mut [f32]) -> f64 {
+    let n = maps.n;
+    let k = maps.k;
+    let sums: Vec<f64> = grad
+        .par_chunks_mut(9 * n)
+        .zip(c.par_chunks(9 * n))
+        .zip(maps.sq_norms.par_chunks(n))
+        .enumerate()
+        .map(|(kk, ((g, row), sq))| kernels::group_sparsity(row, sq, &maps.weights[kk], NORM_EPS * NORM_EPS, scale, g))
+        .collect();
+    sums.iter().sum::<f64>() / k as f64
+}
+
+/// The same loss as a Burn graph (reference for the gradient check; small problems only).
+/// Λ comes from `maps` (already updated for the module's current `C`).
+///
+/// # Shapes
+/// - `x`: `[B, N, 9]`
+/// - output: (`L` `[1]`, the terms as numbers)
+pub fn reference_loss(
+    module: &AutoencoderModule,
+    x: Tensor<3>,
+    nb: &NeighborTensors,
+    maps: &SupportMaps,
+    cfg: &AutoencoderConfig,
+) -> (Tensor<1>, LossTerms) {
+    let device = x.device();
+    let [b, n, _] = x.dims();
+    let (xh, z) = module.forward(x.clone(), nb);
+    let recon = (xh - x).square().sum().div_scalar(b as f32);
+    let [k, _] = module.components_shape();
+    let c = module.components_tensor().reshape([k, n, 9]);
+    let norms = c.square().sum_dim(2).reshape([k, n]).clamp_min(NORM_EPS * NORM_EPS).sqrt();
+    let sparsity = (norms * maps.to_tensor(&device)).sum().div_scalar(k as f32);
+    let hinge = z.abs().max_dim(0).sub_scalar(cfg.theta as f32).clamp_min(0.0).sum().div_scalar(k as f32);
+    let total = recon.clone() + sparsity.clone().mul_scalar(cfg.lambda1 as f32) + hinge.clone().mul_scalar(cfg.lambda2 as f32);
+    let scalar = |t: Tensor<1>| -> f64 { t.into_data().try_into_vec_as::<f32>().map(|v| v[0] as f64).unwrap_or(f64::NAN) };
+    let terms = LossTerms {
+        total: scalar(total.clone().detach()),
+        reconstruction: scalar(recon.detach()),
+        sparsity: scalar(sparsity.detach()),
+        hinge: scalar(hinge.detach()),
+    };
+    (total, terms)
+}

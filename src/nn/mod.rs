@@ -1,0 +1,61 @@
+//! The mesh-convolutional autoencoder of Tan et al. (2018) on ACAP features, in Burn.
+//!
+//! - [`config`]: every hyperparameter in [`AutoencoderConfig`] (validated once).
+//! - [`model`]: the Burn [`Module`](burn::module::Module) holding the parameters, its
+//!   initialisation and a pure-Burn forward pass (the autodiff reference).
+//! - [`loss`]: the loss terms, the support maps Λ and the [`CenterDistances`] trait.
+//! - [`engine`] + [`kernels`]: the hand-written forward and backward pass used for training and
+//!   inference (f32, SIMD, rayon; checked against Burn autodiff in the tests).
+//! - [`data`]: training data and batching; [`neighbors`]: the 1-ring index.
+//! - [`training`]: [`Trainer`] (Burn's Adam, checkpoints, resume, stop flag).
+//! - [`inference`]: [`Autoencoder`] (encode/decode, component analysis, synthesis,
+//!   interpolation, save/load).
+//!
+//! Burn appears only in this module.
+//!
+//! # Use
+//! ```rust,ignore
+//! use meshdeco::nn::{AutoencoderConfig, NeighborIndex, RunOptions, Trainer, TrainingData};
+//! let nb = NeighborIndex::from_faces(rest.n_vertices(), &rest.faces)?;  // 1-rings of the rest mesh
+//! let data = TrainingData::from_features(&scaled_acap)?;                 // F × N × 9, in [−0.95, 0.95]
+//! let dist = /* impl CenterDistances: normalised geodesic distance rows */;
+//! let mut trainer = Trainer::new(config, &data, &nb, &dist)?;            // or Trainer::resume(path, …)
+//! let opts = RunOptions { checkpoint: Some(dir.join("checkpoint.mdae")), stop: Some(stop_flag) };
+//! let summary = trainer.run(&opts, |r| { /* progress bar, JSONL line: serde_json::to_string(r) */ })?;
+//! let model = trainer.into_model()?;
+//! model.save(&dir)?;                                          // autoencoder.bpk + autoencoder.json
+//! let model = Autoencoder::load(&dir, nb)?;                   // nb rebuilt from the stored rest mesh
+//! let z = model.encode(&features)?;                           // codes, F × K
+//! let x = model.decode(&z)?;                                  // features, F × N × 9 (scaled)
+//! let analysis = model.analyze_components(&scaled_acap, 0)?;  // ranked extremes per dimension
+//! let synth = model.synthesize(&analysis, &[(3, 1.0), (7, 0.5)])?;
+//! let frames = model.interpolate(&z[a], &z[b], 10)?;
+//! ```
+//!
+//! # Speed
+//! One training step is a hand-written forward and backward pass (kernels in VCB layout, latent
+//! products as faer GEMMs on the rayon pool), then Burn's Adam on the parameters (`C` is split
+//! into row blocks of [`model::COMPONENT_BLOCK`] components, each with its own optimizer, so the
+//! update runs in parallel). `cargo bench --bench autoencoder` times a step at SCAPE and horse
+//! size and prints where the time goes; `cargo run --release --example ae_synthetic -- --profile
+//! OBJ SHAPES STEPS` does the same for any mesh.
+
+pub mod checkpoint;
+pub mod config;
+pub mod data;
+pub mod engine;
+pub mod inference;
+pub mod kernels;
+pub mod loss;
+pub mod model;
+pub mod neighbors;
+pub mod rng;
+pub mod training;
+
+pub use config::AutoencoderConfig;
+pub use data::TrainingData;
+pub use inference::{Autoencoder, ComponentAnalysis, ComponentExtreme};
+pub use loss::{CenterDistances, EuclideanDistances, HopDistances, LossTerms};
+pub use model::AutoencoderModule;
+pub use neighbors::NeighborIndex;
+pub use training::{IterationReport, RunOptions, RunSummary, StepTimings, Trainer};

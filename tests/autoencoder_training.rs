@@ -1,0 +1,378 @@
+//! Integration tests of the mesh autoencoder: hand-written gradients against Burn autodiff,
+//! training on a synthetic problem with planted local deformations, resume equivalence,
+//! NaN safety and save/load.
+
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+
+use burn::tensor::{Device, Tensor};
+use meshdeco::nn::engine::{self, Grads, Weights, Workspace};
+use meshdeco::nn::kernels::padded_width;
+use meshdeco::nn::loss::{SupportMaps, reference_loss};
+use meshdeco::nn::model::NeighborTensors;
+use meshdeco::nn::rng::Rng;
+use meshdeco::nn::{Autoencoder, AutoencoderConfig, HopDistances, NeighborIndex, RunOptions, Trainer, TrainingData};
+use meshdeco::representation::Features;
+
+/// A regular grid of `nx × ny` vertices in the unit square, two triangles per cell.
+fn grid(nx: usize, ny: usize) -> (Vec<[f64; 3]>, Vec<[usize; 3]>) {
+    let mut p = Vec::new();
+    for y in 0..ny {
+        for x in 0..nx {
+            p.push([x as f64 / (nx - 1) as f64, y as f64 / (ny - 1) as f64, 0.0]);
+        }
+    }
+    let mut f = Vec::new();
+    for y in 0..ny - 1 {
+        for x in 0..nx - 1 {
+            let v = y * nx + x;
+            f.push([v, v + 1, v + nx + 1]);
+            f.push([v, v + nx + 1, v + nx]);
+        }
+    }
+    (p, f)
+}
+
+fn random_features(n_frames: usize, n: usize, amp: f64, seed: u64) -> Features {
+    let mut rng = Rng::new(seed);
+    let mut f = Features::zeros(n_frames, n, 9);
+    for v in f.data.iter_mut() {
+        *v = (rng.uniform() * 2.0 - 1.0) * amp;
+    }
+    f
+}
+
+/// Ten shapes: a smooth global field plus two planted localized bumps (around vertices `c1`,
+/// `c2`) whose amplitudes vary independently across the shapes.
+/// Rest positions, faces, features and the two planted centres.
+type Planted = (Vec<[f64; 3]>, Vec<[usize; 3]>, Features, [usize; 2]);
+
+fn planted(nx: usize, ny: usize) -> Planted {
+    let (p, f) = grid(nx, ny);
+    let n = p.len();
+    let c1 = (ny / 4) * nx + nx / 4;
+    let c2 = (3 * ny / 4) * nx + 3 * nx / 4;
+    let mut rng = Rng::new(11);
+    let frames = 10;
+    let mut feat = Features::zeros(frames, n, 9);
+    for s in 0..frames {
+        let a1 = rng.uniform() * 1.6 - 0.8;
+        let a2 = rng.uniform() * 1.6 - 0.8;
+        for i in 0..n {
+            let d1 = meshdeco::mesh::dist(p[i], p[c1]);
+            let d2 = meshdeco::mesh::dist(p[i], p[c2]);
+            let b1 = (-(d1 * d1) / (2.0 * 0.12f64.powi(2))).exp();
+            let b2 = (-(d2 * d2) / (2.0 * 0.12f64.powi(2))).exp();
+            for c in 0..9 {
+                let pat1 = [0.9, -0.5, 0.3, 0.7, -0.2, 0.1, 0.4, -0.6, 0.2][c];
+                let pat2 = [-0.3, 0.8, 0.5, -0.1, 0.6, -0.7, 0.2, 0.3, -0.4][c];
+                feat.data[(s * n + i) * 9 + c] = (a1 * b1 * pat1 + a2 * b2 * pat2).clamp(-0.95, 0.95);
+            }
+        }
+    }
+    (p, f, feat, [c1, c2])
+}
+
+fn rel_err(a: &[f32], b: &[f32]) -> f64 {
+    let num: f64 = a.iter().zip(b).map(|(x, y)| ((x - y) as f64).powi(2)).sum::<f64>().sqrt();
+    let den: f64 = b.iter().map(|y| (*y as f64).powi(2)).sum::<f64>().sqrt();
+    num / den.max(1e-30)
+}
+
+fn to_vec<const D: usize>(t: Tensor<D>) -> Vec<f32> {
+    t.into_data().try_into_vec_as::<f32>().unwrap()
+}
+
+fn flat9(a: &[[f64; 9]; 9]) -> Vec<f32> {
+    a.iter().flatten().map(|&v| v as f32).collect()
+}
+
+fn gradient_check(layers: usize) {
+    let (_, faces) = grid(7, 6);
+    let n = 42;
+    let nb = NeighborIndex::from_faces(n, &faces).unwrap();
+    let dist = HopDistances::new(&nb);
+    let feats = random_features(3, n, 0.9, 5);
+    let data = TrainingData::from_features(&feats).unwrap();
+    // Larger init and a small θ so that every term and every activation regime is exercised.
+    let cfg = AutoencoderConfig {
+        components: 4,
+        layers,
+        init_std: 0.35,
+        theta: 0.05,
+        d_min: 0.2,
+        d_max: 0.6,
+        seed: 3,
+        ..Default::default()
+    };
+    cfg.validate().unwrap();
+    #[allow(deprecated)]
+    let device = Device::ndarray().autodiff();
+    let module = cfg.init(n, &device);
+
+    // Hand-written pass.
+    let w = Weights::from_module(&module).unwrap();
+    let mut maps = SupportMaps::new(cfg.components, n);
+    maps.update(&w.c, &cfg, &dist).unwrap();
+    let idx: Vec<usize> = (0..3).collect();
+    let x = data.batch_vcb(&idx);
+    let mut ws = Workspace::new(n, cfg.components, layers, padded_width(3));
+    let mut g = Grads { layers: Vec::new(), c: Vec::new() };
+    let terms = engine::loss_and_grad(&mut ws, &w, &nb, &x, 3, &maps, &cfg, &mut g);
+    assert!(terms.hinge > 0.0 && terms.sparsity > 0.0 && terms.reconstruction > 0.0, "{terms:?}");
+
+    // Burn autodiff reference.
+    let nbt = NeighborTensors::new(&nb, &device);
+    let xt = data.batch_tensor(&idx, &device);
+    let (loss, ref_terms) = reference_loss(&module, xt, &nbt, &maps, &cfg);
+    let grads = loss.backward();
+    for (a, b) in [
+        (terms.total, ref_terms.total),
+        (terms.reconstruction, ref_terms.reconstruction),
+        (terms.sparsity, ref_terms.sparsity),
+        (terms.hinge, ref_terms.hinge),
+    ] {
+        assert!((a - b).abs() <= 1e-5 * b.abs().max(1e-3), "loss terms differ: hand {terms:?} vs burn {ref_terms:?}");
+    }
+    let gc: Vec<f32> = module.components.iter().flat_map(|p| to_vec(p.val().grad(&grads).unwrap())).collect();
+    let e = rel_err(&g.c, &gc);
+    eprintln!("L = {layers}: loss {terms:?}; C gradient relative error {e:.2e}");
+    assert!(e <= 1e-4, "components gradient relative error {e}");
+    for (l, layer) in module.layers.iter().enumerate() {
+        let checks = [
+            ("weight_point", flat9(&g.layers[l].wp), to_vec(layer.weight_point.val().grad(&grads).unwrap())),
+            ("weight_neighbor", flat9(&g.layers[l].wn), to_vec(layer.weight_neighbor.val().grad(&grads).unwrap())),
+            ("bias", g.layers[l].b.iter().map(|&v| v as f32).collect(), to_vec(layer.bias.val().grad(&grads).unwrap())),
+            (
+                "decoder_bias",
+                g.layers[l].bd.iter().map(|&v| v as f32).collect(),
+                to_vec(layer.decoder_bias.val().grad(&grads).unwrap()),
+            ),
+        ];
+        for (name, hand, burn) in checks {
+            let e = rel_err(&hand, &burn);
+            eprintln!("L = {layers}: layer {l} {name} gradient relative error {e:.2e}");
+            assert!(e <= 1e-4, "layer {l} {name}: relative error {e}\nhand {hand:?}\nburn {burn:?}");
+        }
+    }
+}
+
+#[test]
+fn hand_gradients_match_burn_autodiff_one_layer() {
+    gradient_check(1);
+}
+
+#[test]
+fn hand_gradients_match_burn_autodiff_three_layers() {
+    gradient_check(3);
+}
+
+#[test]
+fn hand_inference_matches_burn_forward() {
+    let (_, faces) = grid(6, 5);
+    let n = 30;
+    let nb = NeighborIndex::from_faces(n, &faces).unwrap();
+    let feats = random_features(5, n, 0.9, 8);
+    let cfg = AutoencoderConfig { components: 3, layers: 2, init_std: 0.3, seed: 4, ..Default::default() };
+    #[allow(deprecated)]
+    let device = Device::ndarray();
+    let module = cfg.init(n, &device);
+    let data = TrainingData::from_features(&feats).unwrap();
+    let nbt = NeighborTensors::new(&nb, &device);
+    let (xh, z) = module.forward(data.batch_tensor(&[0, 1, 2, 3, 4], &device), &nbt);
+    let (xh, z) = (to_vec(xh), to_vec(z));
+    let ae = Autoencoder::new(cfg, module, nb).unwrap();
+    let codes = ae.encode(&feats).unwrap();
+    let zf: Vec<f32> = codes.iter().flatten().map(|&v| v as f32).collect();
+    assert!(rel_err(&zf, &z) < 1e-5, "codes differ");
+    let rec = ae.decode(&codes).unwrap();
+    let rf: Vec<f32> = rec.data.iter().map(|&v| v as f32).collect();
+    assert!(rel_err(&rf, &xh) < 1e-5, "reconstructions differ");
+}
+
+fn tmp_dir(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("meshdeco-ae-{}-{}", name, std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+#[test]
+fn training_recovers_planted_local_deformations() {
+    let (p, faces, feats, centres) = planted(15, 14);
+    let n = p.len();
+    let nb = NeighborIndex::from_faces(n, &faces).unwrap();
+    let dist = HopDistances::new(&nb);
+    let data = TrainingData::from_features(&feats).unwrap();
+    let cfg = AutoencoderConfig { components: 4, iterations: 1500, learning_rate: 1e-2, seed: 1, ..Default::default() };
+    let energy: f64 = feats.data.iter().map(|v| v * v).sum::<f64>() / feats.n_frames as f64;
+    let mut trainer = Trainer::new(cfg.clone(), &data, &nb, &dist).unwrap();
+    let mut losses = Vec::new();
+    let summary = trainer.run(&RunOptions::default(), |r| losses.push(r.loss)).unwrap();
+    assert_eq!(summary.iterations_done, 1500);
+    assert!(!summary.stopped);
+    let first = losses[0];
+    let last = *losses.last().unwrap();
+    assert!(last.total < 0.2 * first.total, "loss did not decrease enough: {first:?} → {last:?}");
+    let rel = last.reconstruction / energy;
+    eprintln!("planted: loss {:.4} → {:.4}, relative reconstruction error {rel:.5}", first.total, last.total);
+    assert!(rel < 0.05, "relative reconstruction error {rel} (energy per shape {energy})");
+
+    // The two strongest components sit on the two planted regions.
+    let ae = trainer.into_model().unwrap();
+    let analysis = ae.analyze_components(&feats, 0).unwrap();
+    let mut hit = [false; 2];
+    for comp in analysis.components.iter().take(2) {
+        let peak = comp
+            .vertex_change
+            .iter()
+            .enumerate()
+            .max_by(|a, b| a.1.total_cmp(b.1))
+            .map(|(i, _)| i)
+            .unwrap();
+        for (j, &c) in centres.iter().enumerate() {
+            if meshdeco::mesh::dist(p[peak], p[c]) < 0.2 {
+                hit[j] = true;
+            }
+        }
+    }
+    assert!(hit[0] && hit[1], "top components do not localize on the planted bumps: {:?}", analysis
+        .components
+        .iter()
+        .map(|c| (c.dim, c.distance, c.center))
+        .collect::<Vec<_>>());
+
+    // Synthesis with weight 1 on a dimension decodes its extreme shape; weight 0 the reference.
+    let top = &analysis.components[0];
+    let s1 = ae.synthesize(&analysis, &[(top.dim, 1.0)]).unwrap();
+    let d1: f64 = s1.data.iter().zip(&top.features).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+    assert!(d1 < 1e-6, "synthesis at weight 1 differs from the extreme by {d1}");
+    let s0 = ae.synthesize(&analysis, &[(top.dim, 0.0)]).unwrap();
+    let d0: f64 = s0.data.iter().zip(&analysis.reference_features).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+    assert!(d0 < 1e-6);
+    // Interpolation ends at the decoded end codes.
+    let z = ae.encode(&feats).unwrap();
+    let interp = ae.interpolate(&z[1], &z[2], 5).unwrap();
+    let ends = ae.decode(&[z[1].clone(), z[2].clone()]).unwrap();
+    assert_eq!(interp.frame(0), ends.frame(0));
+    assert_eq!(interp.frame(4), ends.frame(1));
+
+    // Save / load round trip; a different mesh is refused.
+    let dir = tmp_dir("saveload");
+    ae.save(&dir).unwrap();
+    let loaded = Autoencoder::load(&dir, nb.clone()).unwrap();
+    assert_eq!(loaded.encode(&feats).unwrap(), z);
+    let (_, other_faces) = grid(14, 15);
+    let other = NeighborIndex::from_faces(n, &other_faces).unwrap();
+    assert!(Autoencoder::load(&dir, other).is_err());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+fn params(t: &Trainer) -> Vec<f32> {
+    let w = Weights::from_module(t.module()).unwrap();
+    let mut v = w.c.clone();
+    for l in &w.layers {
+        v.extend(l.wp.iter().flatten());
+        v.extend(l.wn.iter().flatten());
+        v.extend(l.b);
+        v.extend(l.bd);
+    }
+    v
+}
+
+#[test]
+fn resume_reproduces_the_uninterrupted_run() {
+    let (_, faces, feats, _) = planted(9, 8);
+    let n = 72;
+    let nb = NeighborIndex::from_faces(n, &faces).unwrap();
+    let dist = HopDistances::new(&nb);
+    let data = TrainingData::from_features(&feats).unwrap();
+    // Mini-batches so that the generator state matters too.
+    let cfg = AutoencoderConfig {
+        components: 10, // two row blocks of C, two Adam instances for them
+        layers: 2,
+        iterations: 40,
+        batch_size: Some(6),
+        checkpoint_every: 7,
+        learning_rate: 5e-3,
+        seed: 9,
+        ..Default::default()
+    };
+    let mut full = Trainer::new(cfg.clone(), &data, &nb, &dist).unwrap();
+    full.run(&RunOptions::default(), |_| {}).unwrap();
+    let expected = params(&full);
+
+    let dir = tmp_dir("resume");
+    let ck = dir.join("checkpoint.mdae");
+    let stop = Arc::new(AtomicBool::new(false));
+    let opts = RunOptions { checkpoint: Some(ck.clone()), stop: Some(stop.clone()) };
+    let mut first = Trainer::new(cfg.clone(), &data, &nb, &dist).unwrap();
+    let s = first
+        .run(&opts, |r| {
+            if r.iteration == 20 {
+                stop.store(true, Ordering::SeqCst);
+            }
+        })
+        .unwrap();
+    assert!(s.stopped);
+    assert_eq!(s.iterations_done, 20);
+    drop(first);
+    assert!(ck.exists());
+    assert!(!dir.join("checkpoint.mdae.tmp").exists());
+    stop.store(false, Ordering::SeqCst);
+    let mut resumed = Trainer::resume(&ck, cfg.clone(), &data, &nb, &dist).unwrap();
+    assert_eq!(resumed.iteration(), 20);
+    let s = resumed.run(&opts, |_| {}).unwrap();
+    assert_eq!(s.iterations_done, 40);
+    let got = params(&resumed);
+    let max_diff = expected.iter().zip(&got).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
+    eprintln!("resume: max parameter difference {max_diff}");
+    assert!(max_diff <= 1e-6, "resumed run differs by {max_diff}");
+
+    // A checkpoint with other hyperparameters is refused.
+    let other = AutoencoderConfig { components: 11, ..cfg };
+    assert!(Trainer::resume(&ck, other, &data, &nb, &dist).is_err());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn nan_never_reaches_a_checkpoint() {
+    let (_, faces) = grid(6, 6);
+    let n = 36;
+    let nb = NeighborIndex::from_faces(n, &faces).unwrap();
+    let dist = HopDistances::new(&nb);
+
+    // Non-finite input: a clear error naming the location.
+    let mut feats = random_features(4, n, 0.9, 2);
+    feats.data[(2 * n + 7) * 9 + 4] = f64::NAN;
+    let err = TrainingData::from_features(&feats).unwrap_err().to_string();
+    assert!(err.contains("frame 2") && err.contains("vertex 7") && err.contains("channel 4"), "{err}");
+
+    // Finite but absurd input overflows the loss: the run stops before writing anything.
+    let mut feats = random_features(4, n, 0.9, 2);
+    feats.data[5] = 1e30;
+    let data = TrainingData::from_features(&feats).unwrap();
+    let dir = tmp_dir("nan");
+    let ck = dir.join("checkpoint.mdae");
+    let cfg = AutoencoderConfig { components: 3, iterations: 5, checkpoint_every: 1, ..Default::default() };
+    let mut t = Trainer::new(cfg, &data, &nb, &dist).unwrap();
+    let opts = RunOptions { checkpoint: Some(ck.clone()), stop: None };
+    let err = t.run(&opts, |_| {}).unwrap_err().to_string();
+    assert!(err.contains("not finite") && err.contains("iteration 1"), "{err}");
+    assert!(!ck.exists(), "a checkpoint was written for a diverged run");
+
+    // A diverging run (absurd learning rate) errors; whatever checkpoint is on disk is finite.
+    let feats = random_features(4, n, 0.9, 3);
+    let data = TrainingData::from_features(&feats).unwrap();
+    let cfg = AutoencoderConfig { components: 3, iterations: 50, checkpoint_every: 1, learning_rate: 1e30, ..Default::default() };
+    let mut t = Trainer::new(cfg, &data, &nb, &dist).unwrap();
+    let res = t.run(&opts, |_| {});
+    assert!(res.is_err(), "expected divergence, got {res:?}");
+    eprintln!("divergence: {} (checkpoint on disk: {})", res.unwrap_err(), ck.exists());
+    if ck.exists() {
+        let ae = Autoencoder::from_checkpoint(&ck, nb.clone()).unwrap();
+        assert!(ae.components_matrix().iter().all(|v| v.is_finite()));
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
