@@ -6,6 +6,7 @@ use anyhow::{Context, Result, bail};
 use clap::Args;
 use meshdeco::artifact;
 use meshdeco::mesh::{self, TriMesh};
+use meshdeco::pipeline::autoencoder::{AeArtifact, frame_erms};
 use meshdeco::pipeline::linear::LinearArtifact;
 use meshdeco::representation::roundtrip::frame_squared_error;
 
@@ -95,6 +96,26 @@ pub fn encode(a: EncodeArgs) -> Result<()> {
             println!("total Erms {erms:.4} over {} frames [alignment: {alignment}]; reconstructions and weights.csv in {}", seq.n_frames(), a.out.display());
             Ok(())
         }
+        "autoencoder" => {
+            let m = AeArtifact::load(&a.model)?;
+            if seq.n_vertices() != m.rest.n_vertices() || seq.faces != m.rest.faces {
+                bail!("{}: connectivity differs from the model's rest mesh", a.path);
+            }
+            let codes = m.encode_frames(&seq)?;
+            let rec = m.decode_codes(&codes)?;
+            std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
+            let per = frame_erms(&seq.frames, &rec)?;
+            for ((name, e), r) in seq.names.iter().zip(&per).zip(&rec) {
+                println!("{name}: Erms {e:.4}");
+                mesh::write_obj(&a.out.join(format!("{name}.obj")), &TriMesh::new(r.clone(), seq.faces.clone()))?;
+            }
+            let k = m.header.components;
+            let flat: Vec<f64> = codes.iter().flatten().copied().collect();
+            artifact::write_weights_csv(&a.out.join("weights.csv"), &seq.names, &flat, k)?;
+            let total = (per.iter().map(|e| e * e).sum::<f64>() / per.len().max(1) as f64).sqrt();
+            println!("total Erms {total:.4} over {} frames [alignment: centroid]; reconstructions and latent codes (weights.csv) in {}", seq.n_frames(), a.out.display());
+            Ok(())
+        }
         other => bail!("encode: models of method `{other}` are not supported by this build"),
     }
 }
@@ -110,6 +131,97 @@ pub fn synthesize(a: SynthesizeArgs) -> Result<()> {
             println!("wrote {}", a.out.display());
             Ok(())
         }
+        "autoencoder" => {
+            let m = AeArtifact::load(&a.model)?;
+            let dense = parse_weights(&a.weights, m.header.components)?;
+            let pairs: Vec<(usize, f64)> = dense.iter().enumerate().filter(|(_, w)| **w != 0.0).map(|(i, w)| (i, *w)).collect();
+            let z = m.synthesis_code(&pairs)?;
+            let p = m.decode_codes(&[z])?.remove(0);
+            write_mesh(&a.out, &TriMesh::new(p, m.rest.faces.clone()))?;
+            println!("wrote {} (z_i = Z_r,i + (Z_h,i − Z_r,i)·w_i)", a.out.display());
+            Ok(())
+        }
         other => bail!("synthesize: models of method `{other}` are not supported by this build"),
     }
+}
+
+#[derive(Debug, Args)]
+pub struct ComponentsArgs {
+    /// Autoencoder model directory written by `meshdeco train`.
+    pub model: PathBuf,
+    /// Output directory: `<rank>_<dim>.obj` extreme shapes, `<rank>_<dim>_change.ply` heat maps
+    /// of per-vertex feature change, and `components.csv`.
+    #[arg(long, short)]
+    pub out: PathBuf,
+}
+
+#[derive(Debug, Args)]
+pub struct InterpolateArgs {
+    /// Autoencoder model directory written by `meshdeco train`.
+    pub model: PathBuf,
+    /// First shape (a mesh file with the model's connectivity).
+    #[arg(long)]
+    pub from: PathBuf,
+    /// Second shape.
+    #[arg(long)]
+    pub to: PathBuf,
+    /// Number of meshes written, including both ends (≥ 2).
+    #[arg(long, default_value_t = 10)]
+    pub steps: usize,
+    /// Output directory (`interp_000.obj`, …).
+    #[arg(long, short)]
+    pub out: PathBuf,
+}
+
+pub fn components(a: ComponentsArgs) -> Result<()> {
+    let method = model_method(&a.model)?;
+    match method.as_str() {
+        "autoencoder" => {
+            let m = AeArtifact::load(&a.model)?;
+            m.write_components(&a.out)?;
+            println!("wrote {} components (ranked by distance of the extreme shape) to {}", m.header.components, a.out.display());
+            Ok(())
+        }
+        "pca" | "splocs" => {
+            let m = LinearArtifact::load(&a.model)?;
+            meshdeco::pipeline::linear::write_components(&m, &a.out)?;
+            println!("wrote {} components to {}", m.model.n_components, a.out.display());
+            Ok(())
+        }
+        other => bail!("components: models of method `{other}` are not supported by this build"),
+    }
+}
+
+pub fn interpolate(a: InterpolateArgs) -> Result<()> {
+    if a.steps < 2 {
+        bail!("--steps ({}) must be at least 2", a.steps);
+    }
+    let method = model_method(&a.model)?;
+    if method != "autoencoder" {
+        bail!("interpolate needs an autoencoder model; {} is `{method}`", a.model.display());
+    }
+    let m = AeArtifact::load(&a.model)?;
+    let mut frames = Vec::new();
+    for p in [&a.from, &a.to] {
+        let mesh = mesh::load_mesh(p)?;
+        if mesh.faces != m.rest.faces {
+            bail!("{}: connectivity differs from the model's rest mesh", p.display());
+        }
+        frames.push(mesh.positions);
+    }
+    let seq = meshdeco::mesh::MeshSequence { faces: m.rest.faces.clone(), frames, names: vec!["from".into(), "to".into()] };
+    let codes = m.encode_frames(&seq)?;
+    let codes: Vec<Vec<f64>> = (0..a.steps)
+        .map(|s| {
+            let t = s as f64 / (a.steps - 1) as f64;
+            codes[0].iter().zip(&codes[1]).map(|(x, y)| x + (y - x) * t).collect()
+        })
+        .collect();
+    let meshes = m.decode_codes(&codes)?;
+    std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
+    for (i, p) in meshes.into_iter().enumerate() {
+        mesh::write_obj(&a.out.join(format!("interp_{i:03}.obj")), &TriMesh::new(p, m.rest.faces.clone()))?;
+    }
+    println!("wrote {} meshes to {}", a.steps, a.out.display());
+    Ok(())
 }

@@ -23,6 +23,10 @@ pub struct Cli {
 
 #[derive(Debug, Subcommand)]
 pub enum Command {
+    /// Export each component's extreme shape and heat map (autoencoder: ranked extremes).
+    Components(apply::ComponentsArgs),
+    /// Latent interpolation between two shapes (autoencoder).
+    Interpolate(apply::InterpolateArgs),
     /// Fit a trained model's weights to new meshes; writes reconstructions, weights and Erms.
     Encode(apply::EncodeArgs),
     /// Build a shape from component weights ("index:weight,…").
@@ -43,6 +47,8 @@ pub enum Command {
 /// Runs one parsed command line.
 pub fn run(cli: Cli) -> Result<()> {
     match cli.command {
+        Command::Components(a) => apply::components(a),
+        Command::Interpolate(a) => apply::interpolate(a),
         Command::Encode(a) => apply::encode(a),
         Command::Synthesize(a) => apply::synthesize(a),
         Command::Features(a) => features::features(a),

@@ -1,11 +1,13 @@
 //! `meshdeco train --config F`.
 
 use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 use anyhow::{Context, Result, bail};
 use clap::Args;
 use meshdeco::config::{Config, MethodKind};
-use meshdeco::pipeline::linear;
+use meshdeco::pipeline::{autoencoder, linear};
 
 use super::progress::Bars;
 
@@ -32,24 +34,45 @@ pub fn run(a: TrainArgs) -> Result<()> {
             }
             let mut bars = Bars::new();
             let o = linear::train(&cfg, &out, &mut bars).with_context(|| format!("training {} ({})", cfg.name, a.config.display()))?;
-            let m = &o.metrics;
-            println!(
-                "{} ({}, {}, K = {}): train Erms {:.4}{} [alignment: {}], fit {:.3} s, representation {:.3} s, {} iterations{}",
-                cfg.name,
-                m.method,
-                m.representation,
-                m.components,
-                m.train_erms,
-                m.test_erms.map(|t| format!(", test Erms {t:.4}")).unwrap_or_default(),
-                m.erms_alignment,
-                m.train_seconds,
-                m.representation_seconds,
-                m.iterations,
-                m.median_energy_share.map(|s| format!(", median in-support energy {s:.3}")).unwrap_or_default(),
-            );
+            print_summary(&cfg.name, &o.metrics);
+            println!("artefacts in {}", o.out_dir.display());
+            Ok(())
+        }
+        MethodKind::Autoencoder => {
+            let stop = Arc::new(AtomicBool::new(false));
+            let flag = stop.clone();
+            // Ctrl-C: finish the current step, write a checkpoint, exit non-zero with a hint.
+            ctrlc::set_handler(move || {
+                if flag.swap(true, Ordering::SeqCst) {
+                    std::process::exit(130);
+                }
+                eprintln!("\ninterrupt: stopping after this step and writing a checkpoint (Ctrl-C again to quit at once)");
+            })
+            .context("installing the Ctrl-C handler")?;
+            let mut bars = Bars::new();
+            let o = autoencoder::train(&cfg, &out, a.resume, Some(stop), &mut bars)
+                .with_context(|| format!("training {} ({})", cfg.name, a.config.display()))?;
+            print_summary(&cfg.name, &o.metrics);
             println!("artefacts in {}", o.out_dir.display());
             Ok(())
         }
         other => bail!("method `{}` is not yet available in this build (config {})", other.name(), a.config.display()),
     }
+}
+
+fn print_summary(name: &str, m: &meshdeco::pipeline::metrics_file::Metrics) {
+    println!(
+        "{} ({}, {}, K = {}): train Erms {:.4}{} [alignment: {}], fit {:.3} s, representation {:.3} s, {} iterations{}",
+        name,
+        m.method,
+        m.representation,
+        m.components,
+        m.train_erms,
+        m.test_erms.map(|t| format!(", test Erms {t:.4}")).unwrap_or_default(),
+        m.erms_alignment,
+        m.train_seconds,
+        m.representation_seconds,
+        m.iterations,
+        m.median_energy_share.map(|s| format!(", median in-support energy {s:.3}")).unwrap_or_default(),
+    );
 }
