@@ -197,7 +197,7 @@ impl HeatGeodesics {
         } else {
             IntrinsicTriangulation::new(positions, faces)
         };
-        if (0..faces.len()).all(|f| tri.is_degenerate(f)) || !(mean_edge_length > 0.0) {
+        if (0..faces.len()).all(|f| tri.is_degenerate(f)) || mean_edge_length.is_nan() || mean_edge_length <= 0.0 {
             return Err(Error::Invalid(format!("heat geodesics: all {} faces are degenerate (zero area)", faces.len())));
         }
         let t = options.m * mean_edge_length * mean_edge_length;
@@ -388,13 +388,12 @@ impl HeatGeodesics {
         }
         // Pinned vertices (first of each component) and vertices on no face: right-hand side 0.
         let mut seen = vec![false; self.n_components];
-        for v in 0..n {
-            let l = self.label[v];
+        for (r, &l) in rhs.iter_mut().zip(&self.label) {
             if l == NONE {
-                rhs[v] = 0.0;
+                *r = 0.0;
             } else if !seen[l] {
                 seen[l] = true;
-                rhs[v] = 0.0;
+                *r = 0.0;
             }
         }
         self.poisson.solve_in_place(rhs);
@@ -410,15 +409,13 @@ impl HeatGeodesics {
             }
         }
         let mut min = vec![f64::INFINITY; self.n_components];
-        for v in 0..n {
-            let l = self.label[v];
-            if l != NONE && phi[v] < min[l] {
-                min[l] = phi[v];
+        for (&p, &l) in phi.iter().zip(&self.label) {
+            if l != NONE && p < min[l] {
+                min[l] = p;
             }
         }
-        for v in 0..n {
-            let l = self.label[v];
-            phi[v] = if l != NONE && has_source[l] { phi[v] - min[l] } else { f64::INFINITY };
+        for (p, &l) in phi.iter_mut().zip(&self.label) {
+            *p = if l != NONE && has_source[l] { *p - min[l] } else { f64::INFINITY };
         }
         for s in isolated_source {
             phi[s] = 0.0;
@@ -528,7 +525,8 @@ pub fn geodesic_distances(positions: &[Vec3], faces: &[[usize; 3]], sources: &[u
 fn solve_dense(s: &mut [f64], r: &mut [f64], k: usize) -> Option<Vec<f64>> {
     for c in 0..k {
         let p = (c..k).max_by(|&a, &b| s[a * k + c].abs().total_cmp(&s[b * k + c].abs()))?;
-        if !(s[p * k + c].abs() > 0.0) {
+        let pivot = s[p * k + c];
+        if pivot == 0.0 || !pivot.is_finite() {
             return None;
         }
         if p != c {
@@ -835,6 +833,21 @@ mod tests {
         assert!(truth > 0.97 * std::f64::consts::PI, "sweep ends {a}, {b} are {truth} apart");
         assert!((d - std::f64::consts::PI).abs() < 0.03 * std::f64::consts::PI, "estimate {d}");
         assert_eq!(solver.max_distance_estimate().unwrap(), d);
+    }
+
+    #[test]
+    fn solver_can_be_shared_between_threads() {
+        fn assert_send_sync<T: Send + Sync>() {}
+        assert_send_sync::<HeatGeodesics>();
+        let s = icosphere(2);
+        let solver = HeatGeodesics::new(&s.positions, &s.faces, 1.0).unwrap();
+        let serial: Vec<Vec<f64>> = (0..4).map(|v| solver.distances(&[v]).unwrap()).collect();
+        let parallel: Vec<Vec<f64>> = std::thread::scope(|sc| {
+            let solver = &solver;
+            let hs: Vec<_> = (0..4).map(|v| sc.spawn(move || solver.distances(&[v]).unwrap())).collect();
+            hs.into_iter().map(|h| h.join().unwrap()).collect()
+        });
+        assert_eq!(serial, parallel);
     }
 
     #[test]

@@ -186,7 +186,7 @@ impl IntrinsicTriangulation {
                 }
             }
         }
-        entries.sort_unstable_by(|x, y| (x.0, x.1).cmp(&(y.0, y.1)));
+        entries.sort_unstable_by_key(|e| (e.0, e.1));
         let mut pairs: Vec<[usize; 2]> = Vec::with_capacity(entries.len() / 2 + 1);
         let mut weights: Vec<f64> = Vec::with_capacity(entries.len() / 2 + 1);
         for (a, b, w) in entries {
