@@ -96,7 +96,7 @@ impl EdgeGraph {
         let n = self.n_vertices();
         assert_eq!(out.len(), n, "one output value per vertex");
         out.fill(f64::INFINITY);
-        // Non-negative f64 values order like their bit patterns: a u64 key heap is fast.
+        // Non-negative f64 values order like their bit patterns: a heap of u64 keys.
         let mut heap: BinaryHeap<Reverse<(u64, usize)>> = BinaryHeap::with_capacity(n / 4 + sources.len() + 16);
         for &s in sources {
             assert!(s < n, "dijkstra: source {s} out of range ({n} vertices)");
