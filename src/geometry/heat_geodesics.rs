@@ -22,18 +22,18 @@
 //! per triangle in the triangle's own plane (from its side lengths), so everything is intrinsic.
 //!
 //! # Intrinsic Delaunay triangulation (default)
-//! Crane et al. recommend it for meshes of poor quality, and real meshes need it: on the horse
+//! Crane et al. suggest it for meshes of poor quality, and real meshes need it: on the horse
 //! gallop (many obtuse triangles, 4552 negative cotangent weights) the heat method on the mesh's
 //! own triangles returns 0.35 for a vertex whose edge-path distance is 1.87 (≈ 60 h too short),
 //! because with negative weights the heat solution oscillates and cancels far from the source.
 //! The operators are therefore built on the intrinsic Delaunay triangulation
 //! ([`super::intrinsic_delaunay`]: same vertices and surface, edges flipped until every interior
-//! weight is ≥ 0), where `M + tL` is (up to boundary edges) an M-matrix, so the heat solution is
-//! positive and its triangular solves have no cancellation; the horse's
-//! distances then agree with the edge-path distances (see the tests). On meshes that are
-//! already Delaunay (the test primitives) nothing changes. Negative weights on boundary edges
-//! (which cannot be flipped) remain. `HeatOptions::intrinsic_delaunay = false` uses the mesh's
-//! triangles.
+//! weight is ≥ 0). The weights still negative there (boundary edges, which cannot be flipped, and
+//! rare skipped flips) are set to 0 in the heat system only, so `M + tL` is an M-matrix: the heat
+//! solution is positive and its triangular solves have no cancellation. The horse's distances
+//! then agree with the edge-path distances (see the tests). On meshes that are already Delaunay
+//! (the test primitives) nothing changes. `HeatOptions::intrinsic_delaunay = false` uses the
+//! mesh's own triangles and weights.
 //!
 //! # Clamping to rigorous bounds ([`DistanceBounds`])
 //! Every geodesic distance on the surface lies between the straight-line distance to the
@@ -55,12 +55,12 @@
 //! complement of the constants). The constant is then removed by step 4.
 //! Vertices on no non-degenerate face (isolated, or only on degenerate faces) get an identity row
 //! in both systems; their distance is 0 if they are a source, otherwise their edge-path distance
-//! with [`DistanceBounds::StraightLineAndEdgePath`] and `+∞` otherwise. Vertices in a component without any source get
-//! `+∞` (no finite value is written for them: callers that save distances must handle it).
+//! with [`DistanceBounds::StraightLineAndEdgePath`] and `+∞` otherwise. Vertices in a component
+//! without any source get `+∞` (callers that save distances must handle it).
 //!
 //! # Boundary conditions
-//! [`BoundaryCondition::Averaged`] (the default, the recommendation of Crane et al.) averages the heat
-//! of the Neumann solution (the natural condition of the system above) and of the Dirichlet
+//! [`BoundaryCondition::Averaged`] (the default, the recommendation of Crane et al.) averages
+//! the heat of the Neumann solution (the natural condition of the system above) and of the Dirichlet
 //! solution (`u = 0` on boundary vertices: their rows/columns replaced by the identity, a second
 //! factorisation). A source on the boundary is exempt from the Dirichlet condition (`u = 0` on
 //! the rest of the boundary only): the factored Dirichlet system is reused with a Schur
