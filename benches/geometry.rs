@@ -1,6 +1,8 @@
 //! Geometry operator benchmarks: cotangent Laplacian assembly, heat-method factorisation
-//! (`HeatGeodesics::new`: Laplacian, mass, one symbolic analysis, three numeric Cholesky
-//! factorisations on meshes with a boundary) and one single-source geodesic query.
+//! (`HeatGeodesics::new`: intrinsic Delaunay flips, Laplacian, mass, one symbolic analysis, two
+//! numeric Cholesky factorisations, three on meshes with a boundary) and one single-source
+//! geodesic query (default options: averaged boundary conditions, straight-line lower bound;
+//! and with the edge-path upper bound, which adds a Dijkstra search).
 //!
 //! Meshes: a unit icosphere with 10 242 vertices (always) and frame 1 of the horse gallop
 //! (8 431 vertices, `../shared/data/horse-gallop/0001.obj`, loaded with tobj directly; skipped
@@ -14,7 +16,7 @@ use std::time::Duration;
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use meshdeco::geometry::cotan_laplacian::cotan_laplacian;
-use meshdeco::geometry::heat_geodesics::HeatGeodesics;
+use meshdeco::geometry::heat_geodesics::{DistanceBounds, HeatGeodesics, HeatOptions};
 use meshdeco::mesh::primitives::icosphere;
 use meshdeco::mesh::{TriMesh, Vec3};
 
@@ -44,6 +46,10 @@ fn bench_mesh(c: &mut Criterion, name: &str, mesh: &TriMesh) {
     let solver = HeatGeodesics::new(&mesh.positions, &mesh.faces, 1.0).unwrap();
     let source = mesh.n_vertices() / 3;
     group.bench_function("geodesic_query", |b| b.iter(|| solver.distances(black_box(&[source])).unwrap()));
+    // With the edge-path (Dijkstra) upper bound as well.
+    let both = HeatOptions { bounds: DistanceBounds::StraightLineAndEdgePath, ..Default::default() };
+    let both = HeatGeodesics::with_options(&mesh.positions, &mesh.faces, both).unwrap();
+    group.bench_function("geodesic_query (+ edge-path bound)", |b| b.iter(|| both.distances(black_box(&[source])).unwrap()));
     group.finish();
 }
 

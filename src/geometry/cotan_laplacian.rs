@@ -344,14 +344,14 @@ mod tests {
             let l = cotan_laplacian(&m.positions, &m.faces);
             assert_eq!(l.compute_nnz(), n + 2 * topo.edges.len(), "{name}: nnz");
             let d = dense(&l);
-            for i in 0..n {
-                let scale = d[i][i].abs().max(1e-300);
-                assert!(d[i][i] > 0.0, "{name}: diagonal {i} = {}", d[i][i]);
-                let row: f64 = d[i].iter().sum();
-                assert!(row.abs() <= 1e-12 * scale, "{name}: row {i} sums to {row}");
-                for j in 0..n {
-                    assert!(d[i][j].is_finite());
-                    assert!((d[i][j] - d[j][i]).abs() <= 1e-15 * scale, "{name}: asymmetric at ({i},{j})");
+            for (i, row) in d.iter().enumerate() {
+                let scale = row[i].abs().max(1e-300);
+                assert!(row[i] > 0.0, "{name}: diagonal {i} = {}", row[i]);
+                let sum: f64 = row.iter().sum();
+                assert!(sum.abs() <= 1e-12 * scale, "{name}: row {i} sums to {sum}");
+                for (j, x) in row.iter().enumerate() {
+                    assert!(x.is_finite());
+                    assert!((x - d[j][i]).abs() <= 1e-15 * scale, "{name}: asymmetric at ({i},{j})");
                 }
             }
             // Dirichlet energy of a linear function = its gradient² × area (flat grid only),

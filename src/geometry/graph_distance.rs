@@ -7,9 +7,10 @@
 //! paths, cheap, and needs no factorisation: used by region PCA and as a cross-check of the heat
 //! method.
 
-use std::cmp::Ordering;
+use std::cmp::{Ordering, Reverse};
 use std::collections::BinaryHeap;
 
+use crate::geometry::cotan_laplacian::EdgeIncidence;
 use crate::mesh::{Topology, Vec3, dist};
 
 /// Distance (length units) from the nearest vertex of `sources` to every vertex along edges of
@@ -23,6 +24,106 @@ pub fn dijkstra(topology: &Topology, positions: &[Vec3], sources: &[usize]) -> V
     let n = topology.n_vertices;
     assert_eq!(positions.len(), n, "dijkstra: one position per vertex");
     let mut d = vec![f64::INFINITY; n];
+    run(&mut d, sources, |v, relax| {
+        for &u in topology.neighbors(v) {
+            relax(u, dist(positions[v], positions[u]));
+        }
+    });
+    d
+}
+
+/// The edge graph of a mesh in compressed (CSR) form with Euclidean edge lengths, for repeated
+/// [`dijkstra`]-style queries without building a full [`Topology`].
+#[derive(Debug, Clone)]
+pub struct EdgeGraph {
+    offsets: Vec<usize>,
+    targets: Vec<usize>,
+    lengths: Vec<f64>,
+}
+
+impl EdgeGraph {
+    /// Graph of the unique edges of `faces` over `positions.len()` vertices. Face indices must be
+    /// valid.
+    pub fn new(positions: &[Vec3], faces: &[[usize; 3]]) -> Self {
+        Self::from_edges(positions, &EdgeIncidence::new(faces).edges)
+    }
+
+    /// Graph of the given undirected edges (each listed once) over `positions.len()` vertices.
+    pub fn from_edges(positions: &[Vec3], edges: &[[usize; 2]]) -> Self {
+        let n = positions.len();
+        let mut offsets = vec![0usize; n + 1];
+        for e in edges {
+            offsets[e[0] + 1] += 1;
+            offsets[e[1] + 1] += 1;
+        }
+        for i in 0..n {
+            offsets[i + 1] += offsets[i];
+        }
+        let mut cursor = offsets[..n].to_vec();
+        let mut targets = vec![0usize; offsets[n]];
+        let mut lengths = vec![0.0; offsets[n]];
+        for e in edges {
+            let l = dist(positions[e[0]], positions[e[1]]);
+            for (a, b) in [(e[0], e[1]), (e[1], e[0])] {
+                targets[cursor[a]] = b;
+                lengths[cursor[a]] = l;
+                cursor[a] += 1;
+            }
+        }
+        EdgeGraph { offsets, targets, lengths }
+    }
+
+    /// Number of vertices N.
+    pub fn n_vertices(&self) -> usize {
+        self.offsets.len() - 1
+    }
+
+    /// Edge-path distances from the nearest source (as [`dijkstra`]).
+    ///
+    /// # Panics
+    /// If a source index is ≥ N.
+    pub fn distances(&self, sources: &[usize]) -> Vec<f64> {
+        let mut d = vec![f64::INFINITY; self.n_vertices()];
+        self.distances_into(sources, &mut d);
+        d
+    }
+
+    /// Like [`EdgeGraph::distances`], writing into `out` (N values, overwritten).
+    ///
+    /// # Panics
+    /// If a source index is ≥ N or `out.len() != N`.
+    pub fn distances_into(&self, sources: &[usize], out: &mut [f64]) {
+        let n = self.n_vertices();
+        assert_eq!(out.len(), n, "one output value per vertex");
+        out.fill(f64::INFINITY);
+        // Non-negative f64 values order like their bit patterns: a heap of u64 keys.
+        let mut heap: BinaryHeap<Reverse<(u64, usize)>> = BinaryHeap::with_capacity(n / 4 + sources.len() + 16);
+        for &s in sources {
+            assert!(s < n, "dijkstra: source {s} out of range ({n} vertices)");
+            out[s] = 0.0;
+            heap.push(Reverse((0f64.to_bits(), s)));
+        }
+        while let Some(Reverse((key, v))) = heap.pop() {
+            let dv = f64::from_bits(key);
+            if dv > out[v] {
+                continue; // stale entry
+            }
+            for k in self.offsets[v]..self.offsets[v + 1] {
+                let u = self.targets[k];
+                let nd = dv + self.lengths[k];
+                if nd < out[u] {
+                    out[u] = nd;
+                    heap.push(Reverse((nd.to_bits(), u)));
+                }
+            }
+        }
+    }
+}
+
+/// Dijkstra on `d` (pre-filled with +∞) from `sources`; `visit(v, relax)` calls
+/// `relax(u, length)` for every edge (v, u).
+fn run(d: &mut [f64], sources: &[usize], visit: impl Fn(usize, &mut dyn FnMut(usize, f64))) {
+    let n = d.len();
     let mut heap = BinaryHeap::with_capacity(sources.len() + 16);
     for &s in sources {
         assert!(s < n, "dijkstra: source {s} out of range ({n} vertices)");
@@ -33,15 +134,14 @@ pub fn dijkstra(topology: &Topology, positions: &[Vec3], sources: &[usize]) -> V
         if dv > d[v] {
             continue; // stale entry
         }
-        for &u in topology.neighbors(v) {
-            let nd = dv + dist(positions[v], positions[u]);
+        visit(v, &mut |u, len| {
+            let nd = dv + len;
             if nd < d[u] {
                 d[u] = nd;
                 heap.push(Item { d: nd, v: u });
             }
-        }
+        });
     }
-    d
 }
 
 /// Heap entry ordered so that `BinaryHeap` pops the smallest distance first.
@@ -113,5 +213,9 @@ mod tests {
         assert_eq!(d[..3], [1.0, 0.0, 2f64.sqrt()]);
         assert!(d[3].is_infinite());
         assert!(dijkstra(&t2, &p, &[]).iter().all(|x| x.is_infinite()));
+        // The CSR graph gives the same distances as the topology-based search.
+        let g = EdgeGraph::new(&s.positions, &s.faces);
+        assert_eq!(g.distances(&[0, 17]), dijkstra(&t, &s.positions, &[0, 17]));
+        assert_eq!(EdgeGraph::new(&p, &[[0, 1, 2]]).distances(&[1]), dijkstra(&t2, &p, &[1]));
     }
 }

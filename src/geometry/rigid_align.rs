@@ -89,8 +89,9 @@ pub fn kabsch_weighted(source: &[Vec3], target: &[Vec3], weights: &[f64]) -> Res
     if let Some((i, w)) = weights.iter().enumerate().find(|(_, w)| !(w.is_finite() && **w >= 0.0)) {
         return Err(Error::Invalid(format!("kabsch: weight {i} ({w}) must be finite and ≥ 0")));
     }
-    if !(weights.iter().sum::<f64>() > 0.0) {
-        return Err(Error::Invalid("kabsch: the weights sum to zero".into()));
+    let total: f64 = weights.iter().sum();
+    if total <= 0.0 || !total.is_finite() {
+        return Err(Error::Invalid(format!("kabsch: the weights sum to {total}, not a positive finite number")));
     }
     for (name, pts) in [("source", source), ("target", target)] {
         if let Some((i, p)) = pts.iter().enumerate().find(|(_, p)| p.iter().any(|c| !c.is_finite())) {
