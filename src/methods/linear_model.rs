@@ -234,7 +234,7 @@ impl<'a> Encoder<'a> {
     /// Encodes every row of a row-major matrix (`n_rows` × E·W); returns `n_rows` × K.
     pub fn encode_rows(&self, rows: &[f64]) -> Result<Vec<f64>> {
         let d = self.model.n_cols();
-        if rows.len() % d != 0 {
+        if !rows.len().is_multiple_of(d) {
             return Err(Error::Invalid(format!("encode: {} values is not a multiple of the row length {d}", rows.len())));
         }
         let mut out = Vec::with_capacity(rows.len() / d * self.model.n_components);

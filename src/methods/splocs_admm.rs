@@ -37,6 +37,7 @@ pub(crate) fn project_weights(w: &mut [f64], constraint: WeightConstraint) {
 /// G = C·Cᵀ (K × K), the residual product is R·C_k = A[:,k] − W·G[:,k], so
 /// `opt = (A[:,k] − W·G[:,k]) / G_kk + W[:,k]`, then W[:,k] = P(opt). Components with
 /// G_kk ≤ `zero_norm` get zero weights. `col` is an F-sized scratch buffer.
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn update_weights(
     weights: &mut [f64],
     xct: &[f64],
@@ -480,7 +481,7 @@ mod tests {
         let rm: Vec<f64> = (0..k * e * w).map(|i| i as f64).collect();
         let mut bl = vec![0.0; rm.len()];
         b.to_blocked(&rm, &mut bl);
-        assert_eq!(&bl[..4 * 1], &[0.0, 1.0, 2.0, 3.0]);
+        assert_eq!(&bl[..4], &[0.0, 1.0, 2.0, 3.0]);
         let mut back = vec![0.0; rm.len()];
         b.to_row_major(&bl, &mut back);
         assert_eq!(back, rm);
