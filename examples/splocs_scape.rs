@@ -248,7 +248,7 @@ fn run(name: &str, dir: &Path, target_s: f64, target_erms: f64, o: &Opts) {
     let fit = SplocsSolver::fit(dm, &provider, &cfg, |i, e| println!("  iteration {i:03}, E={e:.6}")).unwrap();
     let secs = t0.elapsed().as_secs_f64();
     let cpu = cpu_seconds() - c0;
-    let rec = fit.model.reconstruct();
+    let rec = fit.model.reconstruct().unwrap();
     let e_splocs = erms(&rec, &x);
     println!(
         "  SPLOCS: {secs:.3} s wall (target ≤ {target_s} s; process CPU {cpu:.2} s, load average {}; of which distances \
@@ -261,7 +261,7 @@ fn run(name: &str, dir: &Path, target_s: f64, target_erms: f64, o: &Opts) {
     let t1 = Instant::now();
     let kp = 50.min(nf);
     let pca = Pca::fit(dm, &PcaConfig { components: kp, ..Default::default() }).unwrap();
-    println!("  PCA (K {kp}, mean-centred): train Erms {:.3} ({:.3} s)", erms(&pca.reconstruct(), &x), t1.elapsed().as_secs_f64());
+    println!("  PCA (K {kp}, mean-centred): train Erms {:.3} ({:.3} s)", erms(&pca.reconstruct().unwrap(), &x), t1.elapsed().as_secs_f64());
     let shares: Vec<f64> = fit.locality.iter().map(|l| l.energy_share).collect();
     let sizes: Vec<f64> = fit.locality.iter().map(|l| l.support_size as f64).collect();
     let regions: Vec<f64> = fit.locality.iter().map(|l| l.region_size as f64).collect();

@@ -263,7 +263,7 @@ fn encode_recovers_training_weights() {
     let f = 30;
     let x = displacements(f, false, 1e-3, 5);
     let fit = fit_grid(&x, f, &SplocsConfig { components: 3, ..Default::default() });
-    let rec = fit.model.reconstruct();
+    let rec = fit.model.reconstruct().unwrap();
     let d = fit.model.n_cols();
     let enc = fit.model.encoder().unwrap();
     for r in 0..f {
@@ -326,10 +326,10 @@ fn pca_with_rank_components_is_exact() {
     for centering in [PcaCentering::None, PcaCentering::Mean] {
         // noise-free data has rank 3 (three bumps); centring keeps rank ≤ 3
         let m = Pca::fit(dm, &PcaConfig { components: 3, centering }).unwrap();
-        let err = m.reconstruct().iter().zip(&x).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+        let err = m.reconstruct().unwrap().iter().zip(&x).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
         assert!(err < 1e-12, "{centering:?}: max error {err}");
         let m2 = Pca::fit(dm, &PcaConfig { components: 2, centering }).unwrap();
-        let err2 = m2.reconstruct().iter().zip(&x).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+        let err2 = m2.reconstruct().unwrap().iter().zip(&x).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
         assert!(err2 > 1e-4, "{centering:?}: rank-2 error {err2}");
     }
 }
@@ -385,7 +385,7 @@ fn real_data_train_erms_within_reference() {
         let provider = GraphDistances::new(&unit, &faces);
         let fit = SplocsSolver::fit(DataMatrix::new(&x, nf, nv, 3).unwrap(), &provider, &SplocsConfig::default(), |_, _| {})
             .unwrap();
-        let rec = fit.model.reconstruct();
+        let rec = fit.model.reconstruct().unwrap();
         let erms = 1000.0 * (rec.iter().zip(&x).map(|(a, b)| (a - b) * (a - b)).sum::<f64>() / x.len() as f64).sqrt();
         let mut shares: Vec<f64> = fit.locality.iter().map(|l| l.energy_share).collect();
         shares.sort_by(|a, b| a.total_cmp(b));

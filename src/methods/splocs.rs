@@ -722,7 +722,7 @@ mod tests {
                 }
             }
             // reconstruction explains most of the data
-            let rec = fit.model.reconstruct();
+            let rec = fit.model.reconstruct().unwrap();
             let num: f64 = rec.iter().zip(&x).map(|(a, b)| (a - b) * (a - b)).sum();
             let den: f64 = x.iter().map(|v| v * v).sum();
             assert!(num / den < 0.05, "{constraint:?}: relative error {}", num / den);
