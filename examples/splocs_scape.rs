@@ -166,6 +166,20 @@ fn kabsch_apply(src: &[V3], dst: &[V3]) -> Vec<V3> {
         .collect()
 }
 
+/// Process CPU time (user + system, all threads) in seconds from /proc (Linux; NaN elsewhere).
+/// Reported beside the wall time because the machine is shared: under load the wall time
+/// includes waiting for a core.
+fn cpu_seconds() -> f64 {
+    let Ok(s) = std::fs::read_to_string("/proc/self/stat") else { return f64::NAN };
+    let fields: Vec<&str> = s.rsplit(')').next().unwrap_or("").split_whitespace().collect();
+    let tick = |i: usize| fields.get(i).and_then(|v| v.parse::<f64>().ok()).unwrap_or(f64::NAN);
+    (tick(11) + tick(12)) / 100.0
+}
+
+fn load_average() -> String {
+    std::fs::read_to_string("/proc/loadavg").map(|s| s.split_whitespace().next().unwrap_or("?").to_string()).unwrap_or_default()
+}
+
 fn erms(a: &[f64], b: &[f64]) -> f64 {
     let s: f64 = a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum();
     1000.0 * (s / a.len() as f64).sqrt()
@@ -230,14 +244,16 @@ fn run(name: &str, dir: &Path, target_s: f64, target_erms: f64, o: &Opts) {
         o.threads
     );
     let dm = DataMatrix::new(&x, nf, nv, 3).unwrap();
-    let t0 = Instant::now();
+    let (t0, c0) = (Instant::now(), cpu_seconds());
     let fit = SplocsSolver::fit(dm, &provider, &cfg, |i, e| println!("  iteration {i:03}, E={e:.6}")).unwrap();
     let secs = t0.elapsed().as_secs_f64();
-    let rec = fit.model.reconstruct();
+    let cpu = cpu_seconds() - c0;
+    let rec = fit.model.reconstruct().unwrap();
     let e_splocs = erms(&rec, &x);
     println!(
-        "  SPLOCS: {secs:.3} s (target ≤ {target_s} s; of which distances {:.3} s for {} centre sets), \
-         {} iterations, train Erms {e_splocs:.3} (target ≤ {target_erms})",
+        "  SPLOCS: {secs:.3} s wall (target ≤ {target_s} s; process CPU {cpu:.2} s, load average {}; of which distances \
+         {:.3} s for {} centre sets), {} iterations, train Erms {e_splocs:.3} (target ≤ {target_erms})",
+        load_average(),
         provider.time.get().as_secs_f64(),
         fit.distance_queries,
         fit.iterations
@@ -245,7 +261,7 @@ fn run(name: &str, dir: &Path, target_s: f64, target_erms: f64, o: &Opts) {
     let t1 = Instant::now();
     let kp = 50.min(nf);
     let pca = Pca::fit(dm, &PcaConfig { components: kp, ..Default::default() }).unwrap();
-    println!("  PCA (K {kp}, mean-centred): train Erms {:.3} ({:.3} s)", erms(&pca.reconstruct(), &x), t1.elapsed().as_secs_f64());
+    println!("  PCA (K {kp}, mean-centred): train Erms {:.3} ({:.3} s)", erms(&pca.reconstruct().unwrap(), &x), t1.elapsed().as_secs_f64());
     let shares: Vec<f64> = fit.locality.iter().map(|l| l.energy_share).collect();
     let sizes: Vec<f64> = fit.locality.iter().map(|l| l.support_size as f64).collect();
     let regions: Vec<f64> = fit.locality.iter().map(|l| l.region_size as f64).collect();

@@ -123,14 +123,40 @@ impl LinearModel {
         self.component(k).chunks_exact(self.width).map(|g| g.iter().map(|v| v * v).sum::<f64>().sqrt()).collect()
     }
 
-    /// Reconstruction of every training frame: F × (E·W), row-major, `offset + W·C`.
-    pub fn reconstruct(&self) -> Vec<f64> {
+    /// Reconstruction of every training frame: F × (E·W), row-major, `offset + W·C`. Errors
+    /// when the model's arrays are inconsistent (see [`LinearModel::validate`]).
+    pub fn reconstruct(&self) -> Result<Vec<f64>> {
+        self.reconstruct_weights(&self.weights, self.n_frames)
+    }
+
+    /// `offset + weights·C` for `n_rows` rows of weights (`n_rows` × K, row-major); returns
+    /// `n_rows` × (E·W), row-major. Errors on inconsistent shapes or non-finite weights.
+    pub fn reconstruct_weights(&self, weights: &[f64], n_rows: usize) -> Result<Vec<f64>> {
+        self.validate()?;
         let d = self.n_cols();
-        let mut out = vec![0.0; self.n_frames * d];
-        for f in 0..self.n_frames {
-            self.synthesize_into(self.frame_weights(f), &mut out[f * d..(f + 1) * d]);
+        let k = self.n_components;
+        if weights.len() != n_rows * k {
+            return Err(Error::Invalid(format!(
+                "reconstruct: {} weights given for {n_rows} rows of {k} components",
+                weights.len()
+            )));
         }
-        out
+        if let Some(i) = weights.iter().position(|w| !w.is_finite()) {
+            return Err(Error::Invalid(format!("reconstruct: weight {i} is not finite ({})", weights[i])));
+        }
+        let mut out = Vec::with_capacity(n_rows * d);
+        for _ in 0..n_rows {
+            out.extend_from_slice(&self.offset);
+        }
+        faer::linalg::matmul::matmul(
+            faer::MatMut::from_row_major_slice_mut(&mut out, n_rows, d),
+            faer::Accum::Add,
+            faer::MatRef::from_row_major_slice(weights, n_rows, k),
+            faer::MatRef::from_row_major_slice(&self.components, k, d),
+            1.0,
+            faer::Par::Seq,
+        );
+        Ok(out)
     }
 
     /// `offset + Σ_k weights[k]·C_k` (E·W numbers). Errors when `weights` does not have K
@@ -234,7 +260,7 @@ impl<'a> Encoder<'a> {
     /// Encodes every row of a row-major matrix (`n_rows` × E·W); returns `n_rows` × K.
     pub fn encode_rows(&self, rows: &[f64]) -> Result<Vec<f64>> {
         let d = self.model.n_cols();
-        if rows.len() % d != 0 {
+        if !rows.len().is_multiple_of(d) {
             return Err(Error::Invalid(format!("encode: {} values is not a multiple of the row length {d}", rows.len())));
         }
         let mut out = Vec::with_capacity(rows.len() / d * self.model.n_components);
@@ -392,7 +418,7 @@ mod tests {
     #[test]
     fn reconstruct_and_validate() {
         let m = model(WeightConstraint::Signed);
-        let r = m.reconstruct();
+        let r = m.reconstruct().unwrap();
         assert_eq!(r.len(), 2 * 8);
         assert_eq!(&r[8..], &m.synthesize(&[0.2, 0.0, 1.0]).unwrap()[..]);
         let mut bad = m.clone();

@@ -153,13 +153,13 @@ mod tests {
         let x = low_rank(f, e, w, r);
         let m = Pca::fit(DataMatrix::new(&x, f, e, w).unwrap(), &PcaConfig { components: r, ..Default::default() })
             .unwrap();
-        let rec = m.reconstruct();
+        let rec = m.reconstruct().unwrap();
         let err = rec.iter().zip(&x).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
         assert!(err < 1e-10, "max abs error {err}");
         // one component fewer cannot be exact
         let m2 = Pca::fit(DataMatrix::new(&x, f, e, w).unwrap(), &PcaConfig { components: r - 1, ..Default::default() })
             .unwrap();
-        let err2 = m2.reconstruct().iter().zip(&x).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+        let err2 = m2.reconstruct().unwrap().iter().zip(&x).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
         assert!(err2 > 1e-3, "rank-{} reconstruction unexpectedly exact ({err2})", r - 1);
     }
 

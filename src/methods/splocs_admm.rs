@@ -37,6 +37,7 @@ pub(crate) fn project_weights(w: &mut [f64], constraint: WeightConstraint) {
 /// G = C·Cᵀ (K × K), the residual product is R·C_k = A[:,k] − W·G[:,k], so
 /// `opt = (A[:,k] − W·G[:,k]) / G_kk + W[:,k]`, then W[:,k] = P(opt). Components with
 /// G_kk ≤ `zero_norm` get zero weights. `col` is an F-sized scratch buffer.
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn update_weights(
     weights: &mut [f64],
     xct: &[f64],
@@ -187,6 +188,9 @@ pub(crate) struct AdmmAcc {
     wx: Vec<f64>,
     t: Vec<f64>,
     nrm: Vec<f64>,
+    xc: Vec<f64>,
+    g: Vec<f64>,
+    rows: Vec<usize>,
 }
 
 impl AdmmAcc {
@@ -198,6 +202,9 @@ impl AdmmAcc {
             wx: vec![0.0; k * max_cols],
             t: vec![0.0; k * max_cols],
             nrm: vec![0.0; max_cols],
+            xc: vec![0.0; f * k],
+            g: vec![0.0; k * k],
+            rows: Vec::with_capacity(k),
         }
     }
     pub(crate) fn merge(mut self, o: AdmmAcc) -> AdmmAcc {
@@ -260,9 +267,35 @@ pub(crate) fn admm_block(sh: &AdmmShared<'_>, blocks: &Blocks, b: usize, c: &mut
         }
     }
     acc.sparsity += sparsity;
-    let cb = MatRef::from_row_major_slice(c, k, nc);
-    matmul(MatMut::from_row_major_slice_mut(&mut acc.xct, f, k), Accum::Add, xb, cb.transpose(), sh.inv_scale, Par::Seq);
-    matmul(MatMut::from_row_major_slice_mut(&mut acc.cct, k, k), Accum::Add, cb, cb.transpose(), 1.0, Par::Seq);
+    // X·Cᵀ/s and C·Cᵀ of the block, over the components that are non-zero in it (Z is sparse)
+    acc.rows.clear();
+    acc.rows.extend((0..k).filter(|&kk| c[kk * nc..(kk + 1) * nc].iter().any(|&v| v != 0.0)));
+    let r = acc.rows.len();
+    if r == k {
+        let cb = MatRef::from_row_major_slice(c, k, nc);
+        matmul(MatMut::from_row_major_slice_mut(&mut acc.xct, f, k), Accum::Add, xb, cb.transpose(), sh.inv_scale, Par::Seq);
+        matmul(MatMut::from_row_major_slice_mut(&mut acc.cct, k, k), Accum::Add, cb, cb.transpose(), 1.0, Par::Seq);
+    } else if r > 0 {
+        let compact = &mut acc.wx[..r * nc];
+        for (j, &kk) in acc.rows.iter().enumerate() {
+            compact[j * nc..(j + 1) * nc].copy_from_slice(&c[kk * nc..(kk + 1) * nc]);
+        }
+        let cb = MatRef::from_row_major_slice(compact, r, nc);
+        let xc = &mut acc.xc[..f * r];
+        let g = &mut acc.g[..r * r];
+        matmul(MatMut::from_row_major_slice_mut(xc, f, r), Accum::Replace, xb, cb.transpose(), sh.inv_scale, Par::Seq);
+        matmul(MatMut::from_row_major_slice_mut(g, r, r), Accum::Replace, cb, cb.transpose(), 1.0, Par::Seq);
+        for row in 0..f {
+            for (j, &kk) in acc.rows.iter().enumerate() {
+                acc.xct[row * k + kk] += xc[row * r + j];
+            }
+        }
+        for (a, &ka) in acc.rows.iter().enumerate() {
+            for (b, &kb) in acc.rows.iter().enumerate() {
+                acc.cct[ka * k + kb] += g[a * r + b];
+            }
+        }
+    }
 }
 
 /// Fused step after the C-update of one ADMM iteration on one row segment (one component,
@@ -480,7 +513,7 @@ mod tests {
         let rm: Vec<f64> = (0..k * e * w).map(|i| i as f64).collect();
         let mut bl = vec![0.0; rm.len()];
         b.to_blocked(&rm, &mut bl);
-        assert_eq!(&bl[..4 * 1], &[0.0, 1.0, 2.0, 3.0]);
+        assert_eq!(&bl[..4], &[0.0, 1.0, 2.0, 3.0]);
         let mut back = vec![0.0; rm.len()];
         b.to_row_major(&bl, &mut back);
         assert_eq!(back, rm);
