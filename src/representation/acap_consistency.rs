@@ -22,9 +22,11 @@
 //!   which covers every logarithm of R_i, flips included; vertices whose rotation is the identity
 //!   (θ ≤ 1e-6, as in the reference) may also change their axis. Moves, each accepted only when
 //!   it lowers E: (1) single-vertex moves to the best m_i given the neighbours (iterated
-//!   conditional modes, exact closed form because E is quadratic in φ_i); (2) cluster moves that
-//!   shift a whole connected region of mutually consistent vertices (neighbour differences below
-//!   π) by m = ±1, which repairs the seams where two BFS branches met with different cycle counts.
+//!   conditional modes, exact closed form because E is quadratic in φ_i); (2) cluster moves on a
+//!   whole connected region of mutually consistent vertices (neighbour differences below π):
+//!   with every angle stored non-negative (axis along ω), all members' angles change by +2π or
+//!   −2π (ω → (‖ω‖ ± 2π)·ω/‖ω‖), which repairs seams where two BFS branches met with different
+//!   cycle counts or axis signs (for instance the reference's own BFS output on its fixture).
 //!   The search stops when no move improves E; hence E(global) ≤ E(BFS) always.
 
 
@@ -169,11 +171,100 @@ fn dot(a: Vec3, b: Vec3) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 
+/// Rewrites vertex i as (−a, −φ) when φ < 0 (the same vector ω).
+#[inline]
+fn make_angle_non_negative(field: &mut RotationField, i: usize) {
+    if field.angle[i] < 0.0 {
+        field.angle[i] = -field.angle[i];
+        let a = field.axis[i];
+        field.axis[i] = [-a[0], -a[1], -a[2]];
+    }
+}
+
 /// Minimum energy decrease for a move to be accepted (guards against cycling on rounding).
 const MIN_GAIN: f64 = 1e-9;
 
-/// Neighbour differences below this count as consistent when clusters are formed.
-const CLUSTER_JUMP: f64 = PI;
+/// Neighbour differences below these count as consistent when clusters are formed (several
+/// thresholds find different seams; π alone misses some on horse-gallop).
+const CLUSTER_JUMPS: [f64; 3] = [PI, 2.0, 1.0];
+
+/// Buffers of [`best_cluster_move`]: cluster label per vertex, members of all clusters
+/// concatenated, and the start of each cluster in `members` (plus the end).
+struct ClusterScratch {
+    label: Vec<usize>,
+    stack: Vec<usize>,
+    members: Vec<usize>,
+    starts: Vec<usize>,
+}
+
+/// Splits the vertices into components of edges with ‖ω_i − ω_j‖ < `jump` and returns the
+/// most improving move `(ΔE, cluster, sign)` that changes every angle of one cluster by 2π·sign
+/// (angles stored non-negative, so each ω moves along its own direction), if any lowers E by
+/// more than [`MIN_GAIN`]. Clusters are left in `scratch`.
+fn best_cluster_move(
+    field: &RotationField,
+    w: &[Vec3],
+    offsets: &[usize],
+    ring: &[usize],
+    jump: f64,
+    scratch: &mut ClusterScratch,
+) -> Option<(f64, usize, f64)> {
+    let n = w.len();
+    let ClusterScratch { label, stack, members, starts } = scratch;
+    label.iter_mut().for_each(|l| *l = usize::MAX);
+    members.clear();
+    starts.clear();
+    for s0 in 0..n {
+        if label[s0] != usize::MAX {
+            continue;
+        }
+        let c = starts.len();
+        starts.push(members.len());
+        label[s0] = c;
+        stack.push(s0);
+        while let Some(v) = stack.pop() {
+            members.push(v);
+            for &u in &ring[offsets[v]..offsets[v + 1]] {
+                if label[u] == usize::MAX && dist2(w[v], w[u]) < jump * jump {
+                    label[u] = c;
+                    stack.push(u);
+                }
+            }
+        }
+    }
+    starts.push(members.len());
+    let n_clusters = starts.len() - 1;
+    if n_clusters < 2 {
+        return None;
+    }
+    let mut best = (-MIN_GAIN, usize::MAX, 0.0);
+    for c in 0..n_clusters {
+        for sign in [1.0, -1.0] {
+            let shift = TWO_PI * sign;
+            let mut delta = 0.0;
+            for &i in &members[starts[c]..starts[c + 1]] {
+                let a = field.axis[i];
+                let wi_new = [w[i][0] + shift * a[0], w[i][1] + shift * a[1], w[i][2] + shift * a[2]];
+                for &j in &ring[offsets[i]..offsets[i + 1]] {
+                    if label[j] == c {
+                        if j < i {
+                            continue; // each internal edge once
+                        }
+                        let b = field.axis[j];
+                        let wj_new = [w[j][0] + shift * b[0], w[j][1] + shift * b[1], w[j][2] + shift * b[2]];
+                        delta += dist2(wi_new, wj_new) - dist2(w[i], w[j]);
+                    } else {
+                        delta += dist2(wi_new, w[j]) - dist2(w[i], w[j]);
+                    }
+                }
+            }
+            if delta < best.0 {
+                best = (delta, c, sign);
+            }
+        }
+    }
+    (best.1 != usize::MAX).then_some(best)
+}
 
 /// Global consistency by local search on E (module docs), started from `field` (normally the
 /// BFS result) and modifying it in place. `identity[i]` marks vertices whose rotation is the
@@ -187,12 +278,15 @@ pub fn global_consistency(
     edges: &[[usize; 2]],
 ) -> f64 {
     let n = field.axis.len();
+    // Store every vertex with a non-negative angle (axis along ω): the cluster shift below moves
+    // each ω by 2π along its own direction, which is consistent across a cluster only if the
+    // axes agree with the vectors.
+    for i in 0..n {
+        make_angle_non_negative(field, i);
+    }
     let mut w: Vec<Vec3> = (0..n).map(|i| field.vector(i)).collect();
-    let mut label = vec![usize::MAX; n];
-    let mut stack = Vec::new();
-    let mut members: Vec<usize> = Vec::new();
-    let mut starts: Vec<usize> = Vec::new();
-    for _round in 0..1000 {
+    let mut scratch = ClusterScratch { label: vec![usize::MAX; n], stack: Vec::new(), members: Vec::new(), starts: Vec::new() };
+    for _round in 0..10_000 {
         let mut improved = false;
         // (1) Iterated conditional modes.
         for _sweep in 0..1000 {
@@ -236,6 +330,7 @@ pub fn global_consistency(
                         let cand = [a[0] * phi, a[1] * phi, a[2] * phi];
                         if local(cand) < cur - MIN_GAIN {
                             field.angle[i] = phi;
+                            make_angle_non_negative(field, i);
                             w[i] = cand;
                             changed = true;
                         }
@@ -247,67 +342,27 @@ pub fn global_consistency(
             }
             improved = true;
         }
-        // (2) Cluster moves: components of the graph of consistent edges.
-        label.iter_mut().for_each(|l| *l = usize::MAX);
-        members.clear();
-        starts.clear();
-        for s0 in 0..n {
-            if label[s0] != usize::MAX {
-                continue;
-            }
-            let c = starts.len();
-            starts.push(members.len());
-            label[s0] = c;
-            stack.push(s0);
-            while let Some(v) = stack.pop() {
-                members.push(v);
-                for &u in &ring[offsets[v]..offsets[v + 1]] {
-                    if label[u] == usize::MAX && dist2(w[v], w[u]) < CLUSTER_JUMP * CLUSTER_JUMP {
-                        label[u] = c;
-                        stack.push(u);
-                    }
-                }
+        // (2) Cluster moves: components of the graph of consistent edges, for several
+        // thresholds; the best move over all clusters and thresholds is applied (greedy
+        // best-first: applying the first improving one could commit to a worse branch, e.g.
+        // unwrapping the near-identity half of a bar instead of the half beyond π).
+        let mut best: Option<(f64, Vec<usize>, f64)> = None;
+        for &jump in &CLUSTER_JUMPS {
+            if let Some((delta, c, sign)) = best_cluster_move(field, &w, offsets, ring, jump, &mut scratch)
+                && best.as_ref().is_none_or(|b| delta < b.0)
+            {
+                let members = scratch.members[scratch.starts[c]..scratch.starts[c + 1]].to_vec();
+                best = Some((delta, members, sign));
             }
         }
-        starts.push(members.len());
-        let n_clusters = starts.len() - 1;
-        if n_clusters > 1 {
-            for c in 0..n_clusters {
-                let cluster = &members[starts[c]..starts[c + 1]];
-                // ΔE for shifting every member by 2π·sign along its axis.
-                let mut best = (0.0, 0.0);
-                for sign in [1.0, -1.0] {
-                    let shift = TWO_PI * sign;
-                    let mut delta = 0.0;
-                    for &i in cluster {
-                        let a = field.axis[i];
-                        let wi_new = [w[i][0] + shift * a[0], w[i][1] + shift * a[1], w[i][2] + shift * a[2]];
-                        for &j in &ring[offsets[i]..offsets[i + 1]] {
-                            if label[j] == c {
-                                if j < i {
-                                    continue; // each internal edge once
-                                }
-                                let b = field.axis[j];
-                                let wj_new = [w[j][0] + shift * b[0], w[j][1] + shift * b[1], w[j][2] + shift * b[2]];
-                                delta += dist2(wi_new, wj_new) - dist2(w[i], w[j]);
-                            } else {
-                                delta += dist2(wi_new, w[j]) - dist2(w[i], w[j]);
-                            }
-                        }
-                    }
-                    if delta < best.0 {
-                        best = (delta, sign);
-                    }
-                }
-                if best.0 < -MIN_GAIN {
-                    let shift = TWO_PI * best.1;
-                    for &i in cluster {
-                        field.angle[i] += shift;
-                        w[i] = field.vector(i);
-                    }
-                    improved = true;
-                }
+        if let Some((_, members, sign)) = best {
+            let shift = TWO_PI * sign;
+            for &i in &members {
+                field.angle[i] += shift;
+                make_angle_non_negative(field, i);
+                w[i] = field.vector(i);
             }
+            improved = true;
         }
         if !improved {
             break;
@@ -374,7 +429,8 @@ mod tests {
         assert!(e1 <= e0);
         assert!((e1 - 0.01 * (n - 1) as f64).abs() < 1e-9, "energy {e1}");
         for v in 1..n {
-            assert!((f.angle[v] - f.angle[v - 1] - 0.1).abs() < 1e-9);
+            let (a, b) = (f.vector(v - 1)[2], f.vector(v)[2]);
+            assert!((b - a - 0.1).abs() < 1e-9 || (a - b - 0.1).abs() < 1e-9, "{a} {b}");
         }
         assert!((e1 - neighbour_energy(&f, &edges)).abs() < 1e-9);
     }

@@ -33,6 +33,11 @@
 //! When the T_i were computed by the encoder from positions x, x (up to translation) has zero
 //! residual, so the round trip is exact to rounding. (On a flat 1-ring, h_i is the normal and
 //! the removed component of the residual does not depend on p at all, so nothing is lost.)
+//!
+//! Some meshes leave motions the fit cannot see: symmetric 1-ring fans, e.g. the 3-colouring
+//! patterns of a regular triangle grid or the antipodal pairs of an octahedron, whose fitted
+//! gradients vanish. The optional edge term (weight μ, see
+//! [`super::acap::AcapDecoder::FitInverse`]) keeps the system definite and resolves them.
 
 #![allow(clippy::needless_range_loop)] // index loops over 3-vectors read like the formulas
 

@@ -84,7 +84,7 @@ pub fn inverse(m: &Mat3) -> Option<Mat3> {
     Some(r)
 }
 
-/// The skew matrix [ω]× (see the module docs).
+/// The skew matrix \[ω\]× (see the module docs).
 #[inline]
 pub fn skew(w: Vec3) -> Mat3 {
     [[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]]
@@ -172,7 +172,7 @@ pub fn axis_angle(r: &Mat3) -> (Vec3, f64) {
     (a, theta)
 }
 
-/// Rodrigues' formula: exp([ω]×) for a rotation vector ω (angle ‖ω‖, any size, about ω/‖ω‖).
+/// Rodrigues' formula: exp(\[ω\]×) for a rotation vector ω (angle ‖ω‖, any size, about ω/‖ω‖).
 /// Uses the Taylor series below ‖ω‖ = 1e-6.
 pub fn exp_so3(w: Vec3) -> Mat3 {
     let t2 = w[0] * w[0] + w[1] * w[1] + w[2] * w[2];
