@@ -298,7 +298,7 @@ pub fn train(cfg: &Config, out: &Path, progress: &mut dyn Progress) -> Result<Tr
     let truth = |idx: &[usize]| -> Vec<Vec<Vec3>> {
         idx.iter().map(|&f| prep.sequence.frames[f].iter().map(|p| prep.unit_box.invert(*p)).collect()).collect()
     };
-    let train_rec = artifact.decode_rows(&artifact.model.reconstruct())?;
+    let train_rec = artifact.decode_rows(&artifact.model.reconstruct()?)?;
     let train_erms = erms(&truth(&prep.train), &train_rec, alignment)?;
     let test_erms = if prep.test.is_empty() {
         None
