@@ -129,11 +129,13 @@ pub struct RepresentationOptions {
     /// Triangle-gradient stretch convention for the normal direction (default
     /// [`NormalConvention::UnitNormal`]: the rest shape encodes to zero).
     pub gradient_normal: NormalConvention,
+    /// ACAP decoder (features → vertices); see [`acap::AcapDecoder`].
+    pub acap_decoder: acap::AcapDecoder,
 }
 
 impl Default for RepresentationOptions {
     fn default() -> Self {
-        RepresentationOptions { acap_consistency: Consistency::Bfs, gradient_normal: NormalConvention::UnitNormal }
+        RepresentationOptions { acap_consistency: Consistency::Bfs, gradient_normal: NormalConvention::UnitNormal, acap_decoder: acap::AcapOptions::default().decoder }
     }
 }
 
@@ -181,7 +183,7 @@ impl Representation {
             RepresentationKind::TriangleGradient => {
                 Codec::TriangleGradient(Box::new(TriangleGradient::new(rest, options.gradient_normal)?))
             }
-            RepresentationKind::Acap => Codec::Acap(Box::new(Acap::new(rest)?)),
+            RepresentationKind::Acap => Codec::Acap(Box::new(Acap::with_options(rest, acap::AcapOptions { decoder: options.acap_decoder })?)),
         };
         let topo = Topology::new(rest.n_vertices(), &rest.faces);
         let adjacency = match kind.element() {
