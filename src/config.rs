@@ -72,7 +72,10 @@ impl FrameSelection {
             return Ok(FrameSelection::Rest);
         }
         if let Some(n) = t.strip_prefix("every:") {
-            let n: usize = n.trim().parse().map_err(|_| Error::config(key, format!("`{s}`: expected every:N with N a positive integer")))?;
+            let n: usize = n
+                .trim()
+                .parse()
+                .map_err(|_| Error::config(key, format!("`{s}`: expected every:N with N a positive integer")))?;
             if n == 0 {
                 return Err(Error::config(key, format!("`{s}`: N must be at least 1")));
             }
@@ -81,9 +84,18 @@ impl FrameSelection {
         let mut ranges = Vec::new();
         for part in t.split(',') {
             let part = part.trim();
-            let bad = || Error::config(key, format!("`{s}`: `{part}` is not a frame number or range a-b (1-based); other forms: all, rest, every:N"));
+            let bad = || {
+                Error::config(
+                    key,
+                    format!(
+                        "`{s}`: `{part}` is not a frame number or range a-b (1-based); other forms: all, rest, every:N"
+                    ),
+                )
+            };
             let (a, b) = match part.split_once('-') {
-                Some((a, b)) => (a.trim().parse::<usize>().map_err(|_| bad())?, b.trim().parse::<usize>().map_err(|_| bad())?),
+                Some((a, b)) => {
+                    (a.trim().parse::<usize>().map_err(|_| bad())?, b.trim().parse::<usize>().map_err(|_| bad())?)
+                }
                 None => {
                     let a = part.parse::<usize>().map_err(|_| bad())?;
                     (a, a)
@@ -111,7 +123,10 @@ impl FrameSelection {
                 let mut v = Vec::new();
                 for &(a, b) in r {
                     if b > n_frames {
-                        return Err(Error::config(key, format!("range {a}-{b} goes past the last frame ({n_frames} frames)")));
+                        return Err(Error::config(
+                            key,
+                            format!("range {a}-{b} goes past the last frame ({n_frames} frames)"),
+                        ));
                     }
                     v.extend(a - 1..b);
                 }
@@ -265,15 +280,46 @@ fn allowed_keys(kind: MethodKind) -> &'static [&'static str] {
     match kind {
         MethodKind::Pca => &["components", "representation", "seed", "consistency"],
         MethodKind::Splocs => &[
-            "components", "representation", "sparsity", "support", "weights", "max_iterations", "admm", "tolerance", "seed",
-            "fixed_centers", "geodesic_m",
+            "components",
+            "representation",
+            "sparsity",
+            "support",
+            "weights",
+            "max_iterations",
+            "admm",
+            "tolerance",
+            "seed",
+            "fixed_centers",
+            "geodesic_m",
         ],
         MethodKind::RegionPca => &[
-            "components", "representation", "seed", "lambda", "r", "threshold", "regions", "max_regions", "beta", "gamma", "geodesic_m",
+            "components",
+            "representation",
+            "seed",
+            "lambda",
+            "r",
+            "threshold",
+            "regions",
+            "max_regions",
+            "beta",
+            "gamma",
+            "geodesic_m",
         ],
         MethodKind::Autoencoder => &[
-            "components", "support", "seed", "geodesic_m", "iterations", "learning_rate", "batch_size", "layers", "lambda1", "lambda2",
-            "theta", "checkpoint_every", "scaling", "consistency",
+            "components",
+            "support",
+            "seed",
+            "geodesic_m",
+            "iterations",
+            "learning_rate",
+            "batch_size",
+            "layers",
+            "lambda1",
+            "lambda2",
+            "theta",
+            "checkpoint_every",
+            "scaling",
+            "consistency",
         ],
     }
 }
@@ -303,16 +349,22 @@ impl Config {
     fn validate(raw: RawConfig) -> Result<Self> {
         let name = raw.name.unwrap_or_else(|| "experiment".to_string());
         if name.is_empty() || name.contains(['/', '\\']) || name == "." || name == ".." {
-            return Err(Error::config("name", format!("`{name}` must be a non-empty file name without path separators")));
+            return Err(Error::config(
+                "name",
+                format!("`{name}` must be a non-empty file name without path separators"),
+            ));
         }
         let d = raw.data;
         if d.path.trim().is_empty() {
             return Err(Error::config("data.path", "must not be empty"));
         }
-        if let Some(n) = d.path.strip_prefix(crate::synthetic::PREFIX) {
-            if !crate::synthetic::NAMES.contains(&n) {
-                return Err(Error::config("data.path", format!("unknown synthetic dataset `{n}`; available: {}", crate::synthetic::NAMES.join(", "))));
-            }
+        if let Some(n) = d.path.strip_prefix(crate::synthetic::PREFIX)
+            && !crate::synthetic::NAMES.contains(&n)
+        {
+            return Err(Error::config(
+                "data.path",
+                format!("unknown synthetic dataset `{n}`; available: {}", crate::synthetic::NAMES.join(", ")),
+            ));
         }
         let train = match &d.train {
             Some(s) => FrameSelection::parse("data.train", s)?,
@@ -340,14 +392,26 @@ impl Config {
             "splocs" => MethodKind::Splocs,
             "region-pca" => MethodKind::RegionPca,
             "autoencoder" => MethodKind::Autoencoder,
-            other => return Err(Error::config("method.kind", format!("`{other}`: expected autoencoder, splocs, pca or region-pca"))),
+            other => {
+                return Err(Error::config(
+                    "method.kind",
+                    format!("`{other}`: expected autoencoder, splocs, pca or region-pca"),
+                ));
+            }
         };
         // Keys given for another kind.
         let given = toml::Value::try_from(&m).map_err(|e| Error::Invalid(e.to_string()))?;
         if let toml::Value::Table(t) = given {
             for k in t.keys() {
                 if k != "kind" && !allowed_keys(kind).contains(&k.as_str()) {
-                    return Err(Error::config(format!("method.{k}"), format!("does not apply to kind = \"{}\" (it accepts: {})", kind.name(), allowed_keys(kind).join(", "))));
+                    return Err(Error::config(
+                        format!("method.{k}"),
+                        format!(
+                            "does not apply to kind = \"{}\" (it accepts: {})",
+                            kind.name(),
+                            allowed_keys(kind).join(", ")
+                        ),
+                    ));
                 }
             }
         }
@@ -362,19 +426,19 @@ impl Config {
 }
 
 fn positive(key: &str, v: Option<f64>) -> Result<()> {
-    if let Some(x) = v {
-        if !(x.is_finite() && x > 0.0) {
-            return Err(Error::config(key, format!("{x} must be a positive number")));
-        }
+    if let Some(x) = v
+        && !(x.is_finite() && x > 0.0)
+    {
+        return Err(Error::config(key, format!("{x} must be a positive number")));
     }
     Ok(())
 }
 
 fn non_negative(key: &str, v: Option<f64>) -> Result<()> {
-    if let Some(x) = v {
-        if !(x.is_finite() && x >= 0.0) {
-            return Err(Error::config(key, format!("{x} must be a non-negative number")));
-        }
+    if let Some(x) = v
+        && !(x.is_finite() && x >= 0.0)
+    {
+        return Err(Error::config(key, format!("{x} must be a non-negative number")));
     }
     Ok(())
 }
@@ -394,7 +458,10 @@ fn check_method_values(kind: MethodKind, m: &RawMethod) -> Result<()> {
             _ => ["displacement", "triangle-gradient"].contains(&r.as_str()),
         };
         if !ok {
-            return Err(Error::config("method.representation", format!("`{r}` is not available for kind = \"{}\"", kind.name())));
+            return Err(Error::config(
+                "method.representation",
+                format!("`{r}` is not available for kind = \"{}\"", kind.name()),
+            ));
         }
     }
     non_negative("method.sparsity", m.sparsity)?;
@@ -406,10 +473,11 @@ fn check_method_values(kind: MethodKind, m: &RawMethod) -> Result<()> {
             return Err(Error::config("method.support", format!("d_min ({lo}) must be below d_max ({hi})")));
         }
     }
-    if let Some(w) = &m.weights {
-        if w != "nonnegative" && w != "signed" {
-            return Err(Error::config("method.weights", format!("`{w}`: expected nonnegative or signed")));
-        }
+    if let Some(w) = &m.weights
+        && w != "nonnegative"
+        && w != "signed"
+    {
+        return Err(Error::config("method.weights", format!("`{w}`: expected nonnegative or signed")));
     }
     at_least_one("method.max_iterations", m.max_iterations)?;
     if let Some(a) = m.admm {
@@ -426,33 +494,38 @@ fn check_method_values(kind: MethodKind, m: &RawMethod) -> Result<()> {
     non_negative("method.lambda2", m.lambda2)?;
     non_negative("method.theta", m.theta)?;
     at_least_one("method.checkpoint_every", m.checkpoint_every)?;
-    if let Some(s) = &m.scaling {
-        if s != "per-dimension" && s != "grouped" {
-            return Err(Error::config("method.scaling", format!("`{s}`: expected per-dimension or grouped")));
-        }
+    if let Some(s) = &m.scaling
+        && s != "per-dimension"
+        && s != "grouped"
+    {
+        return Err(Error::config("method.scaling", format!("`{s}`: expected per-dimension or grouped")));
     }
-    if let Some(s) = &m.consistency {
-        if s != "bfs" && s != "global" {
-            return Err(Error::config("method.consistency", format!("`{s}`: expected bfs or global")));
-        }
+    if let Some(s) = &m.consistency
+        && s != "bfs"
+        && s != "global"
+    {
+        return Err(Error::config("method.consistency", format!("`{s}`: expected bfs or global")));
     }
-    if let Some(l) = m.lambda {
-        if !(0.0..=1.0).contains(&l) {
-            return Err(Error::config("method.lambda", format!("{l} must lie in [0, 1]")));
-        }
+    if let Some(l) = m.lambda
+        && !(0.0..=1.0).contains(&l)
+    {
+        return Err(Error::config("method.lambda", format!("{l} must lie in [0, 1]")));
     }
     positive("method.r", m.r)?;
-    if let Some(t) = m.threshold {
-        if !(-1.0..=1.0).contains(&t) {
-            return Err(Error::config("method.threshold", format!("{t} must lie in [-1, 1] (a correlation)")));
-        }
+    if let Some(t) = m.threshold
+        && !(-1.0..=1.0).contains(&t)
+    {
+        return Err(Error::config("method.threshold", format!("{t} must lie in [-1, 1] (a correlation)")));
     }
     at_least_one("method.regions", m.regions)?;
     at_least_one("method.max_regions", m.max_regions)?;
     non_negative("method.beta", m.beta)?;
     non_negative("method.gamma", m.gamma)?;
     if m.regions.is_some() && m.max_regions.is_some() {
-        return Err(Error::config("method.regions", "give either regions (fixed) or max_regions (automatic), not both"));
+        return Err(Error::config(
+            "method.regions",
+            "give either regions (fixed) or max_regions (automatic), not both",
+        ));
     }
     Ok(())
 }
@@ -512,7 +585,14 @@ admm = { rho = 10, iterations = 10 }
     fn frame_selection_forms() {
         assert_eq!(FrameSelection::parse("k", "every:10").unwrap().resolve("k", 25, None).unwrap(), vec![0, 10, 20]);
         assert_eq!(FrameSelection::parse("k", "1-3, 7").unwrap().resolve("k", 10, None).unwrap(), vec![0, 1, 2, 6]);
-        assert!(FrameSelection::parse("k", "1-30").unwrap().resolve("k", 10, None).unwrap_err().to_string().contains("past the last frame"));
+        assert!(
+            FrameSelection::parse("k", "1-30")
+                .unwrap()
+                .resolve("k", 10, None)
+                .unwrap_err()
+                .to_string()
+                .contains("past the last frame")
+        );
         assert!(FrameSelection::parse("k", "every:0").is_err());
         assert!(FrameSelection::parse("k", "x").is_err());
     }
@@ -535,7 +615,8 @@ impl std::fmt::Display for FrameSelection {
             FrameSelection::Rest => write!(f, "rest"),
             FrameSelection::Every(n) => write!(f, "every:{n}"),
             FrameSelection::Ranges(r) => {
-                let parts: Vec<String> = r.iter().map(|&(a, b)| if a == b { a.to_string() } else { format!("{a}-{b}") }).collect();
+                let parts: Vec<String> =
+                    r.iter().map(|&(a, b)| if a == b { a.to_string() } else { format!("{a}-{b}") }).collect();
                 write!(f, "{}", parts.join(","))
             }
         }
@@ -574,7 +655,11 @@ pub fn resolved_toml(name: &str, data: &DataConfig, method: toml::Table) -> Stri
     root.insert("name".into(), name.into());
     root.insert("data".into(), toml::Value::Table(data.to_table()));
     root.insert("method".into(), toml::Value::Table(method));
-    format!("# Resolved by meshdeco {}: every default written out.\n{}", env!("CARGO_PKG_VERSION"), toml::to_string(&root).unwrap_or_default())
+    format!(
+        "# Resolved by meshdeco {}: every default written out.\n{}",
+        env!("CARGO_PKG_VERSION"),
+        toml::to_string(&root).unwrap_or_default()
+    )
 }
 
 #[cfg(test)]
