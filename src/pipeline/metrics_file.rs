@@ -20,7 +20,8 @@ pub struct Metrics {
     /// How results were aligned to the ground truth before measuring: `none` or `centroid`
     /// (representations that drop translation are centroid-aligned).
     pub erms_alignment: String,
-    /// Wall time of the fit itself (excluding loading, measuring and writing), seconds.
+    /// Wall time of the fit (SPLOCS: including the heat-method set-up of the support maps;
+    /// excluding loading, the representation, measuring and writing), seconds.
     pub train_seconds: f64,
     /// Wall time of computing the representation of the training frames, seconds.
     pub representation_seconds: f64,
