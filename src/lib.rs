@@ -21,3 +21,4 @@ pub mod representation;
 pub mod synthetic;
 
 pub use error::{Error, Result};
+pub mod metrics;

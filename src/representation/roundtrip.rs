@@ -1,5 +1,6 @@
 //! Encode → decode round trips of a sequence and their error, Erms (Neumann et al. 2013):
-//! `Erms = 1000·sqrt(Σ_f Σ_v ‖v − v'‖² / (3·F·N))`, in the data's own units × 1000.
+//! `Erms = 1000·sqrt(Σ_f Σ_v ‖v − v'‖² / (3·F·N))`, in the data's own units × 1000 (implemented
+//! in [`crate::metrics::erms`], re-exported here).
 //!
 //! For translation-free representations ([`super::Representation::translation_free`]) every
 //! decoded frame is first translated so that its vertex centroid (unweighted mean) coincides with
@@ -11,58 +12,10 @@
 use std::fmt;
 
 use super::{Representation, RepresentationKind};
-use crate::error::{Error, Result};
+use crate::error::Result;
 use crate::mesh::{MeshSequence, Vec3};
 
-/// How a result is aligned to the ground truth before measuring.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Alignment {
-    /// Absolute positions.
-    None,
-    /// Result translated so that its vertex centroid equals the ground truth's.
-    Centroid,
-}
-
-impl fmt::Display for Alignment {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(match self {
-            Alignment::None => "none",
-            Alignment::Centroid => "centroid",
-        })
-    }
-}
-
-/// Sum over vertices of `‖truth_v − result_v‖²` for one frame, after `alignment`. Errors when
-/// the vertex counts differ.
-pub fn frame_squared_error(truth: &[Vec3], result: &[Vec3], alignment: Alignment) -> Result<f64> {
-    if truth.len() != result.len() {
-        return Err(Error::Invalid(format!("frame has {} vertices, the result {}", truth.len(), result.len())));
-    }
-    let shift: Vec3 = match alignment {
-        Alignment::None => [0.0; 3],
-        Alignment::Centroid if truth.is_empty() => [0.0; 3],
-        Alignment::Centroid => {
-            let n = truth.len() as f64;
-            std::array::from_fn(|k| truth.iter().zip(result).map(|(t, r)| t[k] - r[k]).sum::<f64>() / n)
-        }
-    };
-    Ok(truth.iter().zip(result).map(|(t, r)| (0..3).map(|k| (t[k] - r[k] - shift[k]).powi(2)).sum::<f64>()).sum())
-}
-
-/// Erms of F result frames against F ground-truth frames of N vertices each (module docs).
-/// Errors on a count mismatch; 0 for no vertices.
-pub fn erms(truth: &[Vec<Vec3>], result: &[Vec<Vec3>], alignment: Alignment) -> Result<f64> {
-    if truth.len() != result.len() {
-        return Err(Error::Invalid(format!("{} ground-truth frames, {} result frames", truth.len(), result.len())));
-    }
-    let mut sum = 0.0;
-    let mut count = 0usize;
-    for (t, r) in truth.iter().zip(result) {
-        sum += frame_squared_error(t, r, alignment)?;
-        count += 3 * t.len();
-    }
-    Ok(if count == 0 { 0.0 } else { 1000.0 * (sum / count as f64).sqrt() })
-}
+pub use crate::metrics::erms::{Alignment, erms, frame_squared_error};
 
 /// Per-frame and total error of an encode → decode round trip.
 #[derive(Debug, Clone, PartialEq)]
@@ -125,26 +78,5 @@ impl fmt::Display for RoundTripReport {
         }
         writeln!(f, "{:>5}  {:<w$}  {:>12.6e}", "", "total", self.total)?;
         write!(f, "max vertex distance {:.3e} (data units)", self.max_distance)
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn erms_definition_and_centroid_alignment() {
-        let t = vec![vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]]];
-        // Result shifted by (0.3, 0, 0) and one vertex off by 0.002 in y.
-        let r = vec![vec![[0.3, 0.0, 0.0], [1.3, 0.002, 0.0]]];
-        let none = erms(&t, &r, Alignment::None).unwrap();
-        let want_none = 1000.0 * ((0.09 + 0.09 + 0.002f64 * 0.002) / 6.0).sqrt();
-        assert!((none - want_none).abs() < 1e-12);
-        // After centroid alignment only the y error remains: residuals ±0.001 in y.
-        let cent = erms(&t, &r, Alignment::Centroid).unwrap();
-        let want = 1000.0 * ((2.0 * 0.001f64 * 0.001) / 6.0).sqrt();
-        assert!((cent - want).abs() < 1e-12, "{cent} vs {want}");
-        assert!(erms(&t, &[], Alignment::None).is_err());
-        assert!(frame_squared_error(&t[0], &r[0][..1], Alignment::None).is_err());
     }
 }
