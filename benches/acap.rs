@@ -10,47 +10,15 @@ use meshdeco::mesh::{TriMesh, Vec3};
 use meshdeco::representation::acap::{Acap, AcapDecoder, AcapOptions, Consistency};
 use std::f64::consts::PI;
 use std::hint::black_box;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::time::Duration;
 
-/// Minimal OBJ reader keeping the file's vertex order (tobj renumbers by first use).
-fn load_obj(path: &Path) -> Option<TriMesh> {
-    let text = std::fs::read_to_string(path).ok()?;
-    let mut p = Vec::new();
-    let mut f = Vec::new();
-    for line in text.lines() {
-        let mut t = line.split_whitespace();
-        match t.next() {
-            Some("v") => {
-                let c: Vec<f64> = t.take(3).filter_map(|x| x.parse().ok()).collect();
-                p.push([c[0], c[1], c[2]]);
-            }
-            Some("f") => {
-                let idx: Vec<usize> =
-                    t.filter_map(|x| x.split('/').next()?.parse::<usize>().ok()).map(|i| i - 1).collect();
-                for k in 1..idx.len() - 1 {
-                    f.push([idx[0], idx[k], idx[k + 1]]);
-                }
-            }
-            _ => {}
-        }
-    }
-    Some(TriMesh::new(p, f))
-}
-
-/// All OBJ files of `../shared/data/<name>` in natural (numeric) order.
+/// All OBJ files of `../shared/data/<name>` in natural (numeric) order, or `None` when the folder
+/// is absent or unreadable.
 fn load_folder(name: &str) -> Option<Vec<TriMesh>> {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data").join(name);
-    let mut files: Vec<PathBuf> = std::fs::read_dir(&dir)
-        .ok()?
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| p.extension().is_some_and(|e| e == "obj"))
-        .collect();
-    files.sort_by_key(|p| {
-        let s = p.file_stem().unwrap().to_string_lossy().to_string();
-        s.chars().filter(|c| c.is_ascii_digit()).collect::<String>().parse::<u64>().unwrap_or(0)
-    });
-    files.iter().map(|p| load_obj(p)).collect()
+    let seq = meshdeco::mesh::load_sequence(&format!("{}/*.obj", dir.display())).ok()?;
+    Some(seq.frames.into_iter().map(|p| TriMesh::new(p, seq.faces.clone())).collect())
 }
 
 /// A closed tube along x (`rings` × `m` vertices + 2 cap centres).

@@ -15,12 +15,10 @@ use meshdeco::nn::rng::Rng;
 use meshdeco::nn::{AutoencoderConfig, HopDistances, NeighborIndex, Trainer, TrainingData};
 use meshdeco::representation::Features;
 
+/// Vertex count and triangles of a mesh file, or `None` when it is absent or unreadable.
 fn load_faces(path: &Path) -> Option<(usize, Vec<[usize; 3]>)> {
-    let opts = tobj::LoadOptions { triangulate: true, single_index: false, ..Default::default() };
-    let (models, _) = tobj::load_obj(path, &opts).ok()?;
-    let m = &models.first()?.mesh;
-    let faces = m.indices.chunks_exact(3).map(|f| [f[0] as usize, f[1] as usize, f[2] as usize]).collect();
-    Some((m.positions.len() / 3, faces))
+    let mesh = meshdeco::mesh::load_mesh(path).ok()?;
+    Some((mesh.n_vertices(), mesh.faces))
 }
 
 /// Icosahedron subdivided `levels` times (10·4^levels + 2 vertices).

@@ -5,7 +5,7 @@
 //! and with the edge-path upper bound, which adds a Dijkstra search).
 //!
 //! Meshes: a unit icosphere with 10 242 vertices (always) and frame 1 of the horse gallop
-//! (8 431 vertices, `../shared/data/horse-gallop/0001.obj`, loaded with tobj directly; skipped
+//! (8 431 vertices, `../shared/data/horse-gallop/0001.obj`, loaded with `meshdeco::mesh::load_mesh`; skipped
 //! with a message when the file is absent).
 //!
 //! Run: `cargo bench --bench geometry`. Target: a query on the horse ≤ 5 ms.
@@ -18,23 +18,9 @@ use criterion::{Criterion, criterion_group, criterion_main};
 use meshdeco::geometry::cotan_laplacian::cotan_laplacian;
 use meshdeco::geometry::heat_geodesics::{DistanceBounds, HeatGeodesics, HeatOptions};
 use meshdeco::mesh::primitives::icosphere;
-use meshdeco::mesh::{TriMesh, Vec3};
+use meshdeco::mesh::TriMesh;
 
 const HORSE: &str = "../shared/data/horse-gallop/0001.obj";
-
-/// Loads an OBJ's positions and triangles (position indices, models concatenated).
-fn load_obj(path: &Path) -> Option<TriMesh> {
-    let opts = tobj::LoadOptions { triangulate: true, single_index: false, ..Default::default() };
-    let (models, _) = tobj::load_obj(path, &opts).ok()?;
-    let mut positions: Vec<Vec3> = Vec::new();
-    let mut faces = Vec::new();
-    for m in models {
-        let off = positions.len();
-        positions.extend(m.mesh.positions.chunks_exact(3).map(|c| [c[0] as f64, c[1] as f64, c[2] as f64]));
-        faces.extend(m.mesh.indices.chunks_exact(3).map(|c| [off + c[0] as usize, off + c[1] as usize, off + c[2] as usize]));
-    }
-    Some(TriMesh::new(positions, faces))
-}
 
 fn bench_mesh(c: &mut Criterion, name: &str, mesh: &TriMesh) {
     let mut group = c.benchmark_group(format!("geometry/{name} ({} vertices)", mesh.n_vertices()));
@@ -55,7 +41,7 @@ fn bench_mesh(c: &mut Criterion, name: &str, mesh: &TriMesh) {
 
 fn geometry(c: &mut Criterion) {
     bench_mesh(c, "icosphere(5)", &icosphere(5));
-    match load_obj(Path::new(HORSE)) {
+    match meshdeco::mesh::load_mesh(Path::new(HORSE)).ok() {
         Some(horse) => bench_mesh(c, "horse-gallop/0001", &horse),
         None => eprintln!("skipping horse-gallop benchmarks: {HORSE} not found (shared data absent)"),
     }

@@ -10,21 +10,11 @@
 //! Run: `cargo bench --bench representations`.
 
 use std::hint::black_box;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use criterion::{Criterion, criterion_group, criterion_main};
-use meshdeco::mesh::{MeshSequence, TriMesh};
+use meshdeco::mesh::{load_mesh, MeshSequence, TriMesh};
 use meshdeco::representation::{Representation, RepresentationKind, RepresentationOptions};
-
-fn load_obj(path: &Path) -> TriMesh {
-    let opts = tobj::LoadOptions { triangulate: true, single_index: false, ..Default::default() };
-    let (models, _) = tobj::load_obj(path, &opts).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-    let m = &models[0].mesh;
-    TriMesh::new(
-        m.positions.chunks_exact(3).map(|p| [p[0] as f64, p[1] as f64, p[2] as f64]).collect(),
-        m.indices.chunks_exact(3).map(|f| [f[0] as usize, f[1] as usize, f[2] as usize]).collect(),
-    )
-}
 
 /// The OBJ files `names` of data folder `folder`, or `None` (with a message) when absent.
 fn load(folder: &str, names: &[String]) -> Option<MeshSequence> {
@@ -33,8 +23,11 @@ fn load(folder: &str, names: &[String]) -> Option<MeshSequence> {
         eprintln!("skipping {folder} benchmarks: {} is absent", dir.display());
         return None;
     }
-    let paths: Vec<PathBuf> = names.iter().map(|n| dir.join(n)).collect();
-    let meshes: Vec<TriMesh> = paths.iter().map(|p| load_obj(p)).collect();
+    let meshes: Vec<TriMesh> = names
+        .iter()
+        .map(|n| dir.join(n))
+        .map(|p| load_mesh(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display())))
+        .collect();
     Some(MeshSequence {
         faces: meshes[0].faces.clone(),
         frames: meshes.into_iter().map(|m| m.positions).collect(),

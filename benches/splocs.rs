@@ -4,7 +4,7 @@
 //! (cheap stand-in; after the first iteration the support maps come from the cache anyway).
 //! Skipped (with a message) when `../shared/data` is absent.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use meshdeco::Result;
@@ -39,20 +39,7 @@ fn load(dir: &Path) -> Option<(Vec<f64>, usize, Vec<[f64; 3]>)> {
     if !dir.is_dir() {
         return None;
     }
-    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
-        .ok()?
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| p.extension().is_some_and(|x| x == "obj"))
-        .collect();
-    let key = |p: &PathBuf| -> u64 {
-        p.file_stem().unwrap().to_string_lossy().chars().filter(|c| c.is_ascii_digit()).collect::<String>().parse().unwrap_or(0)
-    };
-    files.sort_by_key(key);
-    let mut frames: Vec<Vec<[f64; 3]>> = Vec::new();
-    for f in &files {
-        let (models, _) = tobj::load_obj(f, &tobj::LoadOptions::default()).ok()?;
-        frames.push(models[0].mesh.positions.chunks_exact(3).map(|c| [c[0] as f64, c[1] as f64, c[2] as f64]).collect());
-    }
+    let frames = meshdeco::mesh::load_sequence(&format!("{}/*.obj", dir.display())).ok()?.frames;
     let rest = frames[0].clone();
     let mut x = Vec::new();
     for fr in &frames {

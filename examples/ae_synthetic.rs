@@ -95,12 +95,8 @@ fn demo(iterations: usize) {
 }
 
 fn profile(obj: &str, shapes: usize, steps: usize) {
-    let opts = tobj::LoadOptions { triangulate: true, single_index: false, ..Default::default() };
-    let (models, _) = tobj::load_obj(obj, &opts).unwrap_or_else(|e| panic!("{obj}: {e}"));
-    let m = &models[0].mesh;
-    let n = m.positions.len() / 3;
-    let faces: Vec<[usize; 3]> =
-        m.indices.chunks_exact(3).map(|f| [f[0] as usize, f[1] as usize, f[2] as usize]).collect();
+    let mesh = meshdeco::mesh::load_mesh(std::path::Path::new(obj)).unwrap_or_else(|e| panic!("{obj}: {e}"));
+    let (n, faces) = (mesh.n_vertices(), mesh.faces);
     let nb = NeighborIndex::from_faces(n, &faces).expect("mesh");
     let dist = HopDistances::new(&nb);
     let mut rng = Rng::new(1);

@@ -20,7 +20,7 @@
 
 use std::cell::Cell;
 use std::collections::BinaryHeap;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::time::{Duration, Instant};
 
 use meshdeco::Result;
@@ -29,31 +29,11 @@ use meshdeco::methods::{DataMatrix, Pca, PcaConfig, SplocsConfig, SplocsSolver, 
 
 type V3 = [f64; 3];
 
-fn natural_key(p: &Path) -> (u64, String) {
-    let stem = p.file_stem().unwrap_or_default().to_string_lossy().to_string();
-    let digits: String = stem.chars().filter(|c| c.is_ascii_digit()).collect();
-    (digits.parse().unwrap_or(u64::MAX), stem)
-}
-
+/// Faces and per-frame positions of every OBJ in `dir`, in natural order.
 fn load_folder(dir: &Path) -> (Vec<[usize; 3]>, Vec<Vec<V3>>) {
-    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
-        .unwrap()
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| p.extension().is_some_and(|x| x == "obj"))
-        .collect();
-    files.sort_by_key(|p| natural_key(p));
-    let mut faces = Vec::new();
-    let mut frames = Vec::new();
-    for (i, f) in files.iter().enumerate() {
-        let (models, _) = tobj::load_obj(f, &tobj::LoadOptions::default()).expect("OBJ load");
-        let m = &models[0].mesh;
-        let pos: Vec<V3> = m.positions.chunks_exact(3).map(|c| [c[0] as f64, c[1] as f64, c[2] as f64]).collect();
-        if i == 0 {
-            faces = m.indices.chunks_exact(3).map(|c| [c[0] as usize, c[1] as usize, c[2] as usize]).collect();
-        }
-        frames.push(pos);
-    }
-    (faces, frames)
+    let spec = format!("{}/*.obj", dir.display());
+    let seq = meshdeco::mesh::load_sequence(&spec).unwrap_or_else(|e| panic!("{spec}: {e}"));
+    (seq.faces, seq.frames)
 }
 
 /// Dijkstra along mesh edges; counts the time spent.

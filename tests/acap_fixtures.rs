@@ -3,7 +3,7 @@
 //!
 //! Run: `cargo test --release --test acap_fixtures -- --nocapture` (prints the measured numbers).
 
-use meshdeco::mesh::{TriMesh, Vec3};
+use meshdeco::mesh::{load_mesh, load_sequence, TriMesh, Vec3};
 use meshdeco::representation::acap::{Acap, AcapDecoder, AcapFrame, AcapOptions, Consistency, Mat3};
 use meshdeco::representation::acap_text::read_matrices;
 use std::f64::consts::PI;
@@ -13,65 +13,10 @@ fn shared() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared")
 }
 
-/// Minimal OBJ reader keeping the file's vertex order (`v x y z`, `f a b c` with optional
-/// `/vt/vn` parts; polygons fanned). tobj renumbers vertices by first use, which would break the
-/// comparison with the reference's per-vertex files.
+/// Loads a mesh file with meshdeco's reader (keeps the file's vertex order, which the comparison
+/// with the reference's per-vertex files needs).
 fn load_obj(path: &Path) -> TriMesh {
-    let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-    let mut p = Vec::new();
-    let mut f = Vec::new();
-    for line in text.lines() {
-        let mut t = line.split_whitespace();
-        match t.next() {
-            Some("v") => {
-                let c: Vec<f64> = t.take(3).map(|x| x.parse().unwrap()).collect();
-                p.push([c[0], c[1], c[2]]);
-            }
-            Some("f") => {
-                let idx: Vec<usize> = t
-                    .map(|x| {
-                        let i: i64 = x.split('/').next().unwrap().parse().unwrap();
-                        if i < 0 { (p.len() as i64 + i) as usize } else { (i - 1) as usize }
-                    })
-                    .collect();
-                for k in 1..idx.len() - 1 {
-                    f.push([idx[0], idx[k], idx[k + 1]]);
-                }
-            }
-            _ => {}
-        }
-    }
-    TriMesh::new(p, f)
-}
-
-/// Minimal ASCII PLY reader (vertex x y z first, faces as lists; polygons fanned).
-fn load_ply_ascii(path: &Path) -> TriMesh {
-    let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-    let mut lines = text.lines();
-    let (mut nv, mut nf) = (0usize, 0usize);
-    for line in lines.by_ref() {
-        let t: Vec<&str> = line.split_whitespace().collect();
-        match t.as_slice() {
-            ["element", "vertex", n] => nv = n.parse().unwrap(),
-            ["element", "face", n] => nf = n.parse().unwrap(),
-            ["format", fmt, ..] => assert_eq!(*fmt, "ascii", "{}: only ASCII PLY", path.display()),
-            ["end_header"] => break,
-            _ => {}
-        }
-    }
-    let mut p = Vec::with_capacity(nv);
-    for _ in 0..nv {
-        let c: Vec<f64> = lines.next().unwrap().split_whitespace().take(3).map(|x| x.parse().unwrap()).collect();
-        p.push([c[0], c[1], c[2]]);
-    }
-    let mut f = Vec::with_capacity(nf);
-    for _ in 0..nf {
-        let v: Vec<usize> = lines.next().unwrap().split_whitespace().map(|x| x.parse().unwrap()).collect();
-        for k in 2..v[0] {
-            f.push([v[1], v[k], v[k + 1]]);
-        }
-    }
-    TriMesh::new(p, f)
+    load_mesh(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
 }
 
 fn fixture_dir() -> Option<PathBuf> {
@@ -403,29 +348,15 @@ fn round_trips_fixtures_and_synthetic() {
     }
 }
 
-/// Loads every mesh of a data folder in natural order (OBJ or ASCII PLY).
+/// Loads every mesh of a data folder in natural order (OBJ or PLY).
 fn load_folder(name: &str) -> Option<Vec<TriMesh>> {
     let dir = shared().join("data").join(name);
-    let Ok(rd) = std::fs::read_dir(&dir) else {
+    if !dir.is_dir() {
         println!("skipping {name}: {} not found", dir.display());
         return None;
-    };
-    let mut files: Vec<PathBuf> = rd
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| matches!(p.extension().and_then(|e| e.to_str()), Some("obj") | Some("ply")))
-        .collect();
-    let key = |p: &PathBuf| {
-        let s = p.file_stem().unwrap().to_string_lossy().to_string();
-        let digits: String = s.chars().filter(|c| c.is_ascii_digit()).collect();
-        (s.trim_end_matches(|c: char| c.is_ascii_digit()).to_string(), digits.parse::<u64>().unwrap_or(0), s)
-    };
-    files.sort_by_key(key);
-    Some(
-        files
-            .iter()
-            .map(|p| if p.extension().unwrap() == "ply" { load_ply_ascii(p) } else { load_obj(p) })
-            .collect(),
-    )
+    }
+    let seq = load_sequence(&dir.to_string_lossy()).unwrap_or_else(|e| panic!("{}: {e}", dir.display()));
+    Some((0..seq.n_frames()).map(|k| seq.mesh(k)).collect())
 }
 
 /// Round trip of a dataset with the default decoder and with the edge least squares; returns

@@ -1,13 +1,12 @@
 //! Encode → decode round trips on real data (`../shared/data`): SCAPE (rest = 1.obj),
 //! horse-gallop and cactus, plus a synthetic counterpart that always runs.
 //!
-//! Meshes are read here with tobj / a minimal ASCII-PLY reader (the io module is not merged yet).
-//! Data tests print a reason and return when the folder is absent. Run with `--nocapture` to see
+//! Meshes are read with `meshdeco::mesh::load_sequence`. Data tests print a reason and return when the folder is absent. Run with `--nocapture` to see
 //! the per-dataset Erms.
 
 use std::path::{Path, PathBuf};
 
-use meshdeco::mesh::{MeshSequence, TriMesh, Vec3};
+use meshdeco::mesh::{load_sequence, MeshSequence, Vec3};
 use meshdeco::representation::roundtrip::{Alignment, roundtrip};
 use meshdeco::representation::{Representation, RepresentationKind, RepresentationOptions};
 
@@ -21,84 +20,11 @@ fn data_dir(name: &str) -> Option<PathBuf> {
     }
 }
 
-/// Natural order: digit runs compare as numbers.
-fn natural_key(s: &str) -> Vec<(String, u64)> {
-    let mut out = Vec::new();
-    let mut text = String::new();
-    let mut chars = s.chars().peekable();
-    while let Some(c) = chars.next() {
-        if c.is_ascii_digit() {
-            let mut num = c.to_digit(10).unwrap() as u64;
-            while let Some(d) = chars.peek().and_then(|d| d.to_digit(10)) {
-                num = num * 10 + d as u64;
-                chars.next();
-            }
-            out.push((std::mem::take(&mut text), num));
-        } else {
-            text.push(c);
-        }
-    }
-    out.push((text, u64::MAX));
-    out
-}
-
-fn load_obj(path: &Path) -> TriMesh {
-    let opts = tobj::LoadOptions { triangulate: true, single_index: false, ..Default::default() };
-    let (models, _) = tobj::load_obj(path, &opts).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-    assert_eq!(models.len(), 1, "{}: expected one object", path.display());
-    let m = &models[0].mesh;
-    let positions = m.positions.chunks_exact(3).map(|p| [p[0] as f64, p[1] as f64, p[2] as f64]).collect();
-    let faces = m.indices.chunks_exact(3).map(|f| [f[0] as usize, f[1] as usize, f[2] as usize]).collect();
-    TriMesh::new(positions, faces)
-}
-
-fn load_ascii_ply(path: &Path) -> TriMesh {
-    let text = std::fs::read_to_string(path).unwrap();
-    let mut lines = text.lines();
-    let (mut nv, mut nf) = (0usize, 0usize);
-    for l in lines.by_ref() {
-        let w: Vec<&str> = l.split_whitespace().collect();
-        match w.as_slice() {
-            ["element", "vertex", n] => nv = n.parse().unwrap(),
-            ["element", "face", n] => nf = n.parse().unwrap(),
-            ["end_header"] => break,
-            _ => {}
-        }
-    }
-    let positions: Vec<Vec3> = (0..nv)
-        .map(|_| {
-            let v: Vec<f64> = lines.next().unwrap().split_whitespace().take(3).map(|x| x.parse().unwrap()).collect();
-            [v[0], v[1], v[2]]
-        })
-        .collect();
-    let faces = (0..nf)
-        .map(|_| {
-            let v: Vec<usize> = lines.next().unwrap().split_whitespace().map(|x| x.parse().unwrap()).collect();
-            assert_eq!(v[0], 3, "{}: non-triangle face", path.display());
-            [v[1], v[2], v[3]]
-        })
-        .collect();
-    TriMesh::new(positions, faces)
-}
-
+/// Every `*.{ext}` file of `dir` in natural order, read with meshdeco's reader (which checks that
+/// all frames share the first frame's connectivity).
 fn load_dir(dir: &Path, ext: &str) -> MeshSequence {
-    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .filter(|p| p.extension().is_some_and(|e| e.eq_ignore_ascii_case(ext)))
-        .collect();
-    files.sort_by_key(|p| natural_key(&p.file_stem().unwrap().to_string_lossy()));
-    let meshes: Vec<TriMesh> =
-        files.iter().map(|p| if ext == "obj" { load_obj(p) } else { load_ascii_ply(p) }).collect();
-    let faces = meshes[0].faces.clone();
-    for (m, p) in meshes.iter().zip(&files) {
-        assert_eq!(m.faces, faces, "{}: connectivity differs from the first frame", p.display());
-    }
-    MeshSequence {
-        faces,
-        frames: meshes.into_iter().map(|m| m.positions).collect(),
-        names: files.iter().map(|p| p.file_stem().unwrap().to_string_lossy().into_owned()).collect(),
-    }
+    let spec = format!("{}/*.{ext}", dir.display());
+    load_sequence(&spec).unwrap_or_else(|e| panic!("{spec}: {e}"))
 }
 
 /// Round trips of displacement and triangle-gradient on `seq` with frame 0 as rest; returns the

@@ -348,25 +348,9 @@ fn real_data_train_erms_within_reference() {
             eprintln!("{} absent: skipping the {folder} reference check", dir.display());
             continue;
         }
-        let mut files: Vec<std::path::PathBuf> = std::fs::read_dir(&dir)
-            .unwrap()
-            .filter_map(|e| e.ok().map(|e| e.path()))
-            .filter(|p| p.extension().is_some_and(|x| x == "obj"))
-            .collect();
-        let num = |p: &std::path::PathBuf| -> u64 {
-            p.file_stem().unwrap().to_string_lossy().chars().filter(|c| c.is_ascii_digit()).collect::<String>().parse().unwrap()
-        };
-        files.sort_by_key(num);
-        let mut faces: Vec<[usize; 3]> = Vec::new();
-        let mut frames: Vec<Vec<[f64; 3]>> = Vec::new();
-        for f in &files {
-            let (models, _) = tobj::load_obj(f, &tobj::LoadOptions::default()).unwrap();
-            let m = &models[0].mesh;
-            if faces.is_empty() {
-                faces = m.indices.chunks_exact(3).map(|c| [c[0] as usize, c[1] as usize, c[2] as usize]).collect();
-            }
-            frames.push(m.positions.chunks_exact(3).map(|c| [c[0] as f64, c[1] as f64, c[2] as f64]).collect());
-        }
+        let spec = format!("{}/*.obj", dir.display());
+        let seq = meshdeco::mesh::load_sequence(&spec).unwrap_or_else(|e| panic!("{spec}: {e}"));
+        let (faces, frames) = (seq.faces, seq.frames);
         let rest = frames[0].clone();
         let (nf, nv) = (frames.len(), rest.len());
         let mut x = Vec::with_capacity(nf * nv * 3);

@@ -825,11 +825,8 @@ mod tests {
             eprintln!("skipping: {} not found (shared data absent)", path.display());
             return;
         }
-        let opts = tobj::LoadOptions { triangulate: true, single_index: false, ..Default::default() };
-        let (models, _) = tobj::load_obj(path, &opts).unwrap();
-        let m = &models[0].mesh;
-        let p: Vec<Vec3> = m.positions.chunks_exact(3).map(|c| [c[0] as f64, c[1] as f64, c[2] as f64]).collect();
-        let f: Vec<[usize; 3]> = m.indices.chunks_exact(3).map(|c| [c[0] as usize, c[1] as usize, c[2] as usize]).collect();
+        let mesh = crate::mesh::load_mesh(path).unwrap();
+        let (p, f): (Vec<Vec3>, Vec<[usize; 3]>) = (mesh.positions, mesh.faces);
         assert_eq!(p.len(), 8431);
         let solver = raw(&p, &f);
         let topo = crate::mesh::Topology::new(p.len(), &f);
