@@ -10,11 +10,13 @@
 //! <out>/components/      per component: heat-map PLY on the rest mesh and ±1 shapes (OBJ)
 //! ```
 //!
-//! Every file is written atomically (temporary file in the same directory, then rename), so
+//! Every file is written atomically ([`write_atomic_with`]: temporary file in the same directory,
+//! then rename), so
 //! an interrupted run never leaves a half-written model; non-finite numbers are refused.
 
 use std::collections::BTreeMap;
-use std::io::Write;
+use std::fs::File;
+use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
@@ -86,23 +88,37 @@ struct HeaderFile<H> {
     arrays: BTreeMap<String, ArrayEntry>,
 }
 
-/// Writes `bytes` to `path` atomically (temporary file next to it, then rename).
+/// Writes `path` atomically, streaming the content: `body` writes into the temporary file
+/// `<path>.tmp` in the same directory (buffered), which is then flushed, synced to disk and renamed
+/// over `path`, so a reader never sees a half-written file. On any failure, including an error
+/// returned by `body`, the temporary file is removed and `path` is left as it was; the error is
+/// [`Error::Io`] naming `path`. The parent directory must exist ([`write_atomic`] creates it).
+///
+/// This is the one atomic writer of the crate; every file meshdeco writes goes through it.
+pub fn write_atomic_with(path: &Path, body: impl FnOnce(&mut BufWriter<File>) -> std::io::Result<()>) -> Result<()> {
+    let mut tmp = path.as_os_str().to_owned();
+    tmp.push(".tmp");
+    let tmp = PathBuf::from(tmp);
+    let result = (|| {
+        let file = File::create(&tmp)?;
+        let mut w = BufWriter::new(file);
+        body(&mut w)?;
+        let file = w.into_inner().map_err(|e| e.into_error())?;
+        file.sync_all()?;
+        std::fs::rename(&tmp, path)
+    })();
+    result.map_err(|e| {
+        let _ = std::fs::remove_file(&tmp);
+        Error::io(path, e)
+    })
+}
+
+/// Writes `bytes` to `path` atomically (see [`write_atomic_with`]), creating the parent
+/// directory first if needed.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     let dir = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
     std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
-    let file_name = path.file_name().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "out".into());
-    let tmp = dir.join(format!(".{file_name}.{}.tmp", std::process::id()));
-    let res = (|| {
-        let mut f = std::fs::File::create(&tmp)?;
-        f.write_all(bytes)?;
-        f.sync_all()?;
-        std::fs::rename(&tmp, path)
-    })();
-    if let Err(e) = res {
-        let _ = std::fs::remove_file(&tmp);
-        return Err(Error::io(path, e));
-    }
-    Ok(())
+    write_atomic_with(path, |w| w.write_all(bytes))
 }
 
 /// Writes a serialisable value as pretty JSON, atomically.

@@ -1,23 +1,23 @@
 //! Mesh writers (OBJ, ASCII PLY with per-vertex colours and a scalar, OFF) and a colour map for
 //! heat maps.
 //!
-//! Every writer is atomic: it writes `<path>.tmp` in the same directory, flushes it to disk and
-//! renames it over `path`, so a reader never sees a half-written file. Nothing non-finite is
-//! written: a non-finite coordinate or scalar, a face index out of range or a colour/scalar array
+//! Every writer is atomic ([`crate::artifact::write_atomic_with`]): it writes `<path>.tmp` in the
+//! same directory, flushes it to disk and renames it over `path`, so a reader never sees a
+//! half-written file. Nothing non-finite is written: a non-finite coordinate or scalar, a face index out of range or a colour/scalar array
 //! of the wrong length is an error and leaves `path` untouched. Coordinates are written in Rust's
 //! shortest round-trip form, so reading a written file gives back the exact `f64` values.
 
-use std::fs::File;
-use std::io::{BufWriter, Write};
-use std::path::{Path, PathBuf};
+use std::io::Write;
+use std::path::Path;
 
 use super::TriMesh;
+use crate::artifact::write_atomic_with;
 use crate::error::{Error, Result};
 
 /// Writes `mesh` as Wavefront OBJ (`v x y z` lines, then `f a b c` with 1-based indices).
 pub fn write_obj(path: &Path, mesh: &TriMesh) -> Result<()> {
     check_mesh(path, mesh)?;
-    write_atomic(path, |w| {
+    write_atomic_with(path, |w| {
         writeln!(w, "# meshdeco: {} vertices, {} faces", mesh.n_vertices(), mesh.n_faces())?;
         for p in &mesh.positions {
             writeln!(w, "v {:?} {:?} {:?}", p[0], p[1], p[2])?;
@@ -32,7 +32,7 @@ pub fn write_obj(path: &Path, mesh: &TriMesh) -> Result<()> {
 /// Writes `mesh` as ASCII OFF (0-based indices).
 pub fn write_off(path: &Path, mesh: &TriMesh) -> Result<()> {
     check_mesh(path, mesh)?;
-    write_atomic(path, |w| {
+    write_atomic_with(path, |w| {
         writeln!(w, "OFF\n{} {} 0", mesh.n_vertices(), mesh.n_faces())?;
         for p in &mesh.positions {
             writeln!(w, "{:?} {:?} {:?}", p[0], p[1], p[2])?;
@@ -84,7 +84,7 @@ pub fn write_ply(
             )));
         }
     }
-    write_atomic(path, |w| {
+    write_atomic_with(path, |w| {
         writeln!(w, "ply\nformat ascii 1.0\ncomment written by meshdeco")?;
         writeln!(w, "element vertex {n}\nproperty double x\nproperty double y\nproperty double z")?;
         if colors.is_some() {
@@ -171,26 +171,6 @@ fn check_mesh(path: &Path, mesh: &TriMesh) -> Result<()> {
         )));
     }
     Ok(())
-}
-
-/// Writes through `body` into `<path>.tmp`, syncs it and renames it to `path`. On any failure the
-/// temporary file is removed and `path` is left as it was.
-pub(crate) fn write_atomic(path: &Path, body: impl FnOnce(&mut BufWriter<File>) -> std::io::Result<()>) -> Result<()> {
-    let mut tmp = path.as_os_str().to_owned();
-    tmp.push(".tmp");
-    let tmp = PathBuf::from(tmp);
-    let result = (|| {
-        let file = File::create(&tmp)?;
-        let mut w = BufWriter::new(file);
-        body(&mut w)?;
-        let file = w.into_inner().map_err(|e| e.into_error())?;
-        file.sync_all()?;
-        std::fs::rename(&tmp, path)
-    })();
-    result.map_err(|e| {
-        let _ = std::fs::remove_file(&tmp);
-        Error::io(path, e)
-    })
 }
 
 #[cfg(test)]

@@ -12,12 +12,13 @@
 //! ```
 
 use std::io::Write;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
 use super::config::AutoencoderConfig;
 use super::loss::LossTerms;
+use crate::artifact::write_atomic_with;
 use crate::error::{Error, Result};
 
 const MAGIC: &[u8; 8] = b"MDAECKPT";
@@ -53,30 +54,6 @@ pub struct Checkpoint {
     pub optimizers: Vec<Vec<u8>>,
 }
 
-/// Writes `bytes` to `path` atomically: a temporary file next to it, flushed and synced, then
-/// renamed over `path`.
-pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    let tmp = temp_path(path);
-    let res = (|| -> std::io::Result<()> {
-        let mut f = std::fs::File::create(&tmp)?;
-        f.write_all(bytes)?;
-        f.sync_all()?;
-        drop(f);
-        std::fs::rename(&tmp, path)
-    })();
-    if let Err(e) = res {
-        let _ = std::fs::remove_file(&tmp);
-        return Err(Error::io(path, e));
-    }
-    Ok(())
-}
-
-fn temp_path(path: &Path) -> PathBuf {
-    let mut name = path.file_name().map(|n| n.to_os_string()).unwrap_or_default();
-    name.push(".tmp");
-    path.with_file_name(name)
-}
-
 impl Checkpoint {
     /// Serialises and writes the checkpoint atomically.
     pub fn save(&self, path: &Path) -> Result<()> {
@@ -94,7 +71,7 @@ impl Checkpoint {
             out.extend_from_slice(&(part.len() as u64).to_le_bytes());
             out.extend_from_slice(part);
         }
-        write_atomic(path, &out)
+        write_atomic_with(path, |w| w.write_all(&out))
     }
 
     /// Reads a checkpoint written by [`Self::save`].

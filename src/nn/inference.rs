@@ -11,7 +11,7 @@ use burn::store::ModuleRecord;
 use burn::tensor::Bytes;
 use serde::{Deserialize, Serialize};
 
-use super::checkpoint::{Checkpoint, write_atomic};
+use super::checkpoint::Checkpoint;
 use super::config::AutoencoderConfig;
 use super::data::{WIDTH, shape_from_vcb, vcb_from_shapes};
 use super::engine::{self, Weights, Workspace};
@@ -19,6 +19,7 @@ use super::kernels::padded_width;
 use super::model::AutoencoderModule;
 use super::neighbors::NeighborIndex;
 use super::training::default_device;
+use crate::artifact::write_atomic;
 use crate::error::{Error, Result};
 use crate::representation::Features;
 

@@ -3,6 +3,7 @@
 //! whitespace. The reference pads with spaces and prints 6 significant digits; meshdeco writes
 //! single spaces and the shortest representation that reads back to the same `f64`.
 
+use crate::artifact::write_atomic_with;
 use crate::representation::acap::AcapFrame;
 use crate::representation::acap_rotation::Mat3;
 use crate::{Error, Result};
@@ -44,12 +45,7 @@ pub fn write_matrices<'a>(path: &Path, rows: impl Iterator<Item = &'a [Mat3]>) -
         }
         text.push('\n');
     }
-    let tmp = path.with_extension("txt.tmp");
-    let mut f = std::fs::File::create(&tmp).map_err(|e| Error::io(&tmp, e))?;
-    f.write_all(text.as_bytes()).map_err(|e| Error::io(&tmp, e))?;
-    f.sync_all().map_err(|e| Error::io(&tmp, e))?;
-    drop(f);
-    std::fs::rename(&tmp, path).map_err(|e| Error::io(path, e))
+    write_atomic_with(path, |w| w.write_all(text.as_bytes()))
 }
 
 /// Reads a file in the reference layout: one `Vec<Mat3>` per non-empty line. Every line must
