@@ -6,11 +6,11 @@
 //! [−0.95, 0.95] (the step costs the same for any values). Besides criterion's numbers the bench
 //! prints where a step's time goes.
 
-use std::collections::HashMap;
 use std::path::Path;
 use std::time::{Duration, Instant};
 
 use criterion::{Criterion, criterion_group, criterion_main};
+use meshdeco::mesh::primitives::icosphere;
 use meshdeco::nn::rng::Rng;
 use meshdeco::nn::{AutoencoderConfig, HopDistances, NeighborIndex, Trainer, TrainingData};
 use meshdeco::representation::Features;
@@ -21,49 +21,14 @@ fn load_faces(path: &Path) -> Option<(usize, Vec<[usize; 3]>)> {
     Some((mesh.n_vertices(), mesh.faces))
 }
 
-/// Icosahedron subdivided `levels` times (10·4^levels + 2 vertices).
-fn icosphere(levels: usize) -> (usize, Vec<[usize; 3]>) {
-    let t = (1.0 + 5f64.sqrt()) / 2.0;
-    let mut p: Vec<[f64; 3]> = vec![
-        [-1.0, t, 0.0], [1.0, t, 0.0], [-1.0, -t, 0.0], [1.0, -t, 0.0],
-        [0.0, -1.0, t], [0.0, 1.0, t], [0.0, -1.0, -t], [0.0, 1.0, -t],
-        [t, 0.0, -1.0], [t, 0.0, 1.0], [-t, 0.0, -1.0], [-t, 0.0, 1.0],
-    ];
-    let mut f: Vec<[usize; 3]> = vec![
-        [0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11], [1, 5, 9], [5, 11, 4],
-        [11, 10, 2], [10, 7, 6], [7, 1, 8], [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8],
-        [3, 8, 9], [4, 9, 5], [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1],
-    ];
-    for _ in 0..levels {
-        let mut mid: HashMap<(usize, usize), usize> = HashMap::new();
-        let mut nf = Vec::with_capacity(f.len() * 4);
-        for tri in &f {
-            let mut m = [0; 3];
-            for k in 0..3 {
-                let (a, b) = (tri[k], tri[(k + 1) % 3]);
-                let key = (a.min(b), a.max(b));
-                m[k] = *mid.entry(key).or_insert_with(|| {
-                    p.push([(p[a][0] + p[b][0]) / 2.0, (p[a][1] + p[b][1]) / 2.0, (p[a][2] + p[b][2]) / 2.0]);
-                    p.len() - 1
-                });
-            }
-            nf.push([tri[0], m[0], m[2]]);
-            nf.push([tri[1], m[1], m[0]]);
-            nf.push([tri[2], m[2], m[1]]);
-            nf.push(m);
-        }
-        f = nf;
-    }
-    (p.len(), f)
-}
-
 fn problem(obj: &str, fallback_levels: usize, shapes: usize) -> (NeighborIndex, TrainingData, String) {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data").join(obj);
     let (n, faces, what) = match load_faces(&path) {
         Some((n, f)) => (n, f, format!("{} ({n} vertices)", path.display())),
         None => {
-            let (n, f) = icosphere(fallback_levels);
-            (n, f, format!("icosphere ({n} vertices; {} not found)", path.display()))
+            let sphere = icosphere(fallback_levels);
+            let n = sphere.n_vertices();
+            (n, sphere.faces, format!("icosphere ({n} vertices; {} not found)", path.display()))
         }
     };
     let nb = NeighborIndex::from_faces(n, &faces).expect("valid mesh");
