@@ -19,11 +19,11 @@
 //! measured against the aligned frames.
 
 use std::cell::Cell;
-use std::collections::BinaryHeap;
 use std::path::Path;
 use std::time::{Duration, Instant};
 
 use meshdeco::Result;
+use meshdeco::geometry::graph_distance::EdgeGraph;
 use meshdeco::methods::support_map::SupportDistances;
 use meshdeco::methods::{DataMatrix, Pca, PcaConfig, SplocsConfig, SplocsSolver, WeightConstraint};
 
@@ -36,67 +36,25 @@ fn load_folder(dir: &Path) -> (Vec<[usize; 3]>, Vec<Vec<V3>>) {
     (seq.faces, seq.frames)
 }
 
-/// Dijkstra along mesh edges; counts the time spent.
+/// Dijkstra along mesh edges (the library's [`EdgeGraph`]); counts the time spent.
 struct GraphDistances {
-    pos: Vec<V3>,
-    adj: Vec<Vec<(usize, f64)>>,
+    graph: EdgeGraph,
     time: Cell<Duration>,
 }
 
 impl GraphDistances {
     fn new(pos: Vec<V3>, faces: &[[usize; 3]]) -> Self {
-        let mut adj: Vec<Vec<(usize, f64)>> = vec![Vec::new(); pos.len()];
-        for f in faces {
-            for k in 0..3 {
-                let (a, b) = (f[k], f[(k + 1) % 3]);
-                if !adj[a].iter().any(|&(n, _)| n == b) {
-                    let l = dist(pos[a], pos[b]);
-                    adj[a].push((b, l));
-                    adj[b].push((a, l));
-                }
-            }
-        }
-        GraphDistances { pos, adj, time: Cell::new(Duration::ZERO) }
-    }
-}
-
-#[derive(PartialEq)]
-struct Item(f64, usize);
-impl Eq for Item {}
-impl PartialOrd for Item {
-    fn partial_cmp(&self, o: &Self) -> Option<std::cmp::Ordering> {
-        Some(self.cmp(o))
-    }
-}
-impl Ord for Item {
-    fn cmp(&self, o: &Self) -> std::cmp::Ordering {
-        o.0.total_cmp(&self.0)
+        GraphDistances { graph: EdgeGraph::new(&pos, faces), time: Cell::new(Duration::ZERO) }
     }
 }
 
 impl SupportDistances for GraphDistances {
     fn n_elements(&self) -> usize {
-        self.pos.len()
+        self.graph.n_vertices()
     }
     fn distances(&self, centers: &[usize]) -> Result<Vec<f64>> {
         let t0 = Instant::now();
-        let mut d = vec![f64::INFINITY; self.pos.len()];
-        let mut heap = BinaryHeap::new();
-        for &c in centers {
-            d[c] = 0.0;
-            heap.push(Item(0.0, c));
-        }
-        while let Some(Item(dv, v)) = heap.pop() {
-            if dv > d[v] {
-                continue;
-            }
-            for &(n, l) in &self.adj[v] {
-                if dv + l < d[n] {
-                    d[n] = dv + l;
-                    heap.push(Item(dv + l, n));
-                }
-            }
-        }
+        let mut d = self.graph.distances(centers);
         // unreachable vertices (other connected components) are "far"
         for v in &mut d {
             if !v.is_finite() {
@@ -106,10 +64,6 @@ impl SupportDistances for GraphDistances {
         self.time.set(self.time.get() + t0.elapsed());
         Ok(d)
     }
-}
-
-fn dist(a: V3, b: V3) -> f64 {
-    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
 }
 
 /// Rigid (proper) rotation + translation of `src` onto `dst` (Kabsch); a reflection is fixed

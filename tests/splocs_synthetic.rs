@@ -3,9 +3,8 @@
 //! planted region is recovered by one component (IoU ≥ 0.7), the weight constraints, the
 //! objective's behaviour, user constraints, the triangle (W = 9) variant and PCA exactness.
 
-use std::collections::BinaryHeap;
-
 use meshdeco::Result;
+use meshdeco::geometry::graph_distance::EdgeGraph;
 use meshdeco::methods::support_map::{SupportDistances, TriangleSupport};
 use meshdeco::methods::{DataMatrix, Pca, PcaCentering, PcaConfig, SplocsConfig, SplocsFit, SplocsSolver, WeightConstraint};
 
@@ -34,68 +33,22 @@ fn grid() -> (Vec<[f64; 3]>, Vec<[usize; 3]>) {
     (pos, faces)
 }
 
-/// Dijkstra distances along mesh edges (Euclidean edge lengths).
-struct GraphDistances {
-    pos: Vec<[f64; 3]>,
-    adj: Vec<Vec<usize>>,
-}
+/// Dijkstra distances along mesh edges (Euclidean edge lengths): the library's [`EdgeGraph`] as
+/// a support-distance provider (a stand-in for heat geodesics).
+struct GraphDistances(EdgeGraph);
 
 impl GraphDistances {
     fn new(pos: &[[f64; 3]], faces: &[[usize; 3]]) -> Self {
-        let mut adj = vec![Vec::new(); pos.len()];
-        for f in faces {
-            for k in 0..3 {
-                let (a, b) = (f[k], f[(k + 1) % 3]);
-                if !adj[a].contains(&b) {
-                    adj[a].push(b);
-                    adj[b].push(a);
-                }
-            }
-        }
-        GraphDistances { pos: pos.to_vec(), adj }
-    }
-}
-
-#[derive(PartialEq)]
-struct Item(f64, usize);
-impl Eq for Item {}
-impl PartialOrd for Item {
-    fn partial_cmp(&self, o: &Self) -> Option<std::cmp::Ordering> {
-        Some(self.cmp(o))
-    }
-}
-impl Ord for Item {
-    fn cmp(&self, o: &Self) -> std::cmp::Ordering {
-        o.0.total_cmp(&self.0)
+        GraphDistances(EdgeGraph::new(pos, faces))
     }
 }
 
 impl SupportDistances for GraphDistances {
     fn n_elements(&self) -> usize {
-        self.pos.len()
+        self.0.n_vertices()
     }
     fn distances(&self, centers: &[usize]) -> Result<Vec<f64>> {
-        let mut d = vec![f64::INFINITY; self.pos.len()];
-        let mut heap = BinaryHeap::new();
-        for &c in centers {
-            d[c] = 0.0;
-            heap.push(Item(0.0, c));
-        }
-        while let Some(Item(dv, v)) = heap.pop() {
-            if dv > d[v] {
-                continue;
-            }
-            for &n in &self.adj[v] {
-                let p = self.pos[v];
-                let q = self.pos[n];
-                let l = ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2)).sqrt();
-                if dv + l < d[n] {
-                    d[n] = dv + l;
-                    heap.push(Item(dv + l, n));
-                }
-            }
-        }
-        Ok(d)
+        Ok(self.0.distances(centers))
     }
 }
 
