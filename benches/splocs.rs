@@ -47,12 +47,8 @@ fn load(dir: &Path) -> Option<(Vec<f64>, usize, Vec<[f64; 3]>)> {
             x.extend_from_slice(&[p[0] - r[0], p[1] - r[1], p[2] - r[2]]);
         }
     }
-    let mut ext = 0.0f64;
-    for q in 0..3 {
-        let lo = rest.iter().map(|p| p[q]).fold(f64::INFINITY, f64::min);
-        let hi = rest.iter().map(|p| p[q]).fold(f64::NEG_INFINITY, f64::max);
-        ext = ext.max(hi - lo);
-    }
+    let (lo, hi) = meshdeco::mesh::bounding_box(&rest);
+    let ext = (0..3).map(|q| hi[q] - lo[q]).fold(0.0f64, f64::max);
     let scaled = rest.iter().map(|p| [p[0] / ext, p[1] / ext, p[2] / ext]).collect();
     Some((x, frames.len(), scaled))
 }

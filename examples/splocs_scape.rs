@@ -24,6 +24,7 @@ use std::time::{Duration, Instant};
 
 use meshdeco::Result;
 use meshdeco::geometry::graph_distance::EdgeGraph;
+use meshdeco::geometry::rigid_align::kabsch;
 use meshdeco::methods::support_map::SupportDistances;
 use meshdeco::methods::{DataMatrix, Pca, PcaConfig, SplocsConfig, SplocsSolver, WeightConstraint};
 
@@ -64,40 +65,6 @@ impl SupportDistances for GraphDistances {
         self.time.set(self.time.get() + t0.elapsed());
         Ok(d)
     }
-}
-
-/// Rigid (proper) rotation + translation of `src` onto `dst` (Kabsch); a reflection is fixed
-/// by flipping the last singular vector.
-fn kabsch_apply(src: &[V3], dst: &[V3]) -> Vec<V3> {
-    let n = src.len() as f64;
-    let mut cs = [0.0; 3];
-    let mut cd = [0.0; 3];
-    for (s, d) in src.iter().zip(dst) {
-        for q in 0..3 {
-            cs[q] += s[q] / n;
-            cd[q] += d[q] / n;
-        }
-    }
-    let mut h = nalgebra::Matrix3::<f64>::zeros();
-    for (s, d) in src.iter().zip(dst) {
-        let a = nalgebra::Vector3::new(s[0] - cs[0], s[1] - cs[1], s[2] - cs[2]);
-        let b = nalgebra::Vector3::new(d[0] - cd[0], d[1] - cd[1], d[2] - cd[2]);
-        h += b * a.transpose();
-    }
-    let svd = h.svd(true, true);
-    let mut u = svd.u.unwrap();
-    let vt = svd.v_t.unwrap();
-    if (u * vt).determinant() < 0.0 {
-        let c = u.column(2) * -1.0;
-        u.set_column(2, &c);
-    }
-    let r = u * vt;
-    src.iter()
-        .map(|s| {
-            let p = r * nalgebra::Vector3::new(s[0] - cs[0], s[1] - cs[1], s[2] - cs[2]);
-            [p[0] + cd[0], p[1] + cd[1], p[2] + cd[2]]
-        })
-        .collect()
 }
 
 /// Process CPU time (user + system, all threads) in seconds from /proc (Linux; NaN elsewhere).
@@ -141,7 +108,7 @@ fn run(name: &str, dir: &Path, target_s: f64, target_erms: f64, o: &Opts) {
     if o.align {
         let rest = frames[0].clone();
         for f in frames.iter_mut().skip(1) {
-            *f = kabsch_apply(f, &rest);
+            *f = kabsch(f, &rest).apply_all(f);
         }
     }
     let (nf, nv) = (frames.len(), frames[0].len());

@@ -312,12 +312,8 @@ fn real_data_train_erms_within_reference() {
                 x.extend_from_slice(&[p[0] - r[0], p[1] - r[1], p[2] - r[2]]);
             }
         }
-        let mut extent = 0.0f64;
-        for q in 0..3 {
-            let lo = rest.iter().map(|p| p[q]).fold(f64::INFINITY, f64::min);
-            let hi = rest.iter().map(|p| p[q]).fold(f64::NEG_INFINITY, f64::max);
-            extent = extent.max(hi - lo);
-        }
+        let (lo, hi) = meshdeco::mesh::bounding_box(&rest);
+        let extent = (0..3).map(|q| hi[q] - lo[q]).fold(0.0f64, f64::max);
         let unit: Vec<[f64; 3]> = rest.iter().map(|p| [p[0] / extent, p[1] / extent, p[2] / extent]).collect();
         let provider = GraphDistances::new(&unit, &faces);
         let fit = SplocsSolver::fit(DataMatrix::new(&x, nf, nv, 3).unwrap(), &provider, &SplocsConfig::default(), |_, _| {})
