@@ -7,7 +7,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use anyhow::{Context, Result, bail};
 use clap::Args;
 use meshdeco::config::{Config, MethodKind};
-use meshdeco::pipeline::{autoencoder, linear};
+use meshdeco::pipeline::{autoencoder, linear, region};
 
 use super::progress::Bars;
 
@@ -28,12 +28,17 @@ pub fn run(a: TrainArgs) -> Result<()> {
     let cfg = Config::from_file(&a.config).with_context(|| format!("reading config {}", a.config.display()))?;
     let out = cfg.output_dir(a.out.as_deref());
     match cfg.kind {
-        MethodKind::Pca | MethodKind::Splocs => {
+        MethodKind::Pca | MethodKind::Splocs | MethodKind::RegionPca => {
             if a.resume {
                 bail!("--resume applies to the autoencoder only; {} trains in one go", cfg.kind.name());
             }
             let mut bars = Bars::new();
-            let o = linear::train(&cfg, &out, &mut bars).with_context(|| format!("training {} ({})", cfg.name, a.config.display()))?;
+            let o = if cfg.kind == MethodKind::RegionPca {
+                region::train(&cfg, &out, &mut bars)
+            } else {
+                linear::train(&cfg, &out, &mut bars)
+            }
+            .with_context(|| format!("training {} ({})", cfg.name, a.config.display()))?;
             print_summary(&cfg.name, &o.metrics);
             println!("artefacts in {}", o.out_dir.display());
             Ok(())
@@ -56,7 +61,6 @@ pub fn run(a: TrainArgs) -> Result<()> {
             println!("artefacts in {}", o.out_dir.display());
             Ok(())
         }
-        other => bail!("method `{}` is not yet available in this build (config {})", other.name(), a.config.display()),
     }
 }
 

@@ -15,6 +15,9 @@
 
 pub mod linear_model;
 pub mod pca;
+pub mod posing;
+pub mod region_pca;
+pub mod segmentation;
 pub mod splocs;
 mod splocs_admm;
 pub mod support_map;

@@ -6,6 +6,7 @@ pub mod autoencoder;
 pub mod geodesic_support;
 pub mod linear;
 pub mod metrics_file;
+pub mod region;
 
 /// Progress reporting hooks of long jobs (the CLI draws them with indicatif).
 pub trait Progress {

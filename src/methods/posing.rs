@@ -1,0 +1,411 @@
+//! Direct-manipulation posing ("click and drag") of linear models: given target values for a
+//! few constrained vertices, find model weights that meet them while staying near the current
+//! weights (Lewis & Anjyo 2010; Tena et al. 2011, Eq. 8–10).
+//!
+//! Targets are in the model's data units and space: for a model of vertex displacements (W = 3)
+//! the target of vertex v is `target position − rest position`. Only W = 3 (per-vertex) models
+//! can be posed here; a triangle-gradient model's vertices come out of a Poisson solve and need
+//! a different (non-local) formulation.
+//!
+//! **γ is dimensionless.** The paper's γ (0.025) multiplies ‖c − c0‖² in mm² units with
+//! orthonormal PCA bases. To make one γ work for any units and any component normalisation
+//! (SPLOCS components are not unit vectors), the regulariser used is `γ·s·‖w − w0‖²` with
+//! `s = trace(data-term Hessian)/P`, the mean squared response of one weight at the constrained
+//! vertices (P weights). β (boundary consistency, region PCA) is used as given: both the data
+//! and the boundary term are squared vertex differences in the same units.
+//!
+//! Factor once / solve many: a poser is built once per model and constraint-vertex set
+//! (assembling and factorising a P × P system) and then [`LinearPoser::solve`] /
+//! [`RegionPoser::solve`] run per drag event (one back-substitution, plus an active-set loop for
+//! non-negative weights).
+
+use faer::Mat;
+use faer::linalg::solvers::Solve;
+use serde::{Deserialize, Serialize};
+
+use super::linear_model::nnls_gram;
+use super::region_pca::{RegionPcaModel, SharedPair, boundary_rhs, factor_spd};
+use super::{LinearModel, WeightConstraint};
+use crate::mesh::Vec3;
+use crate::{Error, Result};
+
+/// Posing hyperparameters.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct PoseConfig {
+    /// γ ≥ 0 (dimensionless, see the module docs): pull towards the previous weights. Default
+    /// 0.025 (the paper's value).
+    pub gamma: f64,
+    /// β ≥ 0: boundary consistency between regions (region PCA only). Default 1.
+    pub beta: f64,
+}
+
+impl Default for PoseConfig {
+    fn default() -> Self {
+        PoseConfig { gamma: 0.025, beta: 1.0 }
+    }
+}
+
+impl PoseConfig {
+    /// Checks γ and β (finite, ≥ 0).
+    pub fn validate(&self) -> Result<()> {
+        for (k, v) in [("gamma", self.gamma), ("beta", self.beta)] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(Error::config(k, format!("{k} ({v}) must be finite and non-negative")));
+            }
+        }
+        Ok(())
+    }
+}
+
+fn check_vertices(vertices: &[usize], n: usize) -> Result<()> {
+    if vertices.is_empty() {
+        return Err(Error::Invalid("posing: no constrained vertex given".into()));
+    }
+    if let Some(&v) = vertices.iter().find(|&&v| v >= n) {
+        return Err(Error::Invalid(format!("posing: constrained vertex {v} out of range ({n} vertices)")));
+    }
+    Ok(())
+}
+
+fn check_targets(targets: &[Vec3], n: usize) -> Result<()> {
+    if targets.len() != n {
+        return Err(Error::Invalid(format!("posing: {} targets for {n} constrained vertices", targets.len())));
+    }
+    if let Some(i) = targets.iter().position(|t| t.iter().any(|x| !x.is_finite())) {
+        return Err(Error::Invalid(format!("posing: target {i} is not finite ({:?})", targets[i])));
+    }
+    Ok(())
+}
+
+fn check_weights(w0: &[f64], p: usize) -> Result<()> {
+    if w0.len() != p {
+        return Err(Error::Invalid(format!("posing: {} previous weights, the model has {p}", w0.len())));
+    }
+    if let Some(i) = w0.iter().position(|x| !x.is_finite()) {
+        return Err(Error::Invalid(format!("posing: previous weight {i} is not finite ({})", w0[i])));
+    }
+    Ok(())
+}
+
+/// Lewis–Anjyo posing of a [`LinearModel`] (paper 002 Eq. 8): w minimises
+/// `Σ_k ‖offset_k + Σ_j w_j C_j,k − t_k‖² + γ·s·‖w − w0‖²` subject to the model's weight
+/// constraint (`Nonnegative`: w ≥ 0, exact active-set NNLS; otherwise unconstrained).
+pub struct LinearPoser<'a> {
+    model: &'a LinearModel,
+    vertices: Vec<usize>,
+    hessian: Mat<f64>,
+    llt: faer::linalg::solvers::Llt<f64>,
+    reg: f64,
+}
+
+impl<'a> LinearPoser<'a> {
+    /// Assembles and factorises `C_S C_Sᵀ + γ s I` for the constrained `vertices`.
+    pub fn new(model: &'a LinearModel, vertices: &[usize], config: &PoseConfig) -> Result<Self> {
+        config.validate()?;
+        model.validate()?;
+        if model.width != 3 {
+            return Err(Error::Invalid(format!(
+                "posing needs a per-vertex model (width 3), got width {}",
+                model.width
+            )));
+        }
+        check_vertices(vertices, model.n_elements)?;
+        let k = model.n_components;
+        let mut h = Mat::<f64>::zeros(k, k);
+        for &v in vertices {
+            for i in 0..k {
+                let ci = &model.component(i)[3 * v..3 * v + 3];
+                for j in 0..k {
+                    let cj = &model.component(j)[3 * v..3 * v + 3];
+                    h[(i, j)] += ci[0] * cj[0] + ci[1] * cj[1] + ci[2] * cj[2];
+                }
+            }
+        }
+        let s = (0..k).map(|i| h[(i, i)]).sum::<f64>() / k as f64;
+        let reg = config.gamma * s;
+        for i in 0..k {
+            h[(i, i)] += reg;
+        }
+        let llt = factor_spd(h.clone(), "posing")?;
+        Ok(LinearPoser { model, vertices: vertices.to_vec(), hessian: h, llt, reg })
+    }
+
+    /// New weights (K) for `targets` (one per constrained vertex, data units) starting from
+    /// `w0` (K weights, e.g. the current pose's).
+    pub fn solve(&self, targets: &[Vec3], w0: &[f64]) -> Result<Vec<f64>> {
+        let m = self.model;
+        let k = m.n_components;
+        check_targets(targets, self.vertices.len())?;
+        check_weights(w0, k)?;
+        let mut b: Vec<f64> = w0.iter().map(|w| self.reg * w).collect();
+        for (&v, t) in self.vertices.iter().zip(targets) {
+            for (j, bj) in b.iter_mut().enumerate() {
+                let c = &m.component(j)[3 * v..3 * v + 3];
+                *bj += (0..3).map(|x| c[x] * (t[x] - m.offset[3 * v + x])).sum::<f64>();
+            }
+        }
+        if m.constraint == WeightConstraint::Nonnegative {
+            let mut g = self.hessian.clone();
+            let md = (0..k).map(|i| g[(i, i)]).fold(0.0f64, f64::max);
+            for i in 0..k {
+                g[(i, i)] += 1e-12 * md.max(f64::MIN_POSITIVE) + 1e-300;
+            }
+            return nnls_gram(&g, &b);
+        }
+        let mut rhs = Mat::<f64>::from_fn(k, 1, |i, _| b[i]);
+        self.llt.solve_in_place(rhs.as_mut());
+        Ok((0..k).map(|i| rhs[(i, 0)]).collect())
+    }
+}
+
+/// One-shot [`LinearPoser`]: weights meeting `targets` at `vertices` from `w0`.
+pub fn pose_linear(
+    model: &LinearModel,
+    vertices: &[usize],
+    targets: &[Vec3],
+    w0: &[f64],
+    config: &PoseConfig,
+) -> Result<Vec<f64>> {
+    LinearPoser::new(model, vertices, config)?.solve(targets, w0)
+}
+
+/// Region PCA posing (paper 002 Eq. 9/10): ζ minimises the data term at the constrained
+/// vertices in every region containing them, β × the boundary consistency of Eq. 6 and
+/// γ·s·‖ζ − ζ0‖². Reconstruct with [`RegionPcaModel::reconstruct`] (boundary averaging).
+pub struct RegionPoser<'a> {
+    model: &'a RegionPcaModel,
+    vertices: Vec<usize>,
+    memberships: Vec<Vec<(usize, usize)>>,
+    pairs: Vec<SharedPair>,
+    llt: faer::linalg::solvers::Llt<f64>,
+    beta: f64,
+    reg: f64,
+}
+
+impl<'a> RegionPoser<'a> {
+    /// Assembles and factorises the Eq. 10 system for the constrained `vertices`.
+    pub fn new(model: &'a RegionPcaModel, vertices: &[usize], config: &PoseConfig) -> Result<Self> {
+        config.validate()?;
+        check_vertices(vertices, model.n_vertices)?;
+        let p = model.n_components();
+        let off = model.offsets();
+        let all = model.memberships();
+        let memberships: Vec<Vec<(usize, usize)>> = vertices.iter().map(|&v| all[v].clone()).collect();
+        let mut h = Mat::<f64>::zeros(p, p);
+        for mem in &memberships {
+            for &(i, l) in mem {
+                model.add_data_vertex(i, l, off[i], &mut h);
+            }
+        }
+        let s = (0..p).map(|i| h[(i, i)]).sum::<f64>() / p as f64;
+        let reg = config.gamma * s;
+        let pairs = model.shared_pairs();
+        let mut dummy = vec![0.0; p];
+        model.add_boundary(&pairs, config.beta, &mut h, &mut dummy);
+        for i in 0..p {
+            h[(i, i)] += reg;
+        }
+        let llt = factor_spd(h, "region posing")?;
+        Ok(RegionPoser { model, vertices: vertices.to_vec(), memberships, pairs, llt, beta: config.beta, reg })
+    }
+
+    /// New coefficients ζ for `targets` (one per constrained vertex) starting from `zeta0`.
+    pub fn solve(&self, targets: &[Vec3], zeta0: &[f64]) -> Result<Vec<f64>> {
+        let m = self.model;
+        let p = m.n_components();
+        check_targets(targets, self.vertices.len())?;
+        check_weights(zeta0, p)?;
+        let off = m.offsets();
+        let mut rhs: Vec<f64> = zeta0.iter().map(|z| self.reg * z).collect();
+        for (mem, t) in self.memberships.iter().zip(targets) {
+            for &(i, l) in mem {
+                let r = &m.regions[i];
+                for (c, tc) in t.iter().enumerate() {
+                    let d = tc - r.mean[3 * l + c];
+                    for k in 0..r.n_components {
+                        rhs[off[i] + k] += r.at(k, l, c) * d;
+                    }
+                }
+            }
+        }
+        boundary_rhs(m, &self.pairs, self.beta, &mut rhs);
+        let mut b = Mat::<f64>::from_fn(p, 1, |i, _| rhs[i]);
+        self.llt.solve_in_place(b.as_mut());
+        Ok((0..p).map(|i| b[(i, 0)]).collect())
+    }
+}
+
+/// One-shot [`RegionPoser`].
+pub fn pose_region(
+    model: &RegionPcaModel,
+    vertices: &[usize],
+    targets: &[Vec3],
+    zeta0: &[f64],
+    config: &PoseConfig,
+) -> Result<Vec<f64>> {
+    RegionPoser::new(model, vertices, config)?.solve(targets, zeta0)
+}
+
+/// Share of the displacement energy Σ_v ‖after_v − before_v‖² (N·3 arrays) that falls on
+/// `inside` vertices; 0 when nothing moved.
+pub fn energy_share(before: &[f64], after: &[f64], inside: &[usize]) -> f64 {
+    let e = |v: usize| (0..3).map(|c| (after[3 * v + c] - before[3 * v + c]).powi(2)).sum::<f64>();
+    let total: f64 = (0..before.len() / 3).map(e).sum();
+    if total <= 0.0 {
+        return 0.0;
+    }
+    inside.iter().map(|&v| e(v)).sum::<f64>() / total
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::graph_distance::EdgeGraph;
+    use crate::methods::region_pca::tests::bumps;
+    use crate::methods::region_pca::{RegionPcaConfig, RegionPcaModel};
+    use crate::methods::segmentation::{SegmentationConfig, segment};
+    use crate::methods::{DataMatrix, Pca, PcaCentering, PcaConfig, SplocsConfig, SplocsSolver, SupportDistances};
+    use crate::synthetic;
+
+    struct Graph(EdgeGraph);
+    impl SupportDistances for Graph {
+        fn n_elements(&self) -> usize {
+            self.0.n_vertices()
+        }
+        fn distances(&self, centers: &[usize]) -> Result<Vec<f64>> {
+            Ok(self.0.distances(centers))
+        }
+    }
+
+    /// Centre vertex of planted bump `b` (largest displacement over the frames).
+    fn bump_centre(b: usize, d: &[f64], f: usize, n: usize) -> (usize, Vec<usize>) {
+        let p = &synthetic::planted_regions("synthetic:bumps").unwrap()[b];
+        let mut best = (0, -1.0);
+        for &v in &p.vertices {
+            let m = (0..f).map(|r| (0..3).map(|c| d[r * 3 * n + 3 * v + c].powi(2)).sum::<f64>()).fold(0.0, f64::max);
+            if m > best.1 {
+                best = (v, m);
+            }
+        }
+        (best.0, p.vertices.clone())
+    }
+
+    /// Drag `v` outward by `amount` from the model's state `x0`; returns (landing error / drag
+    /// distance, new state).
+    fn drag_check(x0: &[f64], v: usize, dir: Vec3, amount: f64, new: &dyn Fn(&[Vec3]) -> Vec<f64>) -> (f64, Vec<f64>) {
+        let t = [x0[3 * v] + amount * dir[0], x0[3 * v + 1] + amount * dir[1], x0[3 * v + 2] + amount * dir[2]];
+        let x = new(&[t]);
+        let err = ((0..3).map(|c| (x[3 * v + c] - t[c]).powi(2)).sum::<f64>()).sqrt();
+        (err / amount, x)
+    }
+
+    fn radial(rest: &[Vec3], v: usize) -> Vec3 {
+        let p = rest[v];
+        let l = (p[0] * p[0] + p[1] * p[1]).sqrt();
+        [p[0] / l, p[1] / l, 0.0]
+    }
+
+    #[test]
+    fn region_pca_drag_lands_and_stays_local() {
+        let (d, f, n, faces, rest) = bumps();
+        // Automatic region count (k grown until a cluster is not compact, at most 8).
+        let (nr, beta, gamma) = (None, 1.0, 0.025);
+        let seg = segment(
+            &rest,
+            &faces,
+            &d,
+            f,
+            &SegmentationConfig { regions: nr, max_regions: 8, restarts: 4, ..Default::default() },
+        )
+        .unwrap();
+        let model = RegionPcaModel::fit(
+            DataMatrix::new(&d, f, n, 3).unwrap(),
+            &seg.regions,
+            &RegionPcaConfig { components: 3 * seg.n_regions(), beta },
+        )
+        .unwrap();
+        let zeta0 = model.encode(&d[..3 * n]).unwrap();
+        let x0 = model.reconstruct(&zeta0).unwrap();
+        for b in 0..3 {
+            let (v, _) = bump_centre(b, &d, f, n);
+            let poser = RegionPoser::new(&model, &[v], &PoseConfig { gamma, beta }).unwrap();
+            let (rel, x) = drag_check(&x0, v, radial(&rest, v), 0.03, &|t| {
+                model.reconstruct(&poser.solve(t, &zeta0).unwrap()).unwrap()
+            });
+            let region = &seg.regions[seg.labels[v]];
+            let share = energy_share(&x0, &x, region);
+            let (_, planted) = bump_centre(b, &d, f, n);
+            eprintln!(
+                "M={} region PCA bump {b}: landing error {:.2}% of drag, energy share in its region {:.3}, in the planted bump {:.3}",
+                seg.n_regions(),
+                100.0 * rel,
+                share,
+                energy_share(&x0, &x, &planted)
+            );
+            assert!(rel < 0.05, "bump {b}: landing error {rel}");
+            assert!(share >= 0.8, "bump {b}: share {share}");
+        }
+    }
+
+    #[test]
+    fn splocs_and_pca_drag_land_splocs_stays_local() {
+        let (d, f, n, faces, rest) = bumps();
+        let x = DataMatrix::new(&d, f, n, 3).unwrap();
+        let graph = Graph(EdgeGraph::new(&rest, &faces));
+        let cfg = SplocsConfig { components: 3, support: [0.05, 0.3], sparsity: 2.0, ..Default::default() };
+        let splocs = SplocsSolver::fit(x, &graph, &cfg, |_, _| {}).unwrap().model;
+        let pca = Pca::fit(x, &PcaConfig { components: 3, centering: PcaCentering::None }).unwrap();
+        for b in 0..3 {
+            let (v, planted) = bump_centre(b, &d, f, n);
+            for (name, model) in [("splocs", &splocs), ("pca", &pca)] {
+                let w0 = vec![0.0; model.n_components];
+                let x0 = model.synthesize(&w0).unwrap();
+                let poser = LinearPoser::new(model, &[v], &PoseConfig::default()).unwrap();
+                let (rel, xn) = drag_check(&x0, v, radial(&rest, v), 0.03, &|t| {
+                    model.synthesize(&poser.solve(t, &w0).unwrap()).unwrap()
+                });
+                // Support of the component that dominates the vertex.
+                let kmax = (0..model.n_components)
+                    .max_by(|&a, &c| model.component_group_norms(a)[v].total_cmp(&model.component_group_norms(c)[v]))
+                    .unwrap();
+                let norms = model.component_group_norms(kmax);
+                let top = norms.iter().cloned().fold(0.0, f64::max);
+                let support: Vec<usize> = (0..n).filter(|&u| norms[u] > 1e-3 * top).collect();
+                let share = energy_share(&x0, &xn, &support);
+                eprintln!(
+                    "{name} bump {b}: landing error {:.2}% of drag, energy share in the dominant component's support {:.3} ({} vertices), in the planted bump {:.3}",
+                    100.0 * rel,
+                    share,
+                    support.len(),
+                    energy_share(&x0, &xn, &planted)
+                );
+                assert!(rel < 0.05, "{name} bump {b}: landing error {rel}");
+                if name == "splocs" {
+                    assert!(share >= 0.8, "splocs bump {b}: share {share}");
+                    assert!(poser.solve(&[[0.0; 3]], &w0).unwrap().iter().all(|&w| w >= 0.0));
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn bad_inputs_are_errors() {
+        let (d, f, n, _, _) = bumps();
+        let pca = Pca::fit(
+            DataMatrix::new(&d, f, n, 3).unwrap(),
+            &PcaConfig { components: 3, centering: PcaCentering::Mean },
+        )
+        .unwrap();
+        assert!(LinearPoser::new(&pca, &[n], &PoseConfig::default()).is_err());
+        assert!(
+            LinearPoser::new(&pca, &[0], &PoseConfig { gamma: -1.0, beta: 1.0 })
+                .err()
+                .unwrap()
+                .to_string()
+                .contains("-1")
+        );
+        let p = LinearPoser::new(&pca, &[0], &PoseConfig::default()).unwrap();
+        assert!(p.solve(&[[f64::NAN, 0.0, 0.0]], &[0.0; 3]).is_err());
+        assert!(p.solve(&[[0.0; 3]], &[0.0; 2]).is_err());
+    }
+}

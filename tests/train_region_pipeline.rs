@@ -1,0 +1,124 @@
+//! Region PCA end to end on the built-in synthetic data: train through the library pipeline,
+//! reload the artefact directory, check reconstruction and posing; and on `face-poses` when the
+//! shared data are present (region vs holistic PCA with the same budget on held-out poses).
+
+use std::path::{Path, PathBuf};
+
+use meshdeco::mesh::MeshSequence;
+use meshdeco::pipeline::linear;
+use meshdeco::synthetic;
+
+use meshdeco::config::Config;
+use meshdeco::methods::posing::{PoseConfig, RegionPoser, energy_share};
+use meshdeco::pipeline::Silent;
+use meshdeco::pipeline::region::{self, RegionArtifact};
+
+fn out_dir(tag: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("meshdeco-test-{tag}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    d
+}
+
+#[test]
+fn region_pca_trains_reloads_and_poses_on_bumps() {
+    let cfg = Config::from_toml(
+        r#"
+name = "bumps-region"
+[data]
+path = "synthetic:bumps"
+train = "1-30"
+test = "rest"
+[method]
+kind = "region-pca"
+components = 24
+max_regions = 8
+"#,
+    )
+    .unwrap();
+    let out = out_dir("region-bumps");
+    let o = region::train(&cfg, &out, &mut Silent).unwrap();
+    for f in ["config.toml", "model.json", "model.bin", "metrics.json", "segmentation.ply"] {
+        assert!(out.join(f).exists(), "{f} missing");
+    }
+    // Rank-3 data, ≥ 3 components per region: near exact on train and held-out frames.
+    eprintln!("bumps region PCA: train Erms {:.4}, test Erms {:?}", o.metrics.train_erms, o.metrics.test_erms);
+    assert!(o.metrics.train_erms < 1e-6, "train Erms {}", o.metrics.train_erms);
+    assert!(o.metrics.test_erms.unwrap() < 1e-6, "test Erms {:?}", o.metrics.test_erms);
+    let a = RegionArtifact::load(&out).unwrap();
+    assert_eq!(a.model.n_components(), o.metrics.components);
+    assert!(a.model.regions.len() >= 2);
+    // Pose from the first training frame: drag the centre of planted bump 1 outward by 0.02.
+    let n = a.model.n_vertices;
+    let bump = &synthetic::planted_regions("synthetic:bumps").unwrap()[1];
+    let rest = &a.rest.positions;
+    let v = *bump
+        .vertices
+        .iter()
+        .max_by(|&&p, &&q| {
+            let r = |v: usize| (rest[v][2] - 0.5).abs();
+            r(q).total_cmp(&r(p)).then(p.cmp(&q))
+        })
+        .unwrap();
+    let seq = synthetic::load("synthetic:bumps").unwrap();
+    let first = MeshSequence { faces: seq.faces.clone(), frames: vec![seq.frames[0].clone()], names: Vec::new() };
+    let zeta0 = a.encode_frames(&first).unwrap().remove(0);
+    let x0 = a.model.reconstruct(&zeta0).unwrap();
+    let p = rest[v];
+    let l = (p[0] * p[0] + p[1] * p[1]).sqrt();
+    let amount = 0.02;
+    let t = [x0[3 * v] + amount * p[0] / l, x0[3 * v + 1] + amount * p[1] / l, x0[3 * v + 2]];
+    let poser = RegionPoser::new(&a.model, &[v], &PoseConfig { gamma: a.header.gamma, beta: a.header.beta }).unwrap();
+    let x = a.model.reconstruct(&poser.solve(&[t], &zeta0).unwrap()).unwrap();
+    let err = (0..3).map(|c| (x[3 * v + c] - t[c]).powi(2)).sum::<f64>().sqrt();
+    assert!(err < 0.05 * amount, "landing error {err} for a drag of {amount}");
+    let share = energy_share(&x0, &x, &bump.vertices);
+    assert!(share > 0.99, "share in the planted bump {share}");
+    assert_eq!(x.len(), 3 * n);
+}
+
+/// Region PCA vs holistic PCA with the same total budget on held-out face poses (train 1–7,
+/// test 8–9). Skips when `../shared/data/face-poses` is absent.
+#[test]
+fn face_poses_region_vs_holistic() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/face-poses");
+    if !dir.exists() {
+        eprintln!("skipping: {} not present", dir.display());
+        return;
+    }
+    let path = dir.display().to_string();
+    let k = 6;
+    let toml = |kind: &str, extra: &str| {
+        format!(
+            "name = \"face\"\n[data]\npath = \"{path}\"\ntrain = \"1-7\"\ntest = \"rest\"\n[method]\nkind = \"{kind}\"\ncomponents = {k}\n{extra}"
+        )
+    };
+    let t = std::time::Instant::now();
+    let out_r = out_dir("face-region");
+    let r =
+        region::train(&Config::from_toml(&toml("region-pca", "regions = 6")).unwrap(), &out_r, &mut Silent).unwrap();
+    let secs = t.elapsed().as_secs_f64();
+    let out_p = out_dir("face-pca");
+    let h = linear::train(&Config::from_toml(&toml("pca", "")).unwrap(), &out_p, &mut Silent).unwrap();
+    eprintln!(
+        "face-poses K = {k}: region PCA (6 regions) train Erms {:.3}, test Erms {:.3} ({secs:.1} s); holistic PCA train Erms {:.3}, test Erms {:.3}",
+        r.metrics.train_erms,
+        r.metrics.test_erms.unwrap(),
+        h.metrics.train_erms,
+        h.metrics.test_erms.unwrap()
+    );
+    assert!(r.metrics.test_erms.unwrap().is_finite());
+    // Automatic segmentation (k grown until a cluster is not compact), 6 components per region.
+    let out_a = out_dir("face-region-auto");
+    let cfg = toml("region-pca", "max_regions = 16").replace(&format!("components = {k}"), "components = 96");
+    let auto = region::train(&Config::from_toml(&cfg).unwrap(), &out_a, &mut Silent).unwrap();
+    let a = RegionArtifact::load(&out_a).unwrap();
+    eprintln!(
+        "face-poses automatic segmentation: {} regions, {} components, train Erms {:.3}, test Erms {:.3}",
+        a.model.regions.len(),
+        auto.metrics.components,
+        auto.metrics.train_erms,
+        auto.metrics.test_erms.unwrap()
+    );
+    // Every cluster of the automatic segmentation is compact on the full mesh.
+    assert!(meshdeco::methods::segmentation::all_compact(&a.labels, a.model.regions.len(), &a.rest.faces));
+}
