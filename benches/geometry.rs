@@ -17,15 +17,17 @@ use std::time::Duration;
 use criterion::{Criterion, criterion_group, criterion_main};
 use meshdeco::geometry::cotan_laplacian::cotan_laplacian;
 use meshdeco::geometry::heat_geodesics::{DistanceBounds, HeatGeodesics, HeatOptions};
-use meshdeco::mesh::primitives::icosphere;
 use meshdeco::mesh::TriMesh;
+use meshdeco::mesh::primitives::icosphere;
 
 const HORSE: &str = "../shared/data/horse-gallop/0001.obj";
 
 fn bench_mesh(c: &mut Criterion, name: &str, mesh: &TriMesh) {
     let mut group = c.benchmark_group(format!("geometry/{name} ({} vertices)", mesh.n_vertices()));
     group.sample_size(20).warm_up_time(Duration::from_secs(1)).measurement_time(Duration::from_secs(4));
-    group.bench_function("cotan_laplacian", |b| b.iter(|| cotan_laplacian(black_box(&mesh.positions), black_box(&mesh.faces))));
+    group.bench_function("cotan_laplacian", |b| {
+        b.iter(|| cotan_laplacian(black_box(&mesh.positions), black_box(&mesh.faces)))
+    });
     group.bench_function("heat_factor (m=1)", |b| {
         b.iter(|| HeatGeodesics::new(black_box(&mesh.positions), black_box(&mesh.faces), 1.0).unwrap())
     });
@@ -35,7 +37,9 @@ fn bench_mesh(c: &mut Criterion, name: &str, mesh: &TriMesh) {
     // With the edge-path (Dijkstra) upper bound as well.
     let both = HeatOptions { bounds: DistanceBounds::StraightLineAndEdgePath, ..Default::default() };
     let both = HeatGeodesics::with_options(&mesh.positions, &mesh.faces, both).unwrap();
-    group.bench_function("geodesic_query (+ edge-path bound)", |b| b.iter(|| both.distances(black_box(&[source])).unwrap()));
+    group.bench_function("geodesic_query (+ edge-path bound)", |b| {
+        b.iter(|| both.distances(black_box(&[source])).unwrap())
+    });
     group.finish();
 }
 

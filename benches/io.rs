@@ -3,7 +3,7 @@
 
 use std::path::PathBuf;
 
-use criterion::{criterion_group, criterion_main, Criterion};
+use criterion::{Criterion, criterion_group, criterion_main};
 use meshdeco::mesh::read_sequence;
 
 fn dataset(name: &str) -> Option<String> {

@@ -13,7 +13,7 @@ use std::hint::black_box;
 use std::path::Path;
 
 use criterion::{Criterion, criterion_group, criterion_main};
-use meshdeco::mesh::{load_mesh, MeshSequence, TriMesh};
+use meshdeco::mesh::{MeshSequence, TriMesh, load_mesh};
 use meshdeco::representation::{Representation, RepresentationKind, RepresentationOptions};
 
 /// The OBJ files `names` of data folder `folder`, or `None` (with a message) when absent.

@@ -132,7 +132,11 @@ fn profile(obj: &str, shapes: usize, steps: usize) {
     let ck = std::env::temp_dir().join(format!("ae_profile_{}.mdae", std::process::id()));
     let t1 = Instant::now();
     t.save_checkpoint(&ck).expect("checkpoint");
-    println!("checkpoint: {:.1} ms, {:.1} MB", t1.elapsed().as_secs_f64() * 1e3, std::fs::metadata(&ck).map(|m| m.len()).unwrap_or(0) as f64 / 1e6);
+    println!(
+        "checkpoint: {:.1} ms, {:.1} MB",
+        t1.elapsed().as_secs_f64() * 1e3,
+        std::fs::metadata(&ck).map(|m| m.len()).unwrap_or(0) as f64 / 1e6
+    );
     let t1 = Instant::now();
     let _ = Trainer::resume(&ck, t.config().clone(), &data, &nb, &dist).expect("resume");
     println!("resume: {:.1} ms", t1.elapsed().as_secs_f64() * 1e3);

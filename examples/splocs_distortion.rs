@@ -47,7 +47,13 @@ fn mean(v: &[f64]) -> f64 {
 fn median(v: &[f64]) -> f64 {
     let mut s = v.to_vec();
     s.sort_by(f64::total_cmp);
-    if s.is_empty() { f64::NAN } else if s.len() % 2 == 1 { s[s.len() / 2] } else { 0.5 * (s[s.len() / 2 - 1] + s[s.len() / 2]) }
+    if s.is_empty() {
+        f64::NAN
+    } else if s.len() % 2 == 1 {
+        s[s.len() / 2]
+    } else {
+        0.5 * (s[s.len() / 2 - 1] + s[s.len() / 2])
+    }
 }
 
 fn max(v: &[f64]) -> f64 {
@@ -72,10 +78,13 @@ fn measure(config: &Path, out_root: &Path) -> Result<Summary> {
     );
 
     let a = LinearArtifact::load(&out)?;
-    let rest = TriMesh::new(a.rest.positions.iter().map(|p| a.header.unit_box.invert(*p)).collect(), a.rest.faces.clone());
+    let rest =
+        TriMesh::new(a.rest.positions.iter().map(|p| a.header.unit_box.invert(*p)).collect(), a.rest.faces.clone());
     let meter = EdgeDistortionMeter::new(&rest, StedParams::default())?;
     let k = a.model.n_components;
-    let rms = |p: &[Vec3]| (p.iter().zip(&rest.positions).map(|(a, b)| dist(*a, *b).powi(2)).sum::<f64>() / p.len() as f64).sqrt();
+    let rms = |p: &[Vec3]| {
+        (p.iter().zip(&rest.positions).map(|(a, b)| dist(*a, *b).powi(2)).sum::<f64>() / p.len() as f64).sqrt()
+    };
     let zero = meter.measure(&a.synthesize(&vec![0.0; k])?)?;
     let mut s = Summary {
         name: cfg.name.clone(),
@@ -135,7 +144,17 @@ fn main() -> Result<()> {
     println!("±1 poses of every component against the rest mesh (STED: rings 1, edge-length weighted)");
     println!(
         "{:<24} {:<18} {:>6} {:>9} {:>11} {:>11} {:>10} {:>11} {:>11} {:>12} {:>10}",
-        "model", "representation", "poses", "train Erms", "mean|dl|/l", "median", "max |dl|/l", "STED_s mean", "STED_s med", "RMS disp.", "rest pose"
+        "model",
+        "representation",
+        "poses",
+        "train Erms",
+        "mean|dl|/l",
+        "median",
+        "max |dl|/l",
+        "STED_s mean",
+        "STED_s med",
+        "RMS disp.",
+        "rest pose"
     );
     for s in &rows {
         println!(

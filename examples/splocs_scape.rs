@@ -78,7 +78,9 @@ fn cpu_seconds() -> f64 {
 }
 
 fn load_average() -> String {
-    std::fs::read_to_string("/proc/loadavg").map(|s| s.split_whitespace().next().unwrap_or("?").to_string()).unwrap_or_default()
+    std::fs::read_to_string("/proc/loadavg")
+        .map(|s| s.split_whitespace().next().unwrap_or("?").to_string())
+        .unwrap_or_default()
 }
 
 fn erms(a: &[f64], b: &[f64]) -> f64 {
@@ -162,7 +164,11 @@ fn run(name: &str, dir: &Path, target_s: f64, target_erms: f64, o: &Opts) {
     let t1 = Instant::now();
     let kp = 50.min(nf);
     let pca = Pca::fit(dm, &PcaConfig { components: kp, ..Default::default() }).unwrap();
-    println!("  PCA (K {kp}, mean-centred): train Erms {:.3} ({:.3} s)", erms(&pca.reconstruct().unwrap(), &x), t1.elapsed().as_secs_f64());
+    println!(
+        "  PCA (K {kp}, mean-centred): train Erms {:.3} ({:.3} s)",
+        erms(&pca.reconstruct().unwrap(), &x),
+        t1.elapsed().as_secs_f64()
+    );
     let shares: Vec<f64> = fit.locality.iter().map(|l| l.energy_share).collect();
     let sizes: Vec<f64> = fit.locality.iter().map(|l| l.support_size as f64).collect();
     let regions: Vec<f64> = fit.locality.iter().map(|l| l.region_size as f64).collect();

@@ -50,10 +50,15 @@ impl ArrayStore {
     pub fn insert(&mut self, name: &str, shape: Vec<usize>, data: Vec<f64>) -> Result<()> {
         let n: usize = shape.iter().product();
         if n != data.len() {
-            return Err(Error::Invalid(format!("array `{name}`: shape {shape:?} needs {n} numbers, got {}", data.len())));
+            return Err(Error::Invalid(format!(
+                "array `{name}`: shape {shape:?} needs {n} numbers, got {}",
+                data.len()
+            )));
         }
         if let Some(i) = data.iter().position(|x| !x.is_finite()) {
-            return Err(Error::Numerical(format!("array `{name}` has a non-finite value at element {i}; refusing to save it")));
+            return Err(Error::Numerical(format!(
+                "array `{name}` has a non-finite value at element {i}; refusing to save it"
+            )));
         }
         self.arrays.insert(name.to_string(), (shape, data));
         Ok(())
@@ -155,12 +160,18 @@ pub fn load_model<H: for<'de> Deserialize<'de>>(dir: &Path) -> Result<(H, ArrayS
     let dir = model_dir(dir);
     let json = dir.join("model.json");
     let text = std::fs::read_to_string(&json).map_err(|e| Error::io(&json, e))?;
-    let probe: serde_json::Value = serde_json::from_str(&text).map_err(|e| Error::parse(&json, Some(e.line()), e.to_string()))?;
+    let probe: serde_json::Value =
+        serde_json::from_str(&text).map_err(|e| Error::parse(&json, Some(e.line()), e.to_string()))?;
     let version = probe.get("format_version").and_then(|v| v.as_u64()).unwrap_or(0);
     if version != FORMAT_VERSION as u64 {
-        return Err(Error::parse(&json, None, format!("model format version {version} is not supported by this build (expects {FORMAT_VERSION})")));
+        return Err(Error::parse(
+            &json,
+            None,
+            format!("model format version {version} is not supported by this build (expects {FORMAT_VERSION})"),
+        ));
     }
-    let file: HeaderFile<H> = serde_json::from_str(&text).map_err(|e| Error::parse(&json, Some(e.line()), e.to_string()))?;
+    let file: HeaderFile<H> =
+        serde_json::from_str(&text).map_err(|e| Error::parse(&json, Some(e.line()), e.to_string()))?;
     let bin = dir.join("model.bin");
     let bytes = std::fs::read(&bin).map_err(|e| Error::io(&bin, e))?;
     if bytes.len() % 8 != 0 {
@@ -171,7 +182,15 @@ pub fn load_model<H: for<'de> Deserialize<'de>>(dir: &Path) -> Result<(H, ArrayS
     for (name, entry) in file.arrays {
         let n: usize = entry.shape.iter().product();
         let data = all.get(entry.offset..entry.offset + n).ok_or_else(|| {
-            Error::parse(&bin, None, format!("array `{name}` ({n} numbers at {}) lies past the end of the file ({} numbers)", entry.offset, all.len()))
+            Error::parse(
+                &bin,
+                None,
+                format!(
+                    "array `{name}` ({n} numbers at {}) lies past the end of the file ({} numbers)",
+                    entry.offset,
+                    all.len()
+                ),
+            )
         })?;
         store.insert(&name, entry.shape, data.to_vec()).map_err(|e| Error::parse(&bin, None, e.to_string()))?;
     }
@@ -199,7 +218,10 @@ pub fn write_weights_csv(path: &Path, frame_names: &[String], weights: &[f64], k
         for c in 0..k {
             let w = weights[f * k + c];
             if !w.is_finite() {
-                return Err(Error::Numerical(format!("weight of frame {name}, component {c} is {w}; refusing to write {}", path.display())));
+                return Err(Error::Numerical(format!(
+                    "weight of frame {name}, component {c} is {w}; refusing to write {}",
+                    path.display()
+                )));
             }
             s.push_str(&format!(",{w}"));
         }

@@ -15,11 +15,7 @@ pub enum Error {
     },
     /// A mesh (or other input) file is malformed. `line` is 1-based when known.
     #[error("{path}{}: {message}", line.map(|l| format!(":{l}")).unwrap_or_default())]
-    Parse {
-        path: PathBuf,
-        line: Option<usize>,
-        message: String,
-    },
+    Parse { path: PathBuf, line: Option<usize>, message: String },
     /// A frame of a sequence does not match the first frame (vertex count or faces).
     #[error("{path}: {message}")]
     Mismatch { path: PathBuf, message: String },

@@ -130,11 +130,18 @@ pub fn rest_shape(seq: &MeshSequence, rest: &RestShape, train: &[usize]) -> Resu
             if m.n_vertices() != seq.n_vertices() {
                 return Err(Error::Mismatch {
                     path: path.clone(),
-                    message: format!("rest mesh has {} vertices, the sequence has {}", m.n_vertices(), seq.n_vertices()),
+                    message: format!(
+                        "rest mesh has {} vertices, the sequence has {}",
+                        m.n_vertices(),
+                        seq.n_vertices()
+                    ),
                 });
             }
             if m.faces != seq.faces {
-                return Err(Error::Mismatch { path: path.clone(), message: "rest mesh faces differ from the sequence's faces".into() });
+                return Err(Error::Mismatch {
+                    path: path.clone(),
+                    message: "rest mesh faces differ from the sequence's faces".into(),
+                });
             }
             Ok(m.positions)
         }
@@ -157,7 +164,14 @@ mod tests {
     use crate::config::FrameSelection;
 
     fn cfg(path: &str) -> DataConfig {
-        DataConfig { path: path.into(), train: FrameSelection::All, test: None, rest: RestShape::First, align: Align::None, unit_box: false }
+        DataConfig {
+            path: path.into(),
+            train: FrameSelection::All,
+            test: None,
+            rest: RestShape::First,
+            align: Align::None,
+            unit_box: false,
+        }
     }
 
     #[test]

@@ -74,7 +74,11 @@ pub fn planted_regions(path: &str) -> Result<Vec<PlantedRegion>> {
             region("joint-b", &|z, _| joint_zone(z, JOINT_B)),
             region("bulge", &|z, phi| bump_profile(z, phi, 0.5, 0.0)),
         ]),
-        "bumps" => Ok(BUMPS.iter().enumerate().map(|(k, b)| region(&format!("bump-{k}"), &|z, phi| bump_profile(z, phi, b.0, b.1))).collect()),
+        "bumps" => Ok(BUMPS
+            .iter()
+            .enumerate()
+            .map(|(k, b)| region(&format!("bump-{k}"), &|z, phi| bump_profile(z, phi, b.0, b.1)))
+            .collect()),
         _ => load(path).map(|_| Vec::new()),
     }
 }
@@ -240,7 +244,9 @@ mod tests {
             .iter()
             .map(|f| {
                 let (a, b, c) = (m.positions[f[0]], m.positions[f[1]], m.positions[f[2]]);
-                (a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0]) + a[2] * (b[0] * c[1] - b[1] * c[0])) / 6.0
+                (a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0])
+                    + a[2] * (b[0] * c[1] - b[1] * c[0]))
+                    / 6.0
             })
             .sum();
         assert!(vol > 0.0, "signed volume {vol} should be positive");
@@ -263,7 +269,8 @@ mod tests {
         let seq = load("synthetic:bumps").unwrap();
         let regions = planted_regions("synthetic:bumps").unwrap();
         assert_eq!(regions.len(), 3);
-        let inside: std::collections::HashSet<usize> = regions.iter().flat_map(|r| r.vertices.iter().copied()).collect();
+        let inside: std::collections::HashSet<usize> =
+            regions.iter().flat_map(|r| r.vertices.iter().copied()).collect();
         for f in &seq.frames {
             for (v, (p, q)) in f.iter().zip(&seq.frames[0]).enumerate() {
                 if !inside.contains(&v) {
@@ -273,7 +280,12 @@ mod tests {
         }
         // Each region is small relative to the mesh but not empty.
         for r in &regions {
-            assert!(!r.vertices.is_empty() && r.vertices.len() < seq.n_vertices() / 5, "{}: {}", r.name, r.vertices.len());
+            assert!(
+                !r.vertices.is_empty() && r.vertices.len() < seq.n_vertices() / 5,
+                "{}: {}",
+                r.name,
+                r.vertices.len()
+            );
         }
     }
 
@@ -283,7 +295,8 @@ mod tests {
         let rest = tube_mesh();
         let t = Topology::new(rest.n_vertices(), &rest.faces);
         let regions = planted_regions("synthetic:tube").unwrap();
-        let touched: std::collections::HashSet<usize> = regions.iter().flat_map(|r| r.vertices.iter().copied()).collect();
+        let touched: std::collections::HashSet<usize> =
+            regions.iter().flat_map(|r| r.vertices.iter().copied()).collect();
         for f in &seq.frames {
             for e in &t.edges {
                 if touched.contains(&e[0]) || touched.contains(&e[1]) {

@@ -3,7 +3,7 @@
 //!
 //! Run: `cargo test --release --test acap_fixtures -- --nocapture` (prints the measured numbers).
 
-use meshdeco::mesh::{load_mesh, load_sequence, TriMesh, Vec3};
+use meshdeco::mesh::{TriMesh, Vec3, load_mesh, load_sequence};
 use meshdeco::representation::acap::{Acap, AcapDecoder, AcapFrame, AcapOptions, Consistency, Mat3};
 use meshdeco::representation::acap_text::read_matrices;
 use std::f64::consts::PI;
@@ -72,10 +72,7 @@ fn centroid(p: &[Vec3]) -> Vec3 {
 /// Σ‖v − v'‖² after moving `got`'s centroid onto `want`'s.
 fn sq_err_centroid_aligned(want: &[Vec3], got: &[Vec3]) -> f64 {
     let (cw, cg) = (centroid(want), centroid(got));
-    want.iter()
-        .zip(got)
-        .map(|(w, g)| (0..3).map(|k| (w[k] - (g[k] - cg[k] + cw[k])).powi(2)).sum::<f64>())
-        .sum()
+    want.iter().zip(got).map(|(w, g)| (0..3).map(|k| (w[k] - (g[k] - cg[k] + cw[k])).powi(2)).sum::<f64>()).sum()
 }
 
 /// Largest entry-wise difference between two files' rows 2 and 3 (the deformed shapes).
@@ -137,7 +134,9 @@ fn bfs_on_reference_rotations_is_no_worse_than_reference_bfs() {
     let reference = load_obj(&dir.join("1.obj"));
     let acap = Acap::new(&reference).unwrap();
     let gt_l = read_matrices(&dir.join("LOGRNEW_GT.txt")).unwrap();
-    use meshdeco::representation::acap_consistency::{BfsTree, RotationField, bfs_consistency, global_consistency, neighbour_energy};
+    use meshdeco::representation::acap_consistency::{
+        BfsTree, RotationField, bfs_consistency, global_consistency, neighbour_energy,
+    };
     use meshdeco::representation::acap_rotation::{axis_angle, exp_so3};
     let mut offsets = vec![0];
     let mut ring = Vec::new();
@@ -152,12 +151,21 @@ fn bfs_on_reference_rotations_is_no_worse_than_reference_bfs() {
         let theirs = energy_of(gt, acap.edges());
         // Global consistency started from the reference's seamed BFS field must repair the seam.
         let mut field = RotationField {
-            axis: gt.iter().map(|l| {
-                let w = vee(l);
-                let n = (w[0] * w[0] + w[1] * w[1] + w[2] * w[2]).sqrt();
-                if n > 0.0 { [w[0] / n, w[1] / n, w[2] / n] } else { [0.0; 3] }
-            }).collect(),
-            angle: gt.iter().map(|l| { let w = vee(l); (w[0] * w[0] + w[1] * w[1] + w[2] * w[2]).sqrt() }).collect(),
+            axis: gt
+                .iter()
+                .map(|l| {
+                    let w = vee(l);
+                    let n = (w[0] * w[0] + w[1] * w[1] + w[2] * w[2]).sqrt();
+                    if n > 0.0 { [w[0] / n, w[1] / n, w[2] / n] } else { [0.0; 3] }
+                })
+                .collect(),
+            angle: gt
+                .iter()
+                .map(|l| {
+                    let w = vee(l);
+                    (w[0] * w[0] + w[1] * w[1] + w[2] * w[2]).sqrt()
+                })
+                .collect(),
         };
         let identity: Vec<bool> = theta.iter().map(|&t| t <= 1e-6).collect();
         let repaired = global_consistency(&mut field, &identity, &offsets, &ring, acap.edges());

@@ -224,24 +224,18 @@ fn training_recovers_planted_local_deformations() {
     let analysis = ae.analyze_components(&feats, 0).unwrap();
     let mut hit = [false; 2];
     for comp in analysis.components.iter().take(2) {
-        let peak = comp
-            .vertex_change
-            .iter()
-            .enumerate()
-            .max_by(|a, b| a.1.total_cmp(b.1))
-            .map(|(i, _)| i)
-            .unwrap();
+        let peak = comp.vertex_change.iter().enumerate().max_by(|a, b| a.1.total_cmp(b.1)).map(|(i, _)| i).unwrap();
         for (j, &c) in centres.iter().enumerate() {
             if meshdeco::mesh::dist(p[peak], p[c]) < 0.2 {
                 hit[j] = true;
             }
         }
     }
-    assert!(hit[0] && hit[1], "top components do not localize on the planted bumps: {:?}", analysis
-        .components
-        .iter()
-        .map(|c| (c.dim, c.distance, c.center))
-        .collect::<Vec<_>>());
+    assert!(
+        hit[0] && hit[1],
+        "top components do not localize on the planted bumps: {:?}",
+        analysis.components.iter().map(|c| (c.dim, c.distance, c.center)).collect::<Vec<_>>()
+    );
 
     // Synthesis with weight 1 on a dimension decodes its extreme shape; weight 0 the reference.
     let top = &analysis.components[0];
@@ -365,7 +359,13 @@ fn nan_never_reaches_a_checkpoint() {
     // A diverging run (absurd learning rate) errors; whatever checkpoint is on disk is finite.
     let feats = random_features(4, n, 0.9, 3);
     let data = TrainingData::from_features(&feats).unwrap();
-    let cfg = AutoencoderConfig { components: 3, iterations: 50, checkpoint_every: 1, learning_rate: 1e30, ..Default::default() };
+    let cfg = AutoencoderConfig {
+        components: 3,
+        iterations: 50,
+        checkpoint_every: 1,
+        learning_rate: 1e30,
+        ..Default::default()
+    };
     let mut t = Trainer::new(cfg, &data, &nb, &dist).unwrap();
     let res = t.run(&opts, |_| {});
     assert!(res.is_err(), "expected divergence, got {res:?}");

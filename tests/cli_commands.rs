@@ -23,7 +23,10 @@ fn stderr(o: &Output) -> String {
 fn bad_configs_fail_with_key_and_value() {
     let d = tmp("badcfg");
     let cases = [
-        ("[data]\npath = \"synthetic:tube\"\n[method]\nkind = \"splocs\"\nsupport = [0.8, 0.7]\n", "d_min (0.8) must be below d_max (0.7)"),
+        (
+            "[data]\npath = \"synthetic:tube\"\n[method]\nkind = \"splocs\"\nsupport = [0.8, 0.7]\n",
+            "d_min (0.8) must be below d_max (0.7)",
+        ),
         ("[data]\npath = \"synthetic:tube\"\n[method]\nkind = \"splocs\"\nlayers = 2\n", "method.layers"),
         ("[data]\npath = \"synthetic:tube\"\n[method]\nkind = \"pca\"\ncomponnts = 3\n", "componnts"),
         ("[data]\npath = \"synthetic:tube\"\ntrain = \"1-500\"\n[method]\nkind = \"pca\"\n", "data.train"),
@@ -51,8 +54,18 @@ fn train_encode_synthesize_chain() {
     let o = meshdeco(&["train", "--config", "bumps.toml"], &d);
     assert!(o.status.success(), "{}", stderr(&o));
     let model = d.join("checkpoints/bumps");
-    let metrics: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(model.join("metrics.json")).unwrap()).unwrap();
-    for key in ["method", "representation", "components", "train_erms", "test_erms", "train_seconds", "iterations", "objective"] {
+    let metrics: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(model.join("metrics.json")).unwrap()).unwrap();
+    for key in [
+        "method",
+        "representation",
+        "components",
+        "train_erms",
+        "test_erms",
+        "train_seconds",
+        "iterations",
+        "objective",
+    ] {
         assert!(metrics.get(key).is_some(), "metrics.json lacks {key}");
     }
     assert!(metrics["test_erms"].as_f64().unwrap() < 1.0);

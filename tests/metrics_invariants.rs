@@ -130,7 +130,10 @@ fn sted_scale_behaviour() {
     for k in [0.01, 3.0, 250.0] {
         let sc = |seq: &[Vec<Vec3>]| map_seq(seq, |_, p| [k * p[0], k * p[1], k * p[2]]);
         let r = s.evaluate(&sc(&truth), &sc(&result), FrameOrder::Sequence).unwrap();
-        assert!(close(r.spatial, base.spatial, 1e-9) && close(r.temporal.unwrap(), base.temporal.unwrap(), 1e-9), "k {k}: {r:?}");
+        assert!(
+            close(r.spatial, base.spatial, 1e-9) && close(r.temporal.unwrap(), base.temporal.unwrap(), 1e-9),
+            "k {k}: {r:?}"
+        );
         let e = erms(&sc(&truth), &sc(&result), Alignment::None).unwrap();
         assert!(close(e, k * erms(&truth, &result, Alignment::None).unwrap(), 1e-9));
     }
@@ -139,7 +142,8 @@ fn sted_scale_behaviour() {
     //    with |k − 1|.
     let mut last = 0.0;
     for k in [1.05, 1.2, 1.5] {
-        let r = s.evaluate(&truth, &map_seq(&truth, |_, p| [k * p[0], k * p[1], k * p[2]]), FrameOrder::Sequence).unwrap();
+        let r =
+            s.evaluate(&truth, &map_seq(&truth, |_, p| [k * p[0], k * p[1], k * p[2]]), FrameOrder::Sequence).unwrap();
         assert!(r.spatial < 1e-12, "k {k}: {r:?}");
         let t = r.temporal.unwrap();
         assert!(t > last, "k {k}: temporal {t} should grow past {last}");

@@ -6,7 +6,7 @@
 
 use std::path::{Path, PathBuf};
 
-use meshdeco::mesh::{load_sequence, MeshSequence, Vec3};
+use meshdeco::mesh::{MeshSequence, Vec3, load_sequence};
 use meshdeco::representation::roundtrip::{Alignment, roundtrip};
 use meshdeco::representation::{Representation, RepresentationKind, RepresentationOptions};
 

@@ -5,7 +5,7 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use meshdeco::mesh::{inspect, read_mesh, read_sequence, write_obj, write_ply, LoadedSequence, WarningKind};
+use meshdeco::mesh::{LoadedSequence, WarningKind, inspect, read_mesh, read_sequence, write_obj, write_ply};
 
 fn dataset(name: &str) -> Option<PathBuf> {
     let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data").join(name);

@@ -6,7 +6,9 @@
 use meshdeco::Result;
 use meshdeco::geometry::graph_distance::EdgeGraph;
 use meshdeco::methods::support_map::{SupportDistances, TriangleSupport};
-use meshdeco::methods::{DataMatrix, Pca, PcaCentering, PcaConfig, SplocsConfig, SplocsFit, SplocsSolver, WeightConstraint};
+use meshdeco::methods::{
+    DataMatrix, Pca, PcaCentering, PcaConfig, SplocsConfig, SplocsFit, SplocsSolver, WeightConstraint,
+};
 
 const N: usize = 30;
 
@@ -53,8 +55,11 @@ impl SupportDistances for GraphDistances {
 }
 
 /// Planted bumps: centre (x, y), radius, displacement direction.
-const BUMPS: [([f64; 2], f64, [f64; 3]); 3] =
-    [([0.2, 0.25], 0.15, [0.0, 0.0, 1.0]), ([0.75, 0.3], 0.15, [0.6, 0.0, 0.8]), ([0.45, 0.78], 0.15, [0.0, -0.6, 0.8])];
+const BUMPS: [([f64; 2], f64, [f64; 3]); 3] = [
+    ([0.2, 0.25], 0.15, [0.0, 0.0, 1.0]),
+    ([0.75, 0.3], 0.15, [0.6, 0.0, 0.8]),
+    ([0.45, 0.78], 0.15, [0.0, -0.6, 0.8]),
+];
 
 fn profile(p: [f64; 3], b: usize) -> f64 {
     let (c, r, _) = BUMPS[b];
@@ -104,14 +109,7 @@ fn match_regions(fit: &SplocsFit, planted: &[Vec<bool>]) -> Vec<(usize, f64)> {
         (0..fit.model.n_components).map(|k| region(&fit.model.component_group_norms(k), 0.05)).collect();
     let matches: Vec<(usize, f64)> = planted
         .iter()
-        .map(|p| {
-            supports
-                .iter()
-                .enumerate()
-                .map(|(k, s)| (k, iou(p, s)))
-                .max_by(|a, b| a.1.total_cmp(&b.1))
-                .unwrap()
-        })
+        .map(|p| supports.iter().enumerate().map(|(k, s)| (k, iou(p, s))).max_by(|a, b| a.1.total_cmp(&b.1)).unwrap())
         .collect();
     eprintln!("(component, IoU) per planted region: {matches:?}; objective {:?}", fit.objective_history);
     let mut ks: Vec<usize> = matches.iter().map(|m| m.0).collect();
@@ -189,7 +187,8 @@ fn objective_non_increasing_and_convergence_test() {
     let mean: f64 = (i - 4..=i).map(|j| (h[j] - h[j - 1]).abs()).sum::<f64>() / 5.0;
     assert!(mean <= 1e-6 * h[i]);
     // with tolerance 0 the cap is reached
-    let fit0 = fit_grid(&x, f, &SplocsConfig { components: 3, max_iterations: 7, tolerance: 0.0, ..Default::default() });
+    let fit0 =
+        fit_grid(&x, f, &SplocsConfig { components: 3, max_iterations: 7, tolerance: 0.0, ..Default::default() });
     assert_eq!((fit0.iterations, fit0.converged, fit0.objective_history.len()), (7, false, 8));
 }
 
@@ -316,13 +315,17 @@ fn real_data_train_erms_within_reference() {
         let extent = (0..3).map(|q| hi[q] - lo[q]).fold(0.0f64, f64::max);
         let unit: Vec<[f64; 3]> = rest.iter().map(|p| [p[0] / extent, p[1] / extent, p[2] / extent]).collect();
         let provider = GraphDistances::new(&unit, &faces);
-        let fit = SplocsSolver::fit(DataMatrix::new(&x, nf, nv, 3).unwrap(), &provider, &SplocsConfig::default(), |_, _| {})
-            .unwrap();
+        let fit =
+            SplocsSolver::fit(DataMatrix::new(&x, nf, nv, 3).unwrap(), &provider, &SplocsConfig::default(), |_, _| {})
+                .unwrap();
         let rec = fit.model.reconstruct().unwrap();
         let erms = 1000.0 * (rec.iter().zip(&x).map(|(a, b)| (a - b) * (a - b)).sum::<f64>() / x.len() as f64).sqrt();
         let mut shares: Vec<f64> = fit.locality.iter().map(|l| l.energy_share).collect();
         shares.sort_by(|a, b| a.total_cmp(b));
-        eprintln!("{folder}: train Erms {erms:.3} (reference {reference}), median locality share {}", shares[shares.len() / 2]);
+        eprintln!(
+            "{folder}: train Erms {erms:.3} (reference {reference}), median locality share {}",
+            shares[shares.len() / 2]
+        );
         assert!(erms <= reference, "{folder}: train Erms {erms} above the reference {reference}");
         assert!(shares[shares.len() / 2] >= 0.95);
         // non-negative constraint (4) on every column

@@ -38,7 +38,10 @@ pub struct SynthesizeArgs {
 pub fn model_method(model: &Path) -> Result<String> {
     let json = artifact::model_dir(model).join("model.json");
     let v: serde_json::Value = artifact::read_json(&json)?;
-    v.get("method").and_then(|m| m.as_str()).map(str::to_string).with_context(|| format!("{}: no `method` field", json.display()))
+    v.get("method")
+        .and_then(|m| m.as_str())
+        .map(str::to_string)
+        .with_context(|| format!("{}: no `method` field", json.display()))
 }
 
 /// Parses "i:w,j:v" into a dense weight vector of length k.
@@ -46,7 +49,8 @@ pub fn parse_weights(s: &str, k: usize) -> Result<Vec<f64>> {
     let mut w = vec![0.0; k];
     for part in s.split(',').map(str::trim).filter(|p| !p.is_empty()) {
         let (i, v) = part.split_once(':').with_context(|| format!("--weights: `{part}` is not index:weight"))?;
-        let i: usize = i.trim().parse().with_context(|| format!("--weights: `{i}` in `{part}` is not a component index"))?;
+        let i: usize =
+            i.trim().parse().with_context(|| format!("--weights: `{i}` in `{part}` is not a component index"))?;
         let v: f64 = v.trim().parse().with_context(|| format!("--weights: `{v}` in `{part}` is not a number"))?;
         if i >= k {
             bail!("--weights: component {i} does not exist (the model has {k} components, 0..{})", k - 1);
@@ -76,7 +80,14 @@ pub fn encode(a: EncodeArgs) -> Result<()> {
         "pca" | "splocs" => {
             let m = LinearArtifact::load(&a.model)?;
             if seq.n_vertices() != m.rest.n_vertices() || seq.faces != m.rest.faces {
-                bail!("{}: connectivity differs from the model's rest mesh ({} vertices, {} faces vs {} and {})", a.path, seq.n_vertices(), seq.n_faces(), m.rest.n_vertices(), m.rest.n_faces());
+                bail!(
+                    "{}: connectivity differs from the model's rest mesh ({} vertices, {} faces vs {} and {})",
+                    a.path,
+                    seq.n_vertices(),
+                    seq.n_faces(),
+                    m.rest.n_vertices(),
+                    m.rest.n_faces()
+                );
             }
             let w = m.encode_frames(&seq)?;
             let k = m.model.n_components;
@@ -93,7 +104,11 @@ pub fn encode(a: EncodeArgs) -> Result<()> {
             }
             artifact::write_weights_csv(&a.out.join("weights.csv"), &seq.names, &w, k)?;
             let erms = 1000.0 * (total / (3.0 * (seq.n_frames() * seq.n_vertices()) as f64)).sqrt();
-            println!("total Erms {erms:.4} over {} frames [alignment: {alignment}]; reconstructions and weights.csv in {}", seq.n_frames(), a.out.display());
+            println!(
+                "total Erms {erms:.4} over {} frames [alignment: {alignment}]; reconstructions and weights.csv in {}",
+                seq.n_frames(),
+                a.out.display()
+            );
             Ok(())
         }
         "autoencoder" => {
@@ -113,7 +128,11 @@ pub fn encode(a: EncodeArgs) -> Result<()> {
             let flat: Vec<f64> = codes.iter().flatten().copied().collect();
             artifact::write_weights_csv(&a.out.join("weights.csv"), &seq.names, &flat, k)?;
             let total = (per.iter().map(|e| e * e).sum::<f64>() / per.len().max(1) as f64).sqrt();
-            println!("total Erms {total:.4} over {} frames [alignment: centroid]; reconstructions and latent codes (weights.csv) in {}", seq.n_frames(), a.out.display());
+            println!(
+                "total Erms {total:.4} over {} frames [alignment: centroid]; reconstructions and latent codes (weights.csv) in {}",
+                seq.n_frames(),
+                a.out.display()
+            );
             Ok(())
         }
         other => bail!("encode: models of method `{other}` are not supported by this build"),
@@ -134,7 +153,8 @@ pub fn synthesize(a: SynthesizeArgs) -> Result<()> {
         "autoencoder" => {
             let m = AeArtifact::load(&a.model)?;
             let dense = parse_weights(&a.weights, m.header.components)?;
-            let pairs: Vec<(usize, f64)> = dense.iter().enumerate().filter(|(_, w)| **w != 0.0).map(|(i, w)| (i, *w)).collect();
+            let pairs: Vec<(usize, f64)> =
+                dense.iter().enumerate().filter(|(_, w)| **w != 0.0).map(|(i, w)| (i, *w)).collect();
             let z = m.synthesis_code(&pairs)?;
             let p = m.decode_codes(&[z])?.remove(0);
             write_mesh(&a.out, &TriMesh::new(p, m.rest.faces.clone()))?;
@@ -179,7 +199,11 @@ pub fn components(a: ComponentsArgs) -> Result<()> {
         "autoencoder" => {
             let m = AeArtifact::load(&a.model)?;
             m.write_components(&a.out)?;
-            println!("wrote {} components (ranked by distance of the extreme shape) to {}", m.header.components, a.out.display());
+            println!(
+                "wrote {} components (ranked by distance of the extreme shape) to {}",
+                m.header.components,
+                a.out.display()
+            );
             Ok(())
         }
         "pca" | "splocs" => {
@@ -209,7 +233,8 @@ pub fn interpolate(a: InterpolateArgs) -> Result<()> {
         }
         frames.push(mesh.positions);
     }
-    let seq = meshdeco::mesh::MeshSequence { faces: m.rest.faces.clone(), frames, names: vec!["from".into(), "to".into()] };
+    let seq =
+        meshdeco::mesh::MeshSequence { faces: m.rest.faces.clone(), frames, names: vec!["from".into(), "to".into()] };
     let codes = m.encode_frames(&seq)?;
     let codes: Vec<Vec<f64>> = (0..a.steps)
         .map(|s| {

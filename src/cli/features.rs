@@ -41,7 +41,8 @@ pub struct RoundtripArgs {
 }
 
 fn kind(s: &str) -> Result<RepresentationKind> {
-    RepresentationKind::parse(s).with_context(|| format!("--representation `{s}`: expected acap, triangle-gradient or displacement"))
+    RepresentationKind::parse(s)
+        .with_context(|| format!("--representation `{s}`: expected acap, triangle-gradient or displacement"))
 }
 
 pub fn features(a: FeaturesArgs) -> Result<()> {
@@ -57,7 +58,13 @@ pub fn features(a: FeaturesArgs) -> Result<()> {
         for (f, name) in frames.iter().zip(&seq.names) {
             println!("{name}: consistency energy BFS {:.6}, final {:.6}", f.energy_bfs, f.energy);
         }
-        println!("wrote {} and {} ({} shapes × {} vertices)", a.out.join("LOGRNEW.txt").display(), a.out.join("S.txt").display(), seq.n_frames(), seq.n_vertices());
+        println!(
+            "wrote {} and {} ({} shapes × {} vertices)",
+            a.out.join("LOGRNEW.txt").display(),
+            a.out.join("S.txt").display(),
+            seq.n_frames(),
+            seq.n_vertices()
+        );
         return Ok(());
     }
     if a.global {
@@ -81,7 +88,10 @@ pub fn roundtrip_cmd(a: RoundtripArgs) -> Result<()> {
     let k = kind(&a.representation)?;
     let seq = meshdeco::preprocess::load_frames(&a.path)?;
     let rest: TriMesh = seq.mesh(0);
-    let options = RepresentationOptions { acap_consistency: if a.global { Consistency::Global } else { Consistency::Bfs }, ..Default::default() };
+    let options = RepresentationOptions {
+        acap_consistency: if a.global { Consistency::Global } else { Consistency::Bfs },
+        ..Default::default()
+    };
     let rep = Representation::new(k, &rest, options)?;
     let report = roundtrip(&rep, &seq)?;
     print!("{report}");

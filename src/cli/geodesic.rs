@@ -31,15 +31,28 @@ pub fn run(a: GeodesicArgs) -> Result<()> {
     let m = load_first_frame(&a.mesh)?;
     let n = m.n_vertices();
     if let Some(&bad) = a.source.iter().find(|&&s| s >= n) {
-        bail!("--source {bad} is out of range: {} has {n} vertices (0-based indices 0..{})", a.mesh, n.saturating_sub(1));
+        bail!(
+            "--source {bad} is out of range: {} has {n} vertices (0-based indices 0..{})",
+            a.mesh,
+            n.saturating_sub(1)
+        );
     }
-    let options = HeatOptions { m: a.m, boundary: if a.neumann { BoundaryCondition::Neumann } else { BoundaryCondition::Averaged }, ..Default::default() };
+    let options = HeatOptions {
+        m: a.m,
+        boundary: if a.neumann { BoundaryCondition::Neumann } else { BoundaryCondition::Averaged },
+        ..Default::default()
+    };
     let solver = HeatGeodesics::with_options(&m.positions, &m.faces, options).context("setting up the heat method")?;
     let d = solver.distances(&a.source)?;
     let colors = mesh::colormap(&d);
     mesh::write_ply(&a.out, &m, Some(&colors), Some(("distance", &d)))?;
     let max = d.iter().cloned().fold(0.0, f64::max);
-    println!("{}: {n} vertices, sources {:?}, max distance {max:.6} (data units), wrote {}", a.mesh, a.source, a.out.display());
+    println!(
+        "{}: {n} vertices, sources {:?}, max distance {max:.6} (data units), wrote {}",
+        a.mesh,
+        a.source,
+        a.out.display()
+    );
     Ok(())
 }
 

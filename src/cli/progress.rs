@@ -29,7 +29,10 @@ impl Progress for Bars {
             b
         } else {
             let b = ProgressBar::new_spinner();
-            b.set_style(ProgressStyle::with_template("{prefix:>14} {spinner} {elapsed_precise} {msg}").unwrap_or_else(|_| ProgressStyle::default_spinner()));
+            b.set_style(
+                ProgressStyle::with_template("{prefix:>14} {spinner} {elapsed_precise} {msg}")
+                    .unwrap_or_else(|_| ProgressStyle::default_spinner()),
+            );
             b.enable_steady_tick(Duration::from_millis(120));
             b
         };

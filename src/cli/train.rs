@@ -51,7 +51,9 @@ pub fn run(a: TrainArgs) -> Result<()> {
                 if flag.swap(true, Ordering::SeqCst) {
                     std::process::exit(130);
                 }
-                eprintln!("\ninterrupt: stopping after this step and writing a checkpoint (Ctrl-C again to quit at once)");
+                eprintln!(
+                    "\ninterrupt: stopping after this step and writing a checkpoint (Ctrl-C again to quit at once)"
+                );
             })
             .context("installing the Ctrl-C handler")?;
             let mut bars = Bars::new();

@@ -272,7 +272,8 @@ impl SymmetricPattern {
             values[s[0]] = v;
             values[s[1]] = v;
         }
-        let symbolic = SymbolicSparseColMat::new_checked(self.n, self.n, self.col_ptr.clone(), None, self.row_idx.clone());
+        let symbolic =
+            SymbolicSparseColMat::new_checked(self.n, self.n, self.col_ptr.clone(), None, self.row_idx.clone());
         SparseColMat::new(symbolic, values)
     }
 }
@@ -434,7 +435,8 @@ mod tests {
     fn degenerate_triangles_are_skipped_without_nan() {
         // A square with a zero-area sliver glued on (vertex 4 on the edge 1–2) and a collapsed
         // face (two equal positions).
-        let p = vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0], [1.0, 0.5, 0.0], [0.0, 1.0, 0.0]];
+        let p =
+            vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0], [1.0, 0.5, 0.0], [0.0, 1.0, 0.0]];
         let f = vec![[0, 1, 2], [0, 2, 3], [1, 4, 2], [2, 5, 3]];
         let deg = degenerate_faces(&p, &f);
         assert_eq!(deg, vec![false, false, true, true]);

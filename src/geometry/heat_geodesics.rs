@@ -142,7 +142,12 @@ impl Default for HeatOptions {
     /// `m = 1`, averaged boundary conditions, intrinsic Delaunay triangulation, straight-line
     /// lower bound.
     fn default() -> Self {
-        HeatOptions { m: 1.0, boundary: BoundaryCondition::Averaged, intrinsic_delaunay: true, bounds: DistanceBounds::StraightLine }
+        HeatOptions {
+            m: 1.0,
+            boundary: BoundaryCondition::Averaged,
+            intrinsic_delaunay: true,
+            bounds: DistanceBounds::StraightLine,
+        }
     }
 }
 
@@ -216,7 +221,10 @@ impl HeatGeodesics {
         options.validate()?;
         let n = positions.len();
         if n == 0 || faces.is_empty() {
-            return Err(Error::Invalid(format!("heat geodesics need a mesh with faces (got {n} vertices, {} faces)", faces.len())));
+            return Err(Error::Invalid(format!(
+                "heat geodesics need a mesh with faces (got {n} vertices, {} faces)",
+                faces.len()
+            )));
         }
         if let Some((fi, f)) = faces.iter().enumerate().find(|(_, f)| f.iter().any(|&v| v >= n)) {
             return Err(Error::Invalid(format!("face {fi} {f:?} refers to a vertex ≥ {n} (number of vertices)")));
@@ -237,7 +245,10 @@ impl HeatGeodesics {
             IntrinsicTriangulation::new(positions, faces)
         };
         if (0..faces.len()).all(|f| tri.is_degenerate(f)) || mean_edge_length.is_nan() || mean_edge_length <= 0.0 {
-            return Err(Error::Invalid(format!("heat geodesics: all {} faces are degenerate (zero area)", faces.len())));
+            return Err(Error::Invalid(format!(
+                "heat geodesics: all {} faces are degenerate (zero area)",
+                faces.len()
+            )));
         }
         let t = options.m * mean_edge_length * mean_edge_length;
 
@@ -306,17 +317,20 @@ impl HeatGeodesics {
         // Heat system (Neumann): M + tL; identity rows for vertices on no kept face. On the
         // intrinsic Delaunay triangulation the weights left negative (boundary edges, skipped
         // flips) are clamped to 0 in this system only, which makes it an M-matrix.
-        let heat_weights: Vec<f64> = if options.intrinsic_delaunay { weights.iter().map(|w| w.max(0.0)).collect() } else { weights.clone() };
+        let heat_weights: Vec<f64> =
+            if options.intrinsic_delaunay { weights.iter().map(|w| w.max(0.0)).collect() } else { weights.clone() };
         let mut heat_lap_diag = vec![0.0; n];
         for (e, &w) in pairs.iter().zip(&heat_weights) {
             heat_lap_diag[e[0]] += w;
             heat_lap_diag[e[1]] += w;
         }
-        let heat_diag: Vec<f64> = (0..n).map(|i| if label[i] == NONE { 1.0 } else { mass[i] + t * heat_lap_diag[i] }).collect();
+        let heat_diag: Vec<f64> =
+            (0..n).map(|i| if label[i] == NONE { 1.0 } else { mass[i] + t * heat_lap_diag[i] }).collect();
         let heat_off: Vec<f64> = heat_weights.iter().map(|w| -t * w).collect();
         let heat_matrix = pattern.assemble(&heat_diag, &heat_off);
         let symbolic = SparseCholesky::analyze_with(heat_matrix.as_ref(), FactorLayout::PreferSimplicial)?;
-        let heat_neumann = SparseCholesky::factor_with_symbolic(symbolic.clone(), heat_matrix.as_ref(), "heat system M + tL")?;
+        let heat_neumann =
+            SparseCholesky::factor_with_symbolic(symbolic.clone(), heat_matrix.as_ref(), "heat system M + tL")?;
 
         let is_boundary = EdgeIncidence::new(faces).boundary_vertices(n);
         let has_boundary = is_boundary.iter().any(|&b| b);
@@ -335,7 +349,8 @@ impl HeatGeodesics {
         let off = masked_off(&pairs, &lap_off, &fixed);
         let diag: Vec<f64> = (0..n).map(|i| if fixed[i] { 1.0 } else { lap_diag[i] }).collect();
         let poisson_matrix = pattern.assemble(&diag, &off);
-        let poisson = SparseCholesky::factor_with_symbolic(symbolic, poisson_matrix.as_ref(), "pinned Poisson system L")?;
+        let poisson =
+            SparseCholesky::factor_with_symbolic(symbolic, poisson_matrix.as_ref(), "pinned Poisson system L")?;
 
         Ok(HeatGeodesics {
             n,
@@ -353,7 +368,8 @@ impl HeatGeodesics {
             label,
             n_components,
             positions: if options.bounds == DistanceBounds::None { Vec::new() } else { positions.to_vec() },
-            graph: (options.bounds == DistanceBounds::StraightLineAndEdgePath).then(|| EdgeGraph::new(positions, faces)),
+            graph: (options.bounds == DistanceBounds::StraightLineAndEdgePath)
+                .then(|| EdgeGraph::new(positions, faces)),
         })
     }
 
@@ -402,10 +418,17 @@ impl HeatGeodesics {
             return Err(Error::Invalid("geodesic distances: no source vertex given".into()));
         }
         if let Some(&s) = sources.iter().find(|&&s| s >= self.n) {
-            return Err(Error::Invalid(format!("geodesic source vertex {s} out of range (the mesh has {} vertices)", self.n)));
+            return Err(Error::Invalid(format!(
+                "geodesic source vertex {s} out of range (the mesh has {} vertices)",
+                self.n
+            )));
         }
         if out.len() != self.n {
-            return Err(Error::Invalid(format!("output buffer holds {} values, the mesh has {} vertices", out.len(), self.n)));
+            return Err(Error::Invalid(format!(
+                "output buffer holds {} values, the mesh has {} vertices",
+                out.len(),
+                self.n
+            )));
         }
         let n = self.n;
 
@@ -624,8 +647,7 @@ fn solve_dense(s: &mut [f64], r: &mut [f64], k: usize) -> Option<Vec<f64>> {
 
 /// Off-diagonal values with every entry of an edge touching a `fixed` vertex set to 0.
 fn masked_off(pairs: &[[usize; 2]], off: &[f64], fixed: &[bool]) -> Vec<f64> {
-    pairs
-        .iter().zip(off).map(|(e, &v)| if fixed[e[0]] || fixed[e[1]] { 0.0 } else { v }).collect()
+    pairs.iter().zip(off).map(|(e, &v)| if fixed[e[0]] || fixed[e[1]] { 0.0 } else { v }).collect()
 }
 
 fn argmax_finite(d: &[f64]) -> Option<usize> {
@@ -654,12 +676,11 @@ fn union(parent: &mut [usize], a: usize, b: usize) {
     }
 }
 
-
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::geometry::normals::dot;
     use crate::geometry::intrinsic_delaunay::IntrinsicTriangulation;
+    use crate::geometry::normals::dot;
     use crate::mesh::primitives::{cylinder, grid, icosphere};
 
     fn scale(a: Vec3, s: f64) -> Vec3 {
@@ -721,7 +742,12 @@ mod tests {
         // Neumann alone is less accurate near the boundary (up to 1.5 h here): only Averaged is held
         // to the one-edge bound.
         for boundary in [BoundaryCondition::Averaged, BoundaryCondition::Neumann] {
-            let solver = HeatGeodesics::with_options(&g.positions, &g.faces, HeatOptions { boundary, bounds: DistanceBounds::None, ..Default::default() }).unwrap();
+            let solver = HeatGeodesics::with_options(
+                &g.positions,
+                &g.faces,
+                HeatOptions { boundary, bounds: DistanceBounds::None, ..Default::default() },
+            )
+            .unwrap();
             let h = solver.mean_edge_length();
             // Interior sources (centre, near a corner) and boundary sources (edge middle, corner).
             for src in [20 * 41 + 20, 5 * 41 + 3, 20, 0] {
@@ -757,7 +783,8 @@ mod tests {
         // A source in the middle band and one on a boundary loop.
         for src in [20 * 64 + 5, 3] {
             let d = solver.distances(&[src]).unwrap();
-            let max_err = d.iter().zip(&c.positions).map(|(dv, p)| (dv - exact(*p, c.positions[src])).abs()).fold(0.0, f64::max);
+            let max_err =
+                d.iter().zip(&c.positions).map(|(dv, p)| (dv - exact(*p, c.positions[src])).abs()).fold(0.0, f64::max);
             eprintln!("cylinder, source {src}: max error {max_err:.4} = {:.2} h", max_err / h);
             assert!(max_err < h, "source {src}: max error {max_err} (h = {h})");
         }
@@ -777,11 +804,20 @@ mod tests {
         assert!(tri.n_flips() > 0);
         let mut errors = Vec::new();
         for intrinsic_delaunay in [true, false] {
-            let s = HeatGeodesics::with_options(&g.positions, &g.faces, HeatOptions { intrinsic_delaunay, bounds: DistanceBounds::None, ..Default::default() }).unwrap();
+            let s = HeatGeodesics::with_options(
+                &g.positions,
+                &g.faces,
+                HeatOptions { intrinsic_delaunay, bounds: DistanceBounds::None, ..Default::default() },
+            )
+            .unwrap();
             let h = s.mean_edge_length();
             let src = (ny / 2) * (nx + 1) + 3;
             let d = s.distances(&[src]).unwrap();
-            let e = d.iter().zip(&g.positions).map(|(dv, p)| (dv - crate::mesh::dist(*p, g.positions[src])).abs()).fold(0.0, f64::max);
+            let e = d
+                .iter()
+                .zip(&g.positions)
+                .map(|(dv, p)| (dv - crate::mesh::dist(*p, g.positions[src])).abs())
+                .fold(0.0, f64::max);
             eprintln!("sheared strip, intrinsic Delaunay {intrinsic_delaunay}: max error {:.2} h", e / h);
             errors.push(e / h);
         }
@@ -801,17 +837,24 @@ mod tests {
             let r = raw.distances(&sources).unwrap();
             let up = crate::geometry::graph_distance::dijkstra(&topo, &g.positions, &sources);
             for bounds in [DistanceBounds::StraightLine, DistanceBounds::StraightLineAndEdgePath] {
-                let clamped = HeatGeodesics::with_options(&g.positions, &g.faces, HeatOptions { bounds, ..opts }).unwrap();
+                let clamped =
+                    HeatGeodesics::with_options(&g.positions, &g.faces, HeatOptions { bounds, ..opts }).unwrap();
                 let c = clamped.distances(&sources).unwrap();
                 let mut changed = 0;
                 for v in 0..r.len() {
-                    let lo = sources.iter().map(|&s| crate::mesh::dist(g.positions[v], g.positions[s])).fold(f64::INFINITY, f64::min);
+                    let lo = sources
+                        .iter()
+                        .map(|&s| crate::mesh::dist(g.positions[v], g.positions[s]))
+                        .fold(f64::INFINITY, f64::min);
                     let hi = if bounds == DistanceBounds::StraightLine { f64::INFINITY } else { up[v] };
                     assert_eq!(c[v], r[v].max(lo).min(hi));
                     assert!((c[v] - lo).abs() <= (r[v] - lo).abs());
                     changed += usize::from(c[v] != r[v]);
                 }
-                eprintln!("intrinsic Delaunay {intrinsic_delaunay}, {bounds:?}: clamping changed {changed} of {} values", r.len());
+                eprintln!(
+                    "intrinsic Delaunay {intrinsic_delaunay}, {bounds:?}: clamping changed {changed} of {} values",
+                    r.len()
+                );
             }
         }
     }
@@ -844,7 +887,11 @@ mod tests {
                 above = above.max(dv - gv);
                 below = below.max(gv / 1.2 - dv);
             }
-            eprintln!("horse source {src}: max(heat − graph) = {:.2} h, max(graph/1.2 − heat) = {:.2} h", above / h, below / h);
+            eprintln!(
+                "horse source {src}: max(heat − graph) = {:.2} h, max(graph/1.2 − heat) = {:.2} h",
+                above / h,
+                below / h
+            );
             assert!(above < 2.0 * h && below < h, "source {src}");
         }
     }
@@ -861,7 +908,8 @@ mod tests {
         for v in 0..s.n_vertices() {
             let m = singles.iter().map(|d| d[v]).fold(f64::INFINITY, f64::min);
             max_diff = max_diff.max((multi[v] - m).abs());
-            let truth = srcs.iter().map(|&q| great_circle(s.positions[q], s.positions[v])).fold(f64::INFINITY, f64::min);
+            let truth =
+                srcs.iter().map(|&q| great_circle(s.positions[q], s.positions[v])).fold(f64::INFINITY, f64::min);
             max_err = max_err.max((multi[v] - truth).abs());
         }
         eprintln!(
@@ -908,7 +956,12 @@ mod tests {
             }
             let want = solve_dense(&mut a, &mut b, n).unwrap();
             for i in 0..n {
-                assert!((got[i] - want[i]).abs() < 1e-12 * (1.0 + want[i].abs()), "{sources:?} vertex {i}: {} vs {}", got[i], want[i]);
+                assert!(
+                    (got[i] - want[i]).abs() < 1e-12 * (1.0 + want[i].abs()),
+                    "{sources:?} vertex {i}: {} vs {}",
+                    got[i],
+                    want[i]
+                );
                 if clamped(i) {
                     assert_eq!(got[i], 0.0);
                 }

@@ -97,7 +97,14 @@ impl IntrinsicTriangulation {
             }
             s = e;
         }
-        IntrinsicTriangulation { n_vertices: positions.len(), faces: faces.to_vec(), side_lengths, twin, degenerate, flips: 0 }
+        IntrinsicTriangulation {
+            n_vertices: positions.len(),
+            faces: faces.to_vec(),
+            side_lengths,
+            twin,
+            degenerate,
+            flips: 0,
+        }
     }
 
     /// The intrinsic Delaunay triangulation of the mesh: [`IntrinsicTriangulation::new`] followed by
@@ -114,7 +121,8 @@ impl IntrinsicTriangulation {
     pub fn flip_to_delaunay(&mut self) -> usize {
         let cap = 50 * self.twin.len() + 100;
         let mut done = 0;
-        let mut stack: Vec<usize> = (0..self.twin.len()).filter(|&h| self.twin[h] != NONE && h < self.twin[h]).collect();
+        let mut stack: Vec<usize> =
+            (0..self.twin.len()).filter(|&h| self.twin[h] != NONE && h < self.twin[h]).collect();
         while let Some(h) = stack.pop() {
             if done >= cap {
                 break;
@@ -344,7 +352,8 @@ mod tests {
     fn flipping_removes_negative_weights_and_keeps_area() {
         let (p, f) = ellipsoid();
         let before = cotan_laplacian(&p, &f);
-        let positive_off = |l: &SparseColMat<usize, f64>| l.triplet_iter().filter(|t| t.row != t.col && *t.val > 1e-9).count();
+        let positive_off =
+            |l: &SparseColMat<usize, f64>| l.triplet_iter().filter(|t| t.row != t.col && *t.val > 1e-9).count();
         assert!(positive_off(&before) > 0, "the test mesh must have negative weights");
         let t = IntrinsicTriangulation::delaunay(&p, &f);
         assert!(t.n_flips() > 0);
@@ -379,7 +388,8 @@ mod tests {
         assert!(t.n_flips() > 0, "the sheared grid has non-Delaunay diagonals");
         let l = t.cotan_laplacian();
         let x: Vec<f64> = p.iter().map(|q| 2.0 * q[0] - q[1]).collect();
-        let energy = |l: &SparseColMat<usize, f64>| -> f64 { l.triplet_iter().map(|e| x[e.row] * e.val * x[e.col]).sum() };
+        let energy =
+            |l: &SparseColMat<usize, f64>| -> f64 { l.triplet_iter().map(|e| x[e.row] * e.val * x[e.col]).sum() };
         let exact = 5.0 * 0.3; // |∇x|² = 4 + 1, area = 0.3
         assert!((energy(&before) - exact).abs() < 1e-9);
         assert!((energy(&l) - exact).abs() < 1e-9, "{} vs {exact}", energy(&l));

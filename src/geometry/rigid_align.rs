@@ -138,7 +138,8 @@ fn solve(source: &[Vec3], target: &[Vec3], weights: Option<&[f64]>) -> RigidTran
         d[(k, k)] = -1.0;
     }
     let r = v * d * u.transpose();
-    let rotation = [[r[(0, 0)], r[(0, 1)], r[(0, 2)]], [r[(1, 0)], r[(1, 1)], r[(1, 2)]], [r[(2, 0)], r[(2, 1)], r[(2, 2)]]];
+    let rotation =
+        [[r[(0, 0)], r[(0, 1)], r[(0, 2)]], [r[(1, 0)], r[(1, 1)], r[(1, 2)]], [r[(2, 0)], r[(2, 1)], r[(2, 2)]]];
     let mut translation = ct;
     for k in 0..3 {
         translation[k] -= rotation[k][0] * cs[0] + rotation[k][1] * cs[1] + rotation[k][2] * cs[2];
@@ -184,7 +185,8 @@ mod tests {
         let mut r = rng(7);
         for trial in 0..20 {
             let pts: Vec<Vec3> = (0..30).map(|_| [r(), 2.0 * r(), 0.5 * r()]).collect();
-            let truth = RigidTransform { rotation: random_rotation(&mut r), translation: [10.0 * r(), r(), -3.0 * r()] };
+            let truth =
+                RigidTransform { rotation: random_rotation(&mut r), translation: [10.0 * r(), r(), -3.0 * r()] };
             let moved = truth.apply_all(&pts);
             let est = kabsch(&pts, &moved);
             for a in 0..3 {
@@ -213,7 +215,15 @@ mod tests {
         let base: Vec<Vec3> = (0..5).map(|_| [3.0 * r(), 2.0 * r(), 0.3 * r()]).collect();
         let pts: Vec<Vec3> = base
             .iter()
-            .flat_map(|p| (0..8).map(move |s| [if s & 1 == 0 { p[0] } else { -p[0] }, if s & 2 == 0 { p[1] } else { -p[1] }, if s & 4 == 0 { p[2] } else { -p[2] }]))
+            .flat_map(|p| {
+                (0..8).map(move |s| {
+                    [
+                        if s & 1 == 0 { p[0] } else { -p[0] },
+                        if s & 2 == 0 { p[1] } else { -p[1] },
+                        if s & 4 == 0 { p[2] } else { -p[2] },
+                    ]
+                })
+            })
             .collect();
         // Mirror z (the axis of smallest spread), then rotate and translate.
         let truth = RigidTransform { rotation: random_rotation(&mut r), translation: [1.0, -2.0, 0.5] };

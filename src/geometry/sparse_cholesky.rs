@@ -13,7 +13,8 @@ use faer::linalg::cholesky::llt::factor::LltRegularization;
 use faer::sparse::SparseColMatRef;
 use faer::sparse::linalg::SupernodalThreshold;
 use faer::sparse::linalg::cholesky::{
-    CholeskySymbolicParams, LltRef, SymbolicCholesky, SymbolicCholeskyRaw, SymmetricOrdering, factorize_symbolic_cholesky,
+    CholeskySymbolicParams, LltRef, SymbolicCholesky, SymbolicCholeskyRaw, SymmetricOrdering,
+    factorize_symbolic_cholesky,
 };
 use faer::{Conj, MatMut, Par, Side};
 
@@ -57,7 +58,11 @@ impl SparseCholesky {
     /// Symbolic analysis (AMD ordering) of the lower triangle of `matrix`'s pattern.
     pub fn analyze_with(matrix: SparseColMatRef<'_, usize, f64>, layout: FactorLayout) -> Result<CholeskySymbolic> {
         if matrix.nrows() != matrix.ncols() {
-            return Err(Error::Invalid(format!("Cholesky of a non-square {}×{} matrix", matrix.nrows(), matrix.ncols())));
+            return Err(Error::Invalid(format!(
+                "Cholesky of a non-square {}×{} matrix",
+                matrix.nrows(),
+                matrix.ncols()
+            )));
         }
         let threshold = match layout {
             FactorLayout::Auto => SupernodalThreshold::AUTO,
@@ -83,7 +88,11 @@ impl SparseCholesky {
     /// Factors `matrix`, whose pattern must be the one `symbolic` was computed from.
     /// Fails with [`Error::Numerical`] (naming `what`) when the matrix is not numerically
     /// positive definite.
-    pub fn factor_with_symbolic(symbolic: CholeskySymbolic, matrix: SparseColMatRef<'_, usize, f64>, what: &str) -> Result<Self> {
+    pub fn factor_with_symbolic(
+        symbolic: CholeskySymbolic,
+        matrix: SparseColMatRef<'_, usize, f64>,
+        what: &str,
+    ) -> Result<Self> {
         if matrix.nrows() != symbolic.nrows() || matrix.ncols() != symbolic.nrows() {
             return Err(Error::Invalid(format!(
                 "{what}: matrix is {}×{}, symbolic factorisation is for {}",
@@ -108,7 +117,9 @@ impl SparseCholesky {
                 MemStack::new(&mut mem),
                 Default::default(),
             )
-            .map_err(|e| Error::Numerical(format!("{what}: Cholesky factorisation failed, matrix not positive definite ({e:?})")))?;
+            .map_err(|e| {
+                Error::Numerical(format!("{what}: Cholesky factorisation failed, matrix not positive definite ({e:?})"))
+            })?;
         Ok(SparseCholesky { symbolic, values })
     }
 

@@ -11,9 +11,9 @@ use std::fmt;
 use serde::Serialize;
 
 use super::sequence::read_sequence;
-use super::{bounding_box, dist, MeshSequence, Topology, Vec3};
-use crate::geometry::normals::{cross, norm, sub};
+use super::{MeshSequence, Topology, Vec3, bounding_box, dist};
 use crate::error::Result;
+use crate::geometry::normals::{cross, norm, sub};
 
 /// What a [`Warning`] is about.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
@@ -159,8 +159,9 @@ pub fn mesh_warnings(seq: &MeshSequence, topology: &Topology) -> Vec<Warning> {
     let faces = &seq.faces;
     let s = |k: usize| if k == 1 { "" } else { "s" };
 
-    let repeated: Vec<usize> =
-        (0..faces.len()).filter(|&i| faces[i][0] == faces[i][1] || faces[i][1] == faces[i][2] || faces[i][0] == faces[i][2]).collect();
+    let repeated: Vec<usize> = (0..faces.len())
+        .filter(|&i| faces[i][0] == faces[i][1] || faces[i][1] == faces[i][2] || faces[i][0] == faces[i][2])
+        .collect();
     if let Some(&i) = repeated.first() {
         warn(
             WarningKind::RepeatedIndex,
@@ -325,7 +326,11 @@ pub fn mesh_warnings(seq: &MeshSequence, topology: &Topology) -> Vec<Warning> {
 /// Vertices whose incident faces form more than one fan, i.e. whose face corners fall into
 /// several groups when corners of the same vertex are joined across shared edges with exactly two
 /// (non-degenerate) faces. Faces with a repeated index are left out.
-fn non_manifold_vertices(faces: &[[usize; 3]], topology: &Topology, is_repeated: &impl Fn(usize) -> bool) -> Vec<usize> {
+fn non_manifold_vertices(
+    faces: &[[usize; 3]],
+    topology: &Topology,
+    is_repeated: &impl Fn(usize) -> bool,
+) -> Vec<usize> {
     // Union–find over corners `3 · face + k`.
     let mut parent: Vec<usize> = (0..3 * faces.len()).collect();
     fn root(parent: &mut [usize], mut x: usize) -> usize {
@@ -500,9 +505,17 @@ mod tests {
         assert!(r.warnings[0].message.contains("face 8 = [10, 11, 10]"), "{}", r.warnings[0]);
         assert!(r.warnings[1].message.starts_with("1 face of zero area") && r.warnings[1].message.contains("face 7"));
         assert!(r.warnings[2].message.starts_with("3 edges whose two faces"), "{}", r.warnings[2]);
-        assert!(r.warnings[3].message.contains("2 boundary loops (6 boundary edges; loop lengths 3, 3)"), "{}", r.warnings[3]);
+        assert!(
+            r.warnings[3].message.contains("2 boundary loops (6 boundary edges; loop lengths 3, 3)"),
+            "{}",
+            r.warnings[3]
+        );
         assert!(r.warnings[4].message.contains("2 connected components (vertex counts 6, 3)"), "{}", r.warnings[4]);
-        assert!(r.warnings[5].message.starts_with("1 vertex referenced by no face (first: vertex 9)"), "{}", r.warnings[5]);
+        assert!(
+            r.warnings[5].message.starts_with("1 vertex referenced by no face (first: vertex 9)"),
+            "{}",
+            r.warnings[5]
+        );
         assert_eq!(r.components, 2);
     }
 

@@ -156,10 +156,7 @@ impl FaceCollector {
 
     /// The first triangle that refers to a vertex `>= n_vertices`: (origin, bad index).
     pub fn first_out_of_range(&self, n_vertices: usize) -> Option<(usize, usize)> {
-        self.faces
-            .iter()
-            .zip(&self.origin)
-            .find_map(|(f, &o)| f.iter().find(|&&v| v >= n_vertices).map(|&v| (o, v)))
+        self.faces.iter().zip(&self.origin).find_map(|(f, &o)| f.iter().find(|&&v| v >= n_vertices).map(|&v| (o, v)))
     }
 
     /// The fan-triangulation warning, if any polygon was split. `origin_name` formats an origin

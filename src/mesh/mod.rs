@@ -3,19 +3,19 @@
 //! Conventions: positions are `f64` in the data's own units; faces are triangles given as
 //! 0-based vertex indices, counter-clockwise when seen from outside (the file's order is kept).
 
-pub mod topology;
 pub mod inspect;
 pub mod load;
 pub mod obj;
 pub mod off;
 pub mod ply;
 pub mod sequence;
+pub mod topology;
 pub mod write;
 
+pub use inspect::{InspectReport, Warning, WarningKind, inspect, inspect_path};
+pub use load::{LoadedMesh, MeshFormat, load_mesh, read_mesh};
+pub use sequence::{LoadedSequence, load_sequence, read_sequence};
 pub use topology::Topology;
-pub use inspect::{inspect, inspect_path, InspectReport, Warning, WarningKind};
-pub use load::{load_mesh, read_mesh, LoadedMesh, MeshFormat};
-pub use sequence::{load_sequence, read_sequence, LoadedSequence};
 pub use write::{colormap, colormap_range, write_obj, write_off, write_ply};
 
 /// One vertex position, `[x, y, z]`.

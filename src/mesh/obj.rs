@@ -20,8 +20,8 @@
 
 use std::path::Path;
 
-use super::load::{finite_coordinate, numbered_lines, show, tokens, FaceCollector, LoadedMesh};
 use super::TriMesh;
+use super::load::{FaceCollector, LoadedMesh, finite_coordinate, numbered_lines, show, tokens};
 use crate::error::{Error, Result};
 
 /// Statements that do not affect positions or triangles and are skipped without a warning.
@@ -41,7 +41,11 @@ pub fn parse_obj(bytes: &[u8], path: &Path) -> Result<LoadedMesh> {
         let mut tok = tokens(line);
         let Some(keyword) = tok.next() else { continue };
         if line.trim_ascii_end().ends_with(b"\\") {
-            return Err(Error::parse(path, Some(line_no), "line continuations ('\\' at the end of a line) are not supported"));
+            return Err(Error::parse(
+                path,
+                Some(line_no),
+                "line continuations ('\\' at the end of a line) are not supported",
+            ));
         }
         match keyword {
             b"v" => {
@@ -114,7 +118,9 @@ fn resolve_index(token: &[u8], defined: usize) -> std::result::Result<usize, Str
         v => {
             let back = v.unsigned_abs() as usize;
             if back > defined {
-                Err(format!("relative face vertex index {v} reaches before the first vertex ({defined} defined so far)"))
+                Err(format!(
+                    "relative face vertex index {v} reaches before the first vertex ({defined} defined so far)"
+                ))
             } else {
                 Ok(defined - back)
             }

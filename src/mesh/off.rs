@@ -10,8 +10,8 @@
 
 use std::path::Path;
 
-use super::load::{finite_coordinate, numbered_lines, show, tokens, FaceCollector, LoadedMesh};
 use super::TriMesh;
+use super::load::{FaceCollector, LoadedMesh, finite_coordinate, numbered_lines, show, tokens};
 use crate::error::{Error, Result};
 
 /// Parses OFF content; `path` is used in messages only.
@@ -121,8 +121,10 @@ mod tests {
         let m = parse("OFF\n# square\n4 2 0\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n3 0 1 2\n3 0 2 3\n").unwrap();
         assert_eq!(m.mesh.faces, vec![[0, 1, 2], [0, 2, 3]]);
         assert!(m.warnings.is_empty());
-        let m = parse("COFF 4 1 0\n0 0 0 255 0 0 255\n1 0 0 1 1 1 1\n1 1 0 0 0 0 0\n0 1 0 0 0 0 0\n4 0 1 2 3 0.5 0.5 0.5\n")
-            .unwrap();
+        let m = parse(
+            "COFF 4 1 0\n0 0 0 255 0 0 255\n1 0 0 1 1 1 1\n1 1 0 0 0 0 0\n0 1 0 0 0 0 0\n4 0 1 2 3 0.5 0.5 0.5\n",
+        )
+        .unwrap();
         assert_eq!(m.mesh.positions[2], [1.0, 1.0, 0.0]);
         assert_eq!(m.mesh.faces, vec![[0, 1, 2], [0, 2, 3]]);
         assert_eq!(m.warnings.len(), 1);

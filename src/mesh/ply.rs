@@ -12,8 +12,8 @@
 
 use std::path::Path;
 
-use super::load::{numbered_lines, parse_f64, show, tokens, FaceCollector, LoadedMesh};
 use super::TriMesh;
+use super::load::{FaceCollector, LoadedMesh, numbered_lines, parse_f64, show, tokens};
 use crate::error::{Error, Result};
 
 /// A PLY scalar type.
@@ -131,10 +131,9 @@ fn parse_header(bytes: &[u8], path: &Path) -> Result<Header> {
                 let (Some(name), Some(count), None) = (tok.get(1), tok.get(2), tok.get(3)) else {
                     return Err(err(line_no, "expected 'element <name> <count>'".into()));
                 };
-                let count = std::str::from_utf8(count)
-                    .ok()
-                    .and_then(|c| c.parse::<usize>().ok())
-                    .ok_or_else(|| err(line_no, format!("element count '{}' is not a non-negative integer", show(count))))?;
+                let count = std::str::from_utf8(count).ok().and_then(|c| c.parse::<usize>().ok()).ok_or_else(|| {
+                    err(line_no, format!("element count '{}' is not a non-negative integer", show(count)))
+                })?;
                 elements.push(Element { name: show(name), count, properties: Vec::new() });
             }
             Some(b"property") => {
@@ -147,7 +146,10 @@ fn parse_header(bytes: &[u8], path: &Path) -> Result<Header> {
                         let c = Scalar::from_name(count).ok_or_else(|| bad_type(count))?;
                         let i = Scalar::from_name(item).ok_or_else(|| bad_type(item))?;
                         if !c.is_integer() {
-                            return Err(err(line_no, format!("list count type '{}' is not an integer type", show(count))));
+                            return Err(err(
+                                line_no,
+                                format!("list count type '{}' is not an integer type", show(count)),
+                            ));
                         }
                         (PropertyType::List(c, i), name)
                     }
@@ -155,7 +157,8 @@ fn parse_header(bytes: &[u8], path: &Path) -> Result<Header> {
                     _ => {
                         return Err(err(
                             line_no,
-                            "expected 'property <type> <name>' or 'property list <count type> <item type> <name>'".into(),
+                            "expected 'property <type> <name>' or 'property list <count type> <item type> <name>'"
+                                .into(),
                         ));
                     }
                 };
@@ -245,9 +248,8 @@ impl<'a, I: Iterator<Item = (usize, &'a [u8])>> Body for AsciiBody<'a, I> {
 
     fn value(&mut self, ty: Scalar) -> Result<f64> {
         let t = self.token(ty)?;
-        let v = parse_f64(t).ok_or_else(|| {
-            Error::parse(self.path, Some(self.line), format!("value '{}' is not a number", show(t)))
-        })?;
+        let v = parse_f64(t)
+            .ok_or_else(|| Error::parse(self.path, Some(self.line), format!("value '{}' is not a number", show(t))))?;
         if ty.is_integer() && (!v.is_finite() || v.fract() != 0.0) {
             return Err(Error::parse(self.path, Some(self.line), format!("value '{}' is not an integer", show(t))));
         }
@@ -372,7 +374,11 @@ fn role(element: &Element, path: &Path) -> Result<Role> {
                 let i = find(&[name])
                     .ok_or_else(|| Error::parse(path, None, format!("the vertex element has no property '{name}'")))?;
                 if !matches!(element.properties[i].ty, PropertyType::Scalar(_)) {
-                    return Err(Error::parse(path, None, format!("vertex property '{name}' is a list, expected a number")));
+                    return Err(Error::parse(
+                        path,
+                        None,
+                        format!("vertex property '{name}' is a list, expected a number"),
+                    ));
                 }
                 idx[axis] = i;
             }
@@ -472,7 +478,8 @@ fn read_body<B: Body>(body: &mut B, header: &Header, path: &Path) -> Result<Load
         }
     }
     let positions = positions.ok_or_else(|| Error::parse(path, None, "no 'vertex' element in the header"))?;
-    let faces = faces.ok_or_else(|| Error::parse(path, None, "no 'face' element in the header: a point cloud is not a mesh"))?;
+    let faces = faces
+        .ok_or_else(|| Error::parse(path, None, "no 'face' element in the header: a point cloud is not a mesh"))?;
     if positions.is_empty() {
         return Err(Error::parse(path, None, "the file has no vertices"));
     }
@@ -645,7 +652,9 @@ mod tests {
         assert!(m.starts_with("t.ply:4: unknown property type 'quad'"), "{m}");
         let m = e("ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nend_header\n0 0\n");
         assert!(m.contains("no property 'z'"), "{m}");
-        let m = e("ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\nend_header\n0 0 0\n");
+        let m = e(
+            "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\nend_header\n0 0 0\n",
+        );
         assert!(m.contains("point cloud"), "{m}");
     }
 }

@@ -19,7 +19,7 @@ use std::path::{Path, PathBuf};
 
 use rayon::prelude::*;
 
-use super::load::{read_mesh, MeshFormat, MESH_EXTENSIONS};
+use super::load::{MESH_EXTENSIONS, MeshFormat, read_mesh};
 use super::{MeshSequence, TriMesh};
 use crate::error::{Error, Result};
 
@@ -107,10 +107,8 @@ pub fn sequence_from_meshes(files: &[PathBuf], meshes: Vec<TriMesh>) -> Result<M
             return Err(Error::Mismatch { path: file.clone(), message });
         }
     }
-    let names = files
-        .iter()
-        .map(|f| f.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default())
-        .collect();
+    let names =
+        files.iter().map(|f| f.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default()).collect();
     let frames = meshes.into_iter().map(|m| m.positions).collect();
     Ok(MeshSequence { faces, frames, names })
 }
@@ -264,9 +262,13 @@ mod tests {
 
     #[test]
     fn natural_order_examples() {
-        let mut v = vec!["10.obj", "2.obj", "1.obj", "cactus10.ply", "cactus2.ply", "cactus0.ply", "0002.obj", "0001.obj"];
+        let mut v =
+            vec!["10.obj", "2.obj", "1.obj", "cactus10.ply", "cactus2.ply", "cactus0.ply", "0002.obj", "0001.obj"];
         v.sort_by(|a, b| natural_cmp(a, b));
-        assert_eq!(v, vec!["0001.obj", "1.obj", "0002.obj", "2.obj", "10.obj", "cactus0.ply", "cactus2.ply", "cactus10.ply"]);
+        assert_eq!(
+            v,
+            vec!["0001.obj", "1.obj", "0002.obj", "2.obj", "10.obj", "cactus0.ply", "cactus2.ply", "cactus10.ply"]
+        );
         assert_eq!(natural_cmp("2.obj", "10.obj"), Ordering::Less);
         assert_eq!(natural_cmp("Smile", "neutral"), Ordering::Greater);
         assert_eq!(natural_cmp("a2b10", "a2b9"), Ordering::Greater);
@@ -298,14 +300,14 @@ mod tests {
         assert!(glob_match("", ""));
     }
 
-
     const TRI: &str = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nf 1 2 3\nf 2 4 3\n";
 
     #[test]
     fn directory_glob_and_file_specs() {
         let d = test_dir("seq-spec");
         for name in ["10.obj", "2.OBJ", "1.obj", "notes.txt", ".hidden.obj", "3.off"] {
-            let body = if name.ends_with(".off") { "OFF\n4 2 0\n0 0 0\n1 0 0\n0 1 0\n1 1 1\n3 0 1 2\n3 1 3 2\n" } else { TRI };
+            let body =
+                if name.ends_with(".off") { "OFF\n4 2 0\n0 0 0\n1 0 0\n0 1 0\n1 1 1\n3 0 1 2\n3 1 3 2\n" } else { TRI };
             std::fs::write(d.join(name), body).unwrap();
         }
         std::fs::create_dir(d.join("sub.obj")).unwrap();
@@ -354,7 +356,9 @@ mod tests {
         }
         let s = read_sequence(d.to_str().unwrap()).unwrap();
         assert_eq!(s.warnings.len(), 1, "{:?}", s.warnings);
-        assert!(s.warnings[0].contains("a.obj:5: 1 polygon") && s.warnings[0].ends_with("(and the same in 2 other frames)"));
+        assert!(
+            s.warnings[0].contains("a.obj:5: 1 polygon") && s.warnings[0].ends_with("(and the same in 2 other frames)")
+        );
         std::fs::remove_dir_all(&d).unwrap();
     }
 }

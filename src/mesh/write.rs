@@ -179,7 +179,6 @@ mod tests {
     use super::*;
     use crate::mesh::load::test_dir;
 
-
     /// A tetrahedron with awkward coordinates (no short decimal form, tiny and huge magnitudes).
     fn tetra() -> TriMesh {
         TriMesh::new(
@@ -214,7 +213,10 @@ mod tests {
         let text = std::fs::read_to_string(&p).unwrap();
         assert!(text.contains("property uchar red\nproperty uchar green\nproperty uchar blue\nproperty float dist\n"));
         let last_vertex = text.lines().nth(17).unwrap();
-        assert!(last_vertex.ends_with(&format!(" {} {} {} 3.5", colors[3][0], colors[3][1], colors[3][2])), "{last_vertex}");
+        assert!(
+            last_vertex.ends_with(&format!(" {} {} {} 3.5", colors[3][0], colors[3][1], colors[3][2])),
+            "{last_vertex}"
+        );
         std::fs::remove_dir_all(&d).unwrap();
     }
 

@@ -261,7 +261,10 @@ impl<'a> Encoder<'a> {
     pub fn encode_rows(&self, rows: &[f64]) -> Result<Vec<f64>> {
         let d = self.model.n_cols();
         if !rows.len().is_multiple_of(d) {
-            return Err(Error::Invalid(format!("encode: {} values is not a multiple of the row length {d}", rows.len())));
+            return Err(Error::Invalid(format!(
+                "encode: {} values is not a multiple of the row length {d}",
+                rows.len()
+            )));
         }
         let mut out = Vec::with_capacity(rows.len() / d * self.model.n_components);
         for r in rows.chunks_exact(d) {
@@ -381,10 +384,12 @@ mod tests {
         let mut best = f64::INFINITY;
         for mask in 0u32..8 {
             let sub = LinearModel {
-                components: (0..3).flat_map(|k| {
-                    let on = mask & (1 << k) != 0;
-                    m.component(k).iter().map(move |&v| if on { v } else { 0.0 })
-                }).collect(),
+                components: (0..3)
+                    .flat_map(|k| {
+                        let on = mask & (1 << k) != 0;
+                        m.component(k).iter().map(move |&v| if on { v } else { 0.0 })
+                    })
+                    .collect(),
                 constraint: WeightConstraint::Unconstrained,
                 ..m.clone()
             };

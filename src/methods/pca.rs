@@ -157,8 +157,9 @@ mod tests {
         let err = rec.iter().zip(&x).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
         assert!(err < 1e-10, "max abs error {err}");
         // one component fewer cannot be exact
-        let m2 = Pca::fit(DataMatrix::new(&x, f, e, w).unwrap(), &PcaConfig { components: r - 1, ..Default::default() })
-            .unwrap();
+        let m2 =
+            Pca::fit(DataMatrix::new(&x, f, e, w).unwrap(), &PcaConfig { components: r - 1, ..Default::default() })
+                .unwrap();
         let err2 = m2.reconstruct().unwrap().iter().zip(&x).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
         assert!(err2 > 1e-3, "rank-{} reconstruction unexpectedly exact ({err2})", r - 1);
     }

@@ -131,16 +131,16 @@ impl SplocsConfig {
         }
         let [d_min, d_max] = self.support;
         if !(d_min.is_finite() && d_max.is_finite()) || d_min < 0.0 {
-            return Err(Error::config(
-                "support",
-                format!("support [{d_min}, {d_max}] must be finite with d_min ≥ 0"),
-            ));
+            return Err(Error::config("support", format!("support [{d_min}, {d_max}] must be finite with d_min ≥ 0")));
         }
         if d_min >= d_max {
             return Err(Error::config("support", format!("d_min ({d_min}) must be below d_max ({d_max})")));
         }
         if self.weights == WeightConstraint::Unconstrained {
-            return Err(Error::config("weights", "weights (unconstrained) must be `nonnegative` or `signed` for SPLOCS"));
+            return Err(Error::config(
+                "weights",
+                "weights (unconstrained) must be `nonnegative` or `signed` for SPLOCS",
+            ));
         }
         if !(self.admm.rho.is_finite() && self.admm.rho > 0.0) {
             return Err(Error::config("admm.rho", format!("admm.rho ({}) must be finite and > 0", self.admm.rho)));
@@ -466,7 +466,14 @@ impl<'a, P: SupportDistances + ?Sized> SplocsSolver<'a, P> {
         let (f, k, d) = (self.f, self.k, self.d);
         let x = MatRef::from_row_major_slice(self.x.data(), f, d);
         let c = MatRef::from_row_major_slice(c, k, d);
-        matmul(MatMut::from_row_major_slice_mut(&mut self.xct, f, k), Accum::Replace, x, c.transpose(), self.inv_scale, par);
+        matmul(
+            MatMut::from_row_major_slice_mut(&mut self.xct, f, k),
+            Accum::Replace,
+            x,
+            c.transpose(),
+            self.inv_scale,
+            par,
+        );
         matmul(MatMut::from_row_major_slice_mut(&mut self.cct, k, k), Accum::Replace, c, c.transpose(), 1.0, par);
     }
 
@@ -494,9 +501,8 @@ impl<'a, P: SupportDistances + ?Sized> SplocsSolver<'a, P> {
         for i in 0..k {
             g[(i, i)] += rho;
         }
-        let llt = g
-            .llt(Side::Lower)
-            .map_err(|e| Error::Numerical(format!("SPLOCS: Cholesky of WᵀW + ρI failed: {e:?}")))?;
+        let llt =
+            g.llt(Side::Lower).map_err(|e| Error::Numerical(format!("SPLOCS: Cholesky of WᵀW + ρI failed: {e:?}")))?;
         let minv = llt.inverse();
         let shared = AdmmShared {
             x: self.x.data(),
@@ -566,7 +572,10 @@ impl<'a, P: SupportDistances + ?Sized> SplocsSolver<'a, P> {
         let res2 = (self.x_norm2 - 2.0 * cross + quad).max(0.0);
         let obj = res2 + acc.sparsity;
         if !obj.is_finite() {
-            return Err(Error::Numerical(format!("SPLOCS: objective became {obj} at iteration {}", self.iterations + 1)));
+            return Err(Error::Numerical(format!(
+                "SPLOCS: objective became {obj} at iteration {}",
+                self.iterations + 1
+            )));
         }
         self.history.push(obj);
         self.iterations += 1;
@@ -694,8 +703,12 @@ mod tests {
             .to_string();
         assert!(msg.contains("41") && msg.contains("40"), "{msg}");
         // TOML round trip with the config's key names
-        let t: SplocsConfig = toml::from_str("components = 3\nsupport = [0.2, 0.5]\nweights = \"signed\"\n[admm]\nrho = 5.0\n").unwrap();
-        assert_eq!((t.components, t.support, t.weights, t.admm.rho, t.admm.iterations), (3, [0.2, 0.5], WeightConstraint::Signed, 5.0, 10));
+        let t: SplocsConfig =
+            toml::from_str("components = 3\nsupport = [0.2, 0.5]\nweights = \"signed\"\n[admm]\nrho = 5.0\n").unwrap();
+        assert_eq!(
+            (t.components, t.support, t.weights, t.admm.rho, t.admm.iterations),
+            (3, [0.2, 0.5], WeightConstraint::Signed, 5.0, 10)
+        );
     }
 
     #[test]
@@ -705,7 +718,8 @@ mod tests {
         for constraint in [WeightConstraint::Nonnegative, WeightConstraint::Signed] {
             let cfg = SplocsConfig { components: 2, weights: constraint, support: [0.1, 0.3], ..Default::default() };
             let mut calls = Vec::new();
-            let fit = SplocsSolver::fit(DataMatrix::new(&x, f, e, w).unwrap(), &p, &cfg, |i, o| calls.push((i, o))).unwrap();
+            let fit =
+                SplocsSolver::fit(DataMatrix::new(&x, f, e, w).unwrap(), &p, &cfg, |i, o| calls.push((i, o))).unwrap();
             assert_eq!(calls.len(), fit.objective_history.len());
             let mut centres: Vec<usize> = fit.centers.iter().map(|s| s[0]).collect();
             centres.sort();
@@ -733,7 +747,12 @@ mod tests {
     fn fixed_centres_are_kept() {
         let (x, f, e, w) = two_bumps();
         let p = Line { n: e, h: 0.025 };
-        let cfg = SplocsConfig { components: 2, support: [0.1, 0.3], fixed_centers: vec![vec![29, 30, 31]], ..Default::default() };
+        let cfg = SplocsConfig {
+            components: 2,
+            support: [0.1, 0.3],
+            fixed_centers: vec![vec![29, 30, 31]],
+            ..Default::default()
+        };
         let fit = SplocsSolver::fit(DataMatrix::new(&x, f, e, w).unwrap(), &p, &cfg, |_, _| {}).unwrap();
         assert_eq!(fit.centers[0], vec![29, 30, 31]);
         // the first component lives around the painted set

@@ -220,7 +220,14 @@ impl AdmmAcc {
 /// initialised to the incoming C, and finally C ← Z. The right-hand side S = WᵀX + ρ(Z − U)
 /// is assembled by the prox step itself, so each ADMM iteration is one K × K product. Adds the
 /// block's X·Cᵀ/s, C·Cᵀ and Ω(C) to `acc`.
-pub(crate) fn admm_block(sh: &AdmmShared<'_>, blocks: &Blocks, b: usize, c: &mut [f64], u: &mut [f64], acc: &mut AdmmAcc) {
+pub(crate) fn admm_block(
+    sh: &AdmmShared<'_>,
+    blocks: &Blocks,
+    b: usize,
+    c: &mut [f64],
+    u: &mut [f64],
+    acc: &mut AdmmAcc,
+) {
     use faer::linalg::matmul::matmul;
     use faer::{Accum, MatMut, MatRef, Par};
     let (f, k, w) = (sh.f, sh.k, sh.width);
@@ -273,7 +280,14 @@ pub(crate) fn admm_block(sh: &AdmmShared<'_>, blocks: &Blocks, b: usize, c: &mut
     let r = acc.rows.len();
     if r == k {
         let cb = MatRef::from_row_major_slice(c, k, nc);
-        matmul(MatMut::from_row_major_slice_mut(&mut acc.xct, f, k), Accum::Add, xb, cb.transpose(), sh.inv_scale, Par::Seq);
+        matmul(
+            MatMut::from_row_major_slice_mut(&mut acc.xct, f, k),
+            Accum::Add,
+            xb,
+            cb.transpose(),
+            sh.inv_scale,
+            Par::Seq,
+        );
         matmul(MatMut::from_row_major_slice_mut(&mut acc.cct, k, k), Accum::Add, cb, cb.transpose(), 1.0, Par::Seq);
     } else if r > 0 {
         let compact = &mut acc.wx[..r * nc];

@@ -62,7 +62,9 @@ impl<'a, P: SupportDistances + ?Sized> TriangleSupport<'a, P> {
     pub fn new(vertex_distances: &'a P, faces: &'a [[usize; 3]]) -> Result<Self> {
         let n = vertex_distances.n_elements();
         if let Some((t, f)) = faces.iter().enumerate().find(|(_, f)| f.iter().any(|&v| v >= n)) {
-            return Err(Error::Invalid(format!("triangle {t} {f:?} refers to a vertex ≥ {n} (vertex count of the provider)")));
+            return Err(Error::Invalid(format!(
+                "triangle {t} {f:?} refers to a vertex ≥ {n} (vertex count of the provider)"
+            )));
         }
         Ok(TriangleSupport { vertex_distances, faces })
     }
@@ -70,10 +72,9 @@ impl<'a, P: SupportDistances + ?Sized> TriangleSupport<'a, P> {
     fn sources(&self, centers: &[usize]) -> Result<Vec<usize>> {
         let mut src = Vec::with_capacity(3 * centers.len());
         for &t in centers {
-            let f = self
-                .faces
-                .get(t)
-                .ok_or_else(|| Error::Invalid(format!("centre triangle {t} out of range ({} triangles)", self.faces.len())))?;
+            let f = self.faces.get(t).ok_or_else(|| {
+                Error::Invalid(format!("centre triangle {t} out of range ({} triangles)", self.faces.len()))
+            })?;
             src.extend_from_slice(f);
         }
         src.sort_unstable();
@@ -233,7 +234,9 @@ mod tests {
             self.0
         }
         fn distances(&self, centers: &[usize]) -> Result<Vec<f64>> {
-            Ok((0..self.0).map(|i| centers.iter().map(|&c| (i as f64 - c as f64).abs()).fold(f64::INFINITY, f64::min)).collect())
+            Ok((0..self.0)
+                .map(|i| centers.iter().map(|&c| (i as f64 - c as f64).abs()).fold(f64::INFINITY, f64::min))
+                .collect())
         }
     }
 

@@ -47,7 +47,9 @@ impl EdgeDistortionMeter {
         for &[i, j] in sted.edges() {
             let l = dist(rest.positions[i], rest.positions[j]);
             if l <= 0.0 {
-                return Err(Error::Numerical(format!("rest edge ({i}, {j}) has length 0; relative edge change undefined")));
+                return Err(Error::Numerical(format!(
+                    "rest edge ({i}, {j}) has length 0; relative edge change undefined"
+                )));
             }
             rest_lengths.push(l);
         }
@@ -58,7 +60,11 @@ impl EdgeDistortionMeter {
     /// count mismatch or non-finite positions. A mesh without edges gives all zeros.
     pub fn measure(&self, shape: &[Vec3]) -> Result<EdgeDistortion> {
         if shape.len() != self.rest.len() {
-            return Err(Error::Invalid(format!("shape has {} vertices, the rest mesh {}", shape.len(), self.rest.len())));
+            return Err(Error::Invalid(format!(
+                "shape has {} vertices, the rest mesh {}",
+                shape.len(),
+                self.rest.len()
+            )));
         }
         let spatial_sted = self.sted.spatial_frame(&self.rest, shape)?;
         let (mut sum, mut max) = (0.0f64, 0.0f64);

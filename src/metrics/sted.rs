@@ -65,7 +65,10 @@ impl StedParams {
             return Err(Error::config("sted.rings", format!("rings ({}) must be at least 1", self.rings)));
         }
         if !(self.temporal_scale.is_finite() && self.temporal_scale > 0.0) {
-            return Err(Error::config("sted.temporal_scale", format!("temporal_scale ({}) must be positive and finite", self.temporal_scale)));
+            return Err(Error::config(
+                "sted.temporal_scale",
+                format!("temporal_scale ({}) must be positive and finite", self.temporal_scale),
+            ));
         }
         if !(self.c.is_finite() && self.c >= 0.0) {
             return Err(Error::config("sted.c", format!("c ({}) must be non-negative and finite", self.c)));
@@ -198,10 +201,17 @@ impl Sted {
 
     fn check_frame(&self, what: &str, frame: usize, p: &[Vec3]) -> Result<()> {
         if p.len() != self.n_vertices {
-            return Err(Error::Invalid(format!("{what} frame {frame} has {} vertices, the mesh {}", p.len(), self.n_vertices)));
+            return Err(Error::Invalid(format!(
+                "{what} frame {frame} has {} vertices, the mesh {}",
+                p.len(),
+                self.n_vertices
+            )));
         }
         if let Some(v) = p.iter().position(|q| q.iter().any(|x| !x.is_finite())) {
-            return Err(Error::Invalid(format!("{what} frame {frame}: vertex {v} has a non-finite coordinate {:?}", p[v])));
+            return Err(Error::Invalid(format!(
+                "{what} frame {frame}: vertex {v} has a non-finite coordinate {:?}",
+                p[v]
+            )));
         }
         Ok(())
     }
@@ -228,7 +238,9 @@ impl Sted {
         for &[i, j] in &self.edges {
             let l = crate::mesh::dist(truth[i], truth[j]);
             if l <= 0.0 {
-                return Err(Error::Numerical(format!("ground-truth frame {frame}: edge ({i}, {j}) has length 0; relative edge change undefined")));
+                return Err(Error::Numerical(format!(
+                    "ground-truth frame {frame}: edge ({i}, {j}) has length 0; relative edge change undefined"
+                )));
             }
             lengths.push(l);
             changes.push((crate::mesh::dist(result[i], result[j]) - l) / l);
@@ -312,7 +324,9 @@ impl Sted {
             self.edges.iter().map(|&[i, j]| crate::mesh::dist(t0[i], t0[j])).sum::<f64>() / self.edges.len() as f64
         };
         if mean_edge <= 0.0 {
-            return Err(Error::Numerical("ground-truth frame 0 has no edge of positive length; temporal scale δ undefined".into()));
+            return Err(Error::Numerical(
+                "ground-truth frame 0 has no edge of positive length; temporal scale δ undefined".into(),
+            ));
         }
         let delta2 = (self.params.temporal_scale * mean_edge).powi(2);
         let mut sum = 0.0;
@@ -342,7 +356,13 @@ impl Sted {
 }
 
 /// One-shot STED of `result` against `truth` (frames of the mesh with triangles `faces`).
-pub fn sted(faces: &[[usize; 3]], truth: &[Vec<Vec3>], result: &[Vec<Vec3>], params: StedParams, order: FrameOrder) -> Result<StedReport> {
+pub fn sted(
+    faces: &[[usize; 3]],
+    truth: &[Vec<Vec3>],
+    result: &[Vec<Vec3>],
+    params: StedParams,
+    order: FrameOrder,
+) -> Result<StedReport> {
     let n = truth.first().map_or(0, |f| f.len());
     Sted::new(n, faces, params)?.evaluate(truth, result, order)
 }

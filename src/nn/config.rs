@@ -112,10 +112,7 @@ impl AutoencoderConfig {
         nonneg("d_min", self.d_min)?;
         nonneg("d_max", self.d_max)?;
         if self.d_min >= self.d_max {
-            return Err(bad(
-                "d_min",
-                format!("d_min ({}) must be below d_max ({})", self.d_min, self.d_max),
-            ));
+            return Err(bad("d_min", format!("d_min ({}) must be below d_max ({})", self.d_min, self.d_max)));
         }
         Ok(())
     }

@@ -63,7 +63,10 @@ fn mat9(v: &[f32]) -> Mat9 {
 
 fn check_finite(name: &str, v: &[f32]) -> Result<()> {
     if let Some(i) = kernels::first_non_finite(v) {
-        return Err(Error::Numerical(format!("parameter `{name}` has a non-finite value ({}) at flat index {i}", v[i])));
+        return Err(Error::Numerical(format!(
+            "parameter `{name}` has a non-finite value ({}) at flat index {i}",
+            v[i]
+        )));
     }
     Ok(())
 }
@@ -138,7 +141,9 @@ impl Weights {
                     let data = t.inner().into_data();
                     match data.as_slice::<f32>() {
                         Ok(v) => dst.copy_from_slice(v),
-                        Err(_) => dst.copy_from_slice(&data.clone().convert::<f32>().try_into_vec_as::<f32>().expect("f32")),
+                        Err(_) => {
+                            dst.copy_from_slice(&data.clone().convert::<f32>().try_into_vec_as::<f32>().expect("f32"))
+                        }
                     }
                     let back = Tensor::from_data(data, &device);
                     if require_grad { back.require_grad() } else { back }
@@ -336,7 +341,16 @@ pub fn decode(ws: &mut Workspace, w: &Weights, nb: &NeighborIndex, b: usize) {
         let lw = &w.layers[l - 1 - d];
         let (prev, rest) = ws.dec.split_at_mut(d + 1);
         kernels::mean_rows(nb, &prev[d], &mut ws.dec_mean[d], r);
-        kernels::conv_rows(&transpose9(&lw.wp), &prev[d], &transpose9(&lw.wn), &ws.dec_mean[d], &lw.bd, &mut rest[0], bp, true);
+        kernels::conv_rows(
+            &transpose9(&lw.wp),
+            &prev[d],
+            &transpose9(&lw.wn),
+            &ws.dec_mean[d],
+            &lw.bd,
+            &mut rest[0],
+            bp,
+            true,
+        );
     }
 }
 
@@ -465,10 +479,5 @@ pub fn loss_and_grad(
     // Sparsity on C.
     let sparsity = sparsity_with_grad(&w.c, maps, (cfg.lambda1 / k as f64) as f32, &mut grads.c);
 
-    LossTerms {
-        total: reconstruction + cfg.lambda1 * sparsity + cfg.lambda2 * hinge,
-        reconstruction,
-        sparsity,
-        hinge,
-    }
+    LossTerms { total: reconstruction + cfg.lambda1 * sparsity + cfg.lambda2 * hinge, reconstruction, sparsity, hinge }
 }

@@ -108,7 +108,10 @@ impl Autoencoder {
     /// Wraps trained parameters (errors if a parameter is not finite or sizes disagree).
     pub fn new(config: AutoencoderConfig, module: AutoencoderModule, neighbors: NeighborIndex) -> Result<Self> {
         let weights = Weights::from_module(&module)?;
-        if weights.n != neighbors.n_vertices() || weights.k != config.components || weights.layers.len() != config.layers {
+        if weights.n != neighbors.n_vertices()
+            || weights.k != config.components
+            || weights.layers.len() != config.layers
+        {
             return Err(Error::Invalid(format!(
                 "model parameters (N = {}, K = {}, L = {}) do not match the mesh (N = {}) / config (K = {}, L = {})",
                 weights.n,
@@ -418,7 +421,12 @@ impl Autoencoder {
         Ok(())
     }
 
-    fn from_record_bytes(path: &Path, config: AutoencoderConfig, bytes: Vec<u8>, neighbors: NeighborIndex) -> Result<Self> {
+    fn from_record_bytes(
+        path: &Path,
+        config: AutoencoderConfig,
+        bytes: Vec<u8>,
+        neighbors: NeighborIndex,
+    ) -> Result<Self> {
         let record = ModuleRecord::from_bytes(Bytes::from_bytes_vec(bytes))
             .map_err(|e| Error::parse(path, None, format!("module record: {e}")))?;
         let module = config

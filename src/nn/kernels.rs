@@ -121,9 +121,7 @@ pub fn tanh_f32(x: f32) -> f32 {
     let ax = if ax > 10.0 { 10.0 } else { ax }; // keeps NaN
     // Small-argument branch.
     let x2 = ax * ax;
-    let small = ax
-        * (1.0
-            + x2 * (-1.0 / 3.0 + x2 * (2.0 / 15.0 + x2 * (-17.0 / 315.0 + x2 * (62.0 / 2835.0)))));
+    let small = ax * (1.0 + x2 * (-1.0 / 3.0 + x2 * (2.0 / 15.0 + x2 * (-17.0 / 315.0 + x2 * (62.0 / 2835.0)))));
     // e^{2|x|} by range reduction.
     let y = 2.0 * ax;
     const MAGIC: f32 = 12_582_912.0; // 1.5·2²³: adding it rounds to an integer in the low bits
@@ -136,8 +134,7 @@ pub fn tanh_f32(x: f32) -> f32 {
     let p = 1.0
         + r * (1.0
             + r * (0.5
-                + r * (1.0 / 6.0
-                    + r * (1.0 / 24.0 + r * (1.0 / 120.0 + r * (1.0 / 720.0 + r * (1.0 / 5040.0)))))));
+                + r * (1.0 / 6.0 + r * (1.0 / 24.0 + r * (1.0 / 120.0 + r * (1.0 / 720.0 + r * (1.0 / 5040.0)))))));
     let scale = f32::from_bits((ni.wrapping_add(127) as u32) << 23);
     let e = p * scale;
     let large = 1.0 - 2.0 / (e + 1.0);
@@ -361,13 +358,10 @@ dispatch! {
 /// `dy`, `dx`, `dm`: N rows of `9·bp`.
 pub fn input_grad_rows(wst: &Mat9, wnt: &Mat9, dy: &[f32], dx: &mut [f32], dm: &mut [f32], bp: usize) {
     let r = 9 * bp;
-    dx.par_chunks_mut(ROW_CHUNK * r)
-        .zip(dm.par_chunks_mut(ROW_CHUNK * r))
-        .enumerate()
-        .for_each(|(ci, (cx, cm))| {
-            let s = ci * ROW_CHUNK * r;
-            input_grad_rows_chunk(wst, wnt, &dy[s..s + cx.len()], cx, cm, bp);
-        });
+    dx.par_chunks_mut(ROW_CHUNK * r).zip(dm.par_chunks_mut(ROW_CHUNK * r)).enumerate().for_each(|(ci, (cx, cm))| {
+        let s = ci * ROW_CHUNK * r;
+        input_grad_rows_chunk(wst, wnt, &dy[s..s + cx.len()], cx, cm, bp);
+    });
 }
 
 /// Gradient accumulators of one convolution (oriented like the matrices it was run with).
@@ -557,7 +551,14 @@ dispatch! {
 }
 
 #[inline(always)]
-fn group_sparsity_impl<M: MulAdd>(row: &[f32], sq_norms: &[f32], lambda: &[f32], eps2: f32, scale: f32, grad: &mut [f32]) -> f64 {
+fn group_sparsity_impl<M: MulAdd>(
+    row: &[f32],
+    sq_norms: &[f32],
+    lambda: &[f32],
+    eps2: f32,
+    scale: f32,
+    grad: &mut [f32],
+) -> f64 {
     let mut total = 0.0f64;
     for (((v, g), &s), &l) in row.chunks_exact(9).zip(grad.chunks_exact_mut(9)).zip(sq_norms).zip(lambda) {
         if l == 0.0 {

@@ -152,7 +152,14 @@ pub struct SupportMaps {
 impl SupportMaps {
     /// Empty maps for `k` components on `n` vertices.
     pub fn new(k: usize, n: usize) -> Self {
-        SupportMaps { k, n, centers: vec![0; k], weights: vec![Vec::new(); k], valid: vec![false; k], sq_norms: vec![0.0; k * n] }
+        SupportMaps {
+            k,
+            n,
+            centers: vec![0; k],
+            weights: vec![Vec::new(); k],
+            valid: vec![false; k],
+            sq_norms: vec![0.0; k * n],
+        }
     }
 
     /// Current centres `c_k` (valid after [`Self::update`]).
@@ -250,8 +257,10 @@ pub fn reference_loss(
     let norms = c.square().sum_dim(2).reshape([k, n]).clamp_min(NORM_EPS * NORM_EPS).sqrt();
     let sparsity = (norms * maps.to_tensor(&device)).sum().div_scalar(k as f32);
     let hinge = z.abs().max_dim(0).sub_scalar(cfg.theta as f32).clamp_min(0.0).sum().div_scalar(k as f32);
-    let total = recon.clone() + sparsity.clone().mul_scalar(cfg.lambda1 as f32) + hinge.clone().mul_scalar(cfg.lambda2 as f32);
-    let scalar = |t: Tensor<1>| -> f64 { t.into_data().try_into_vec_as::<f32>().map(|v| v[0] as f64).unwrap_or(f64::NAN) };
+    let total =
+        recon.clone() + sparsity.clone().mul_scalar(cfg.lambda1 as f32) + hinge.clone().mul_scalar(cfg.lambda2 as f32);
+    let scalar =
+        |t: Tensor<1>| -> f64 { t.into_data().try_into_vec_as::<f32>().map(|v| v[0] as f64).unwrap_or(f64::NAN) };
     let terms = LossTerms {
         total: scalar(total.clone().detach()),
         reconstruction: scalar(recon.detach()),

@@ -66,7 +66,12 @@ impl AutoencoderConfig {
         let c = rng.normal_vec(self.components * 9 * n_vertices, std);
         let components = c
             .chunks(COMPONENT_BLOCK * 9 * n_vertices)
-            .map(|rows| Param::from_data(TensorData::new(rows.to_vec(), [rows.len() / (9 * n_vertices), 9 * n_vertices]), device))
+            .map(|rows| {
+                Param::from_data(
+                    TensorData::new(rows.to_vec(), [rows.len() / (9 * n_vertices), 9 * n_vertices]),
+                    device,
+                )
+            })
             .collect();
         AutoencoderModule { layers, components }
     }

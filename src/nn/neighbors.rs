@@ -101,9 +101,7 @@ impl NeighborIndex {
     /// From a triangle mesh's faces: the 1-rings of [`Topology`].
     pub fn from_faces(n_vertices: usize, faces: &[[usize; 3]]) -> Result<Self> {
         if let Some((f, bad)) = faces.iter().enumerate().find(|(_, f)| f.iter().any(|&v| v >= n_vertices)) {
-            return Err(Error::Invalid(format!(
-                "face {f} {bad:?} references a vertex ≥ {n_vertices}"
-            )));
+            return Err(Error::Invalid(format!("face {f} {bad:?} references a vertex ≥ {n_vertices}")));
         }
         let topo = Topology::new(n_vertices, faces);
         let indices: Vec<usize> = topo.ring.clone();
@@ -193,6 +191,9 @@ mod tests {
         assert_eq!(&p[9..12], &[4, 4, 4]);
         let err = NeighborIndex::new(&[vec![5]]).unwrap_err().to_string();
         assert!(err.contains("neighbour 5"), "{err}");
-        assert_ne!(nb.fingerprint(), NeighborIndex::new(&[vec![1, 2], vec![0], vec![0, 1], vec![]]).unwrap().fingerprint());
+        assert_ne!(
+            nb.fingerprint(),
+            NeighborIndex::new(&[vec![1, 2], vec![0], vec![0, 1], vec![]]).unwrap().fingerprint()
+        );
     }
 }

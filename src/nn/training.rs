@@ -25,10 +25,10 @@ use super::inference::Autoencoder;
 use super::kernels::padded_width;
 use super::loss::{CenterDistances, LossTerms, SupportMaps};
 use super::model::{AutoencoderModule, COMPONENT_BLOCK};
-use rayon::prelude::*;
 use super::neighbors::NeighborIndex;
 use super::rng::Rng;
 use crate::error::{Error, Result};
+use rayon::prelude::*;
 
 /// The CPU device the parameters live on: Burn's ndarray backend (the project's default) with
 /// autodiff enabled, which Burn's optimizer requires of the parameters it updates. The
@@ -420,7 +420,13 @@ impl<'a> Trainer<'a> {
                 self.save_checkpoint(path)?;
                 checkpointed = true;
             }
-            on_iteration(&IterationReport { iteration: self.iteration, iterations: total, loss, step_seconds: dt, checkpointed });
+            on_iteration(&IterationReport {
+                iteration: self.iteration,
+                iterations: total,
+                loss,
+                step_seconds: dt,
+                checkpointed,
+            });
         }
         if stopped && let Some(path) = &options.checkpoint {
             self.save_checkpoint(path)?;

@@ -26,8 +26,8 @@ use super::metrics_file::{Metrics, median};
 use crate::artifact::{self, ArrayStore};
 use crate::config::{Config, MethodKind, resolved_toml};
 use crate::error::{Error, Result};
-use crate::methods::support_map::{ComponentLocality, SupportDistances, component_locality, support_ramp};
 use crate::mesh::{self, MeshSequence, TriMesh, Vec3};
+use crate::methods::support_map::{ComponentLocality, SupportDistances, component_locality, support_ramp};
 use crate::nn::{Autoencoder, AutoencoderConfig, CenterDistances, NeighborIndex, RunOptions, Trainer, TrainingData};
 use crate::preprocess::{self, UnitBox};
 use crate::representation::acap::Consistency;
@@ -135,7 +135,8 @@ impl AeArtifact {
         let dir = artifact::model_dir(dir);
         let (header, arrays): (AeHeader, ArrayStore) = artifact::load_model(&dir)?;
         let rest = rest_from_arrays(&arrays)?;
-        let options = RepresentationOptions { acap_consistency: consistency_of(Some(&header.consistency)), ..Default::default() };
+        let options =
+            RepresentationOptions { acap_consistency: consistency_of(Some(&header.consistency)), ..Default::default() };
         let representation = Representation::new(RepresentationKind::Acap, &rest, options)?;
         let neighbors = NeighborIndex::new(representation.element_adjacency())?;
         let model = Autoencoder::load(&dir, neighbors)?;
@@ -178,7 +179,9 @@ impl AeArtifact {
     pub fn synthesis_code(&self, weights: &[(usize, f64)]) -> Result<Vec<f64>> {
         let mut z = self.reference_code().to_vec();
         for &(i, w) in weights {
-            let s = self.header.analysis.get(i).ok_or_else(|| Error::Invalid(format!("component {i} does not exist (K = {})", self.header.components)))?;
+            let s = self.header.analysis.get(i).ok_or_else(|| {
+                Error::Invalid(format!("component {i} does not exist (K = {})", self.header.components))
+            })?;
             z[i] = z[i] + (s.z_extreme - z[i]) * w;
         }
         Ok(z)
@@ -186,7 +189,10 @@ impl AeArtifact {
 
     /// Rest mesh in data units.
     pub fn rest_in_data_units(&self) -> TriMesh {
-        TriMesh::new(self.rest.positions.iter().map(|p| self.header.unit_box.invert(*p)).collect(), self.rest.faces.clone())
+        TriMesh::new(
+            self.rest.positions.iter().map(|p| self.header.unit_box.invert(*p)).collect(),
+            self.rest.faces.clone(),
+        )
     }
 
     /// Writes, per component in rank order, `<rank>_<dim>.obj` (the extreme shape) and
@@ -218,9 +224,20 @@ impl AeArtifact {
                 })
                 .collect();
             let stem = format!("{}_{}", c.rank, c.dim);
-            mesh::write_obj(&dir.join(format!("{stem}.obj")), &TriMesh::new(meshes[j + 1].clone(), self.rest.faces.clone()))?;
-            mesh::write_ply(&dir.join(format!("{stem}_change.ply")), &rest, Some(&mesh::colormap(&change)), Some(("change", &change)))?;
-            csv.push_str(&format!("{},{},{},{},{},{}\n", c.dim, c.rank, c.distance, c.z_extreme, c.center, c.support_size));
+            mesh::write_obj(
+                &dir.join(format!("{stem}.obj")),
+                &TriMesh::new(meshes[j + 1].clone(), self.rest.faces.clone()),
+            )?;
+            mesh::write_ply(
+                &dir.join(format!("{stem}_change.ply")),
+                &rest,
+                Some(&mesh::colormap(&change)),
+                Some(("change", &change)),
+            )?;
+            csv.push_str(&format!(
+                "{},{},{},{},{},{}\n",
+                c.dim, c.rank, c.distance, c.z_extreme, c.center, c.support_size
+            ));
         }
         artifact::write_atomic(&dir.join("components.csv"), csv.as_bytes())
     }
@@ -230,7 +247,13 @@ impl AeArtifact {
 /// `resume`, continues from `out/checkpoint.bin` (same data and hyperparameters; only
 /// `iterations` and `checkpoint_every` may change). `stop` ends the run early after writing a
 /// checkpoint (Ctrl-C).
-pub fn train(cfg: &Config, out: &Path, resume: bool, stop: Option<Arc<AtomicBool>>, progress: &mut dyn Progress) -> Result<TrainOutcome> {
+pub fn train(
+    cfg: &Config,
+    out: &Path,
+    resume: bool,
+    stop: Option<Arc<AtomicBool>>,
+    progress: &mut dyn Progress,
+) -> Result<TrainOutcome> {
     if cfg.kind != MethodKind::Autoencoder {
         return Err(Error::Invalid(format!("autoencoder::train does not handle kind = \"{}\"", cfg.kind.name())));
     }
@@ -249,7 +272,8 @@ pub fn train(cfg: &Config, out: &Path, resume: bool, stop: Option<Arc<AtomicBool
     let prep = preprocess::prepare(&cfg.data)?;
     progress.stage("acap features", 0);
     let t_rep = Instant::now();
-    let options = RepresentationOptions { acap_consistency: consistency_of(Some(&consistency_name)), ..Default::default() };
+    let options =
+        RepresentationOptions { acap_consistency: consistency_of(Some(&consistency_name)), ..Default::default() };
     let representation = Representation::new(RepresentationKind::Acap, &prep.rest, options)?;
     let train_seq = prep.train_sequence();
     let x_train = representation.encode(&train_seq)?;
@@ -383,14 +407,21 @@ pub fn train(cfg: &Config, out: &Path, resume: bool, stop: Option<Arc<AtomicBool
     method_table.insert("support".into(), toml::Value::try_from(support).map_err(|e| Error::Invalid(e.to_string()))?);
     method_table.insert("kind".into(), "autoencoder".into());
     method_table.insert("consistency".into(), consistency_name.into());
-    method_table.insert("scaling".into(), (if cfg.method.scaling.as_deref() == Some("grouped") { "grouped" } else { "per-dimension" }).into());
+    method_table.insert(
+        "scaling".into(),
+        (if cfg.method.scaling.as_deref() == Some("grouped") { "grouped" } else { "per-dimension" }).into(),
+    );
     method_table.insert("geodesic_m".into(), cfg.method.geodesic_m.unwrap_or(AE_GEODESIC_M).into());
     artifact::write_atomic(&out.join("config.toml"), resolved_toml(&cfg.name, &cfg.data, method_table).as_bytes())?;
     art.model.save(out)?;
     let mut arrays = ArrayStore::new();
     rest_to_arrays(&art.rest, &mut arrays)?;
     let k = ae_cfg.components;
-    arrays.insert("train_codes", vec![art.train_codes.len(), k], art.train_codes.iter().flatten().copied().collect())?;
+    arrays.insert(
+        "train_codes",
+        vec![art.train_codes.len(), k],
+        art.train_codes.iter().flatten().copied().collect(),
+    )?;
     artifact::save_model(out, &art.header, &arrays)?;
     let flat: Vec<f64> = art.train_codes.iter().flatten().copied().collect();
     artifact::write_weights_csv(&out.join("weights.csv"), &train_seq.names, &flat, k)?;
@@ -410,7 +441,8 @@ fn component_locality_of(art: &AeArtifact, distances: &GeodesicSupport, support:
     (0..k)
         .map(|kk| {
             let row = &c[kk * n * 9..(kk + 1) * n * 9];
-            let norms: Vec<f64> = row.chunks_exact(9).map(|g| g.iter().map(|&x| (x as f64) * (x as f64)).sum::<f64>().sqrt()).collect();
+            let norms: Vec<f64> =
+                row.chunks_exact(9).map(|g| g.iter().map(|&x| (x as f64) * (x as f64)).sum::<f64>().sqrt()).collect();
             let center = norms.iter().enumerate().max_by(|a, b| a.1.total_cmp(b.1)).map(|(i, _)| i).unwrap_or(0);
             let d = CenterDistances::distances(distances, center);
             let ramp: Vec<f64> = d.iter().map(|&x| support_ramp(x, support[0], support[1])).collect();

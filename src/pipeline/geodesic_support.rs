@@ -14,8 +14,8 @@ use rayon::prelude::*;
 
 use crate::error::Result;
 use crate::geometry::heat_geodesics::HeatGeodesics;
-use crate::methods::support_map::SupportDistances;
 use crate::mesh::TriMesh;
+use crate::methods::support_map::SupportDistances;
 use crate::preprocess::UnitBox;
 
 /// Per-vertex geodesic distances from centre sets, multiplied by a fixed normalisation factor.

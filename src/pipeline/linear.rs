@@ -11,21 +11,23 @@ use std::time::Instant;
 
 use serde::{Deserialize, Serialize};
 
+use super::Progress;
 use super::geodesic_support::GeodesicSupport;
 use super::metrics_file::{Metrics, median};
-use super::Progress;
 use crate::artifact::{self, ArrayStore};
 use crate::config::{Config, MethodKind, resolved_toml};
 use crate::error::{Error, Result};
+use crate::mesh::{self, MeshSequence, TriMesh, Vec3};
 use crate::methods::pca::{Pca, PcaConfig};
 use crate::methods::splocs::{AdmmConfig, SplocsConfig, SplocsSolver};
-use crate::methods::support_map::{ComponentLocality, SupportDistances, TriangleSupport, component_locality, support_ramp};
+use crate::methods::support_map::{
+    ComponentLocality, SupportDistances, TriangleSupport, component_locality, support_ramp,
+};
 use crate::methods::{DataMatrix, LinearModel, WeightConstraint};
-use crate::mesh::{self, MeshSequence, TriMesh, Vec3};
 use crate::preprocess::{self, UnitBox};
+use crate::representation::acap::Consistency;
 use crate::representation::roundtrip::{Alignment, erms};
 use crate::representation::{Element, Features, Representation, RepresentationKind, RepresentationOptions};
-use crate::representation::acap::Consistency;
 
 /// Header of a linear model's `model.json`.
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -67,9 +69,13 @@ impl LinearArtifact {
     pub fn load(dir: &Path) -> Result<Self> {
         let (header, arrays): (LinearHeader, ArrayStore) = artifact::load_model(dir)?;
         let rest = rest_from_arrays(&arrays)?;
-        let kind = RepresentationKind::parse(&header.representation)
-            .ok_or_else(|| Error::Invalid(format!("{}: unknown representation `{}`", dir.display(), header.representation)))?;
-        let options = RepresentationOptions { acap_consistency: parse_consistency(header.consistency.as_deref()), ..Default::default() };
+        let kind = RepresentationKind::parse(&header.representation).ok_or_else(|| {
+            Error::Invalid(format!("{}: unknown representation `{}`", dir.display(), header.representation))
+        })?;
+        let options = RepresentationOptions {
+            acap_consistency: parse_consistency(header.consistency.as_deref()),
+            ..Default::default()
+        };
         let representation = Representation::new(kind, &rest, options)?;
         let e = representation.n_elements();
         let w = representation.width();
@@ -103,7 +109,8 @@ impl LinearArtifact {
     /// Decodes feature rows (`n` × E·W) to vertex positions in data units.
     pub fn decode_rows(&self, rows: &[f64]) -> Result<Vec<Vec<Vec3>>> {
         let n = rows.len() / self.model.n_cols().max(1);
-        let feats = Features { n_frames: n, n_elements: self.model.n_elements, width: self.model.width, data: rows.to_vec() };
+        let feats =
+            Features { n_frames: n, n_elements: self.model.n_elements, width: self.model.width, data: rows.to_vec() };
         let mut frames = self.representation.decode(&feats)?;
         for p in frames.iter_mut().flatten() {
             *p = self.header.unit_box.invert(*p);
@@ -144,7 +151,9 @@ pub fn rest_from_arrays(a: &ArrayStore) -> Result<TriMesh> {
     let (ps, p) = a.get("rest_positions")?;
     let (fs, f) = a.get("faces")?;
     if ps.len() != 2 || ps[1] != 3 || fs.len() != 2 || fs[1] != 3 {
-        return Err(Error::Invalid(format!("model rest mesh arrays have shapes {ps:?} and {fs:?}, expected N×3 and T×3")));
+        return Err(Error::Invalid(format!(
+            "model rest mesh arrays have shapes {ps:?} and {fs:?}, expected N×3 and T×3"
+        )));
     }
     let positions: Vec<Vec3> = p.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
     let faces: Vec<[usize; 3]> = f.chunks_exact(3).map(|c| [c[0] as usize, c[1] as usize, c[2] as usize]).collect();
@@ -193,7 +202,10 @@ fn read_fixed_center(c: &crate::config::FixedCenter) -> Result<Vec<usize>> {
             text.split(|ch: char| ch.is_whitespace() || ch == ',')
                 .filter(|t| !t.is_empty())
                 .enumerate()
-                .map(|(i, t)| t.parse::<usize>().map_err(|_| Error::parse(p, None, format!("entry {} (`{t}`) is not a vertex index", i + 1))))
+                .map(|(i, t)| {
+                    t.parse::<usize>()
+                        .map_err(|_| Error::parse(p, None, format!("entry {} (`{t}`) is not a vertex index", i + 1)))
+                })
                 .collect()
         }
     }
@@ -216,7 +228,8 @@ pub fn train(cfg: &Config, out: &Path, progress: &mut dyn Progress) -> Result<Tr
     progress.stage("loading", 0);
     let prep = preprocess::prepare(&cfg.data)?;
     let kind_name = cfg.method.representation.as_deref().unwrap_or("displacement");
-    let kind = RepresentationKind::parse(kind_name).ok_or_else(|| Error::config("method.representation", format!("`{kind_name}`")))?;
+    let kind = RepresentationKind::parse(kind_name)
+        .ok_or_else(|| Error::config("method.representation", format!("`{kind_name}`")))?;
     let consistency = cfg.method.consistency.as_deref();
     let options = RepresentationOptions { acap_consistency: parse_consistency(consistency), ..Default::default() };
     let train_seq = prep.train_sequence();
@@ -304,7 +317,8 @@ pub fn train(cfg: &Config, out: &Path, progress: &mut dyn Progress) -> Result<Tr
     let test_erms = if prep.test.is_empty() {
         None
     } else {
-        let test_seq = MeshSequence { faces: prep.sequence.faces.clone(), frames: truth(&prep.test), names: Vec::new() };
+        let test_seq =
+            MeshSequence { faces: prep.sequence.faces.clone(), frames: truth(&prep.test), names: Vec::new() };
         let w = artifact.encode_frames(&test_seq)?;
         let k = artifact.model.n_components;
         let mut rows = Vec::with_capacity(prep.test.len() * artifact.model.n_cols());
@@ -340,7 +354,12 @@ pub fn train(cfg: &Config, out: &Path, progress: &mut dyn Progress) -> Result<Tr
     std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
     artifact::write_atomic(&out.join("config.toml"), resolved_toml(&cfg.name, &cfg.data, method_table).as_bytes())?;
     artifact.save(out)?;
-    artifact::write_weights_csv(&out.join("weights.csv"), &train_seq.names, &artifact.model.weights, artifact.model.n_components)?;
+    artifact::write_weights_csv(
+        &out.join("weights.csv"),
+        &train_seq.names,
+        &artifact.model.weights,
+        artifact.model.n_components,
+    )?;
     artifact::write_json(&out.join("metrics.json"), &metrics)?;
     write_components(&artifact, &out.join("components"))?;
     progress.finish_stage();
@@ -356,7 +375,12 @@ fn prefix_components(e: Error, _cfg: &Config) -> Error {
 
 /// Locality of arbitrary linear components (e.g. PCA): centre = the element of largest group
 /// norm, support region from unit-box geodesics with `support` = [d_min, d_max].
-pub fn measure_locality(model: &LinearModel, rep: &Representation, rest: &TriMesh, support: [f64; 2]) -> Result<Vec<ComponentLocality>> {
+pub fn measure_locality(
+    model: &LinearModel,
+    rep: &Representation,
+    rest: &TriMesh,
+    support: [f64; 2],
+) -> Result<Vec<ComponentLocality>> {
     let vertex_support = GeodesicSupport::unit_box(rest, SPLOCS_GEODESIC_M)?;
     let norms: Vec<Vec<f64>> = (0..model.n_components).map(|k| model.component_group_norms(k)).collect();
     let centers: Vec<Vec<usize>> = norms
@@ -404,12 +428,18 @@ pub fn vertex_magnitudes(model: &LinearModel, k: usize, element: Element, rest: 
 pub fn write_components(a: &LinearArtifact, dir: &Path) -> Result<()> {
     std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
     let k = a.model.n_components;
-    let rest_data = TriMesh::new(a.rest.positions.iter().map(|p| a.header.unit_box.invert(*p)).collect(), a.rest.faces.clone());
+    let rest_data =
+        TriMesh::new(a.rest.positions.iter().map(|p| a.header.unit_box.invert(*p)).collect(), a.rest.faces.clone());
     let width = (k.max(1) - 1).to_string().len().max(2);
     for c in 0..k {
         let mag = vertex_magnitudes(&a.model, c, a.representation.element(), &a.rest);
         let colors = mesh::colormap(&mag);
-        mesh::write_ply(&dir.join(format!("k{c:0width$}_magnitude.ply")), &rest_data, Some(&colors), Some(("magnitude", &mag)))?;
+        mesh::write_ply(
+            &dir.join(format!("k{c:0width$}_magnitude.ply")),
+            &rest_data,
+            Some(&colors),
+            Some(("magnitude", &mag)),
+        )?;
         for (sign, tag) in [(-1.0, "minus"), (1.0, "plus")] {
             let mut w = vec![0.0; k];
             w[c] = sign;

@@ -531,7 +531,14 @@ mod tests {
 
     /// A closed octahedron.
     fn octahedron() -> TriMesh {
-        let p = vec![[1.0, 0.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, 1.0], [0.0, 0.0, -1.0]];
+        let p = vec![
+            [1.0, 0.0, 0.0],
+            [-1.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0],
+            [0.0, -1.0, 0.0],
+            [0.0, 0.0, 1.0],
+            [0.0, 0.0, -1.0],
+        ];
         let f = vec![[0, 2, 4], [2, 1, 4], [1, 3, 4], [3, 0, 4], [2, 0, 5], [1, 2, 5], [3, 1, 5], [0, 3, 5]];
         TriMesh::new(p, f)
     }
@@ -576,9 +583,11 @@ mod tests {
                 }
             }
         }
-        for decoder in
-            [AcapDecoder::FitInverse { edge_weight: 1e-6 }, AcapDecoder::FitInverse { edge_weight: 0.5 }, AcapDecoder::EdgeLeastSquares]
-        {
+        for decoder in [
+            AcapDecoder::FitInverse { edge_weight: 1e-6 },
+            AcapDecoder::FitInverse { edge_weight: 0.5 },
+            AcapDecoder::EdgeLeastSquares,
+        ] {
             let acap = Acap::with_options(&m, AcapOptions { decoder }).unwrap();
             let back = acap.decode_frame(&f.features()).unwrap();
             // The decoder keeps the reference centroid (origin here).

@@ -29,7 +29,6 @@
 //!   cycle counts or axis signs (for instance the reference's own BFS output on its fixture).
 //!   The search stops when no move improves E; hence E(global) ≤ E(BFS) always.
 
-
 #![allow(clippy::needless_range_loop)] // index loops over 3-vectors read like the formulas
 use crate::mesh::Vec3;
 use std::f64::consts::PI;
@@ -285,7 +284,8 @@ pub fn global_consistency(
         make_angle_non_negative(field, i);
     }
     let mut w: Vec<Vec3> = (0..n).map(|i| field.vector(i)).collect();
-    let mut scratch = ClusterScratch { label: vec![usize::MAX; n], stack: Vec::new(), members: Vec::new(), starts: Vec::new() };
+    let mut scratch =
+        ClusterScratch { label: vec![usize::MAX; n], stack: Vec::new(), members: Vec::new(), starts: Vec::new() };
     for _round in 0..10_000 {
         let mut improved = false;
         // (1) Iterated conditional modes.

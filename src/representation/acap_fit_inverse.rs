@@ -88,7 +88,12 @@ impl FitInverse {
     /// (defining the components) and the encoder's fit data. `edge_term = Some((c, μ))` adds
     /// μ × the edge least squares Σ c_ij ‖(p_i − p_j) − ½(T_i + T_j)(q_i − q_j)‖² (c per edge,
     /// μ ≥ 0; μ = 0 or `None` leaves it out).
-    pub fn new(rest: &[Vec3], edges: &[[usize; 2]], fit: RingFit<'_>, edge_term: Option<(&[f64], f64)>) -> Result<Self> {
+    pub fn new(
+        rest: &[Vec3],
+        edges: &[[usize; 2]],
+        fit: RingFit<'_>,
+        edge_term: Option<(&[f64], f64)>,
+    ) -> Result<Self> {
         let RingFit { ring_offsets, ring, row_scale, ref_rows, ref_normal_rows, inv_ata } = fit;
         let n = rest.len();
         if ring_offsets.len() != n + 1 || ring.len() != row_scale.len() || ring.len() != ref_rows.len() {
@@ -136,7 +141,11 @@ impl FitInverse {
                 if w.len() != edges.len() {
                     return Err(Error::Invalid("fit inverse: edge weights do not match edges".into()));
                 }
-                Some(EdgeTerm { rest: rest.to_vec(), edges: edges.to_vec(), weights: w.iter().map(|c| c * mu).collect() })
+                Some(EdgeTerm {
+                    rest: rest.to_vec(),
+                    edges: edges.to_vec(),
+                    weights: w.iter().map(|c| c * mu).collect(),
+                })
             }
             _ => None,
         };

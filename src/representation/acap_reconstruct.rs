@@ -18,7 +18,6 @@
 //! (sparse Cholesky, faer, sequential), and after each solve every component is translated so
 //! that its centroid equals that component's centroid in the reference mesh.
 
-
 #![allow(clippy::needless_range_loop)] // index loops over 3-vectors read like the formulas
 use crate::mesh::Vec3;
 use crate::representation::acap_rotation::Mat3;
@@ -216,11 +215,7 @@ impl AcapReconstruction {
     pub fn new(rest: &[Vec3], edges: &[[usize; 2]], weights: &[f64]) -> Result<Self> {
         let n = rest.len();
         if weights.len() != edges.len() {
-            return Err(Error::Invalid(format!(
-                "reconstruction: {} weights for {} edges",
-                weights.len(),
-                edges.len()
-            )));
+            return Err(Error::Invalid(format!("reconstruction: {} weights for {} edges", weights.len(), edges.len())));
         }
         for (e, (&[i, j], &c)) in edges.iter().zip(weights).enumerate() {
             if i >= n || j >= n || i == j {
@@ -230,10 +225,8 @@ impl AcapReconstruction {
                 return Err(Error::Invalid(format!("reconstruction: weight of edge [{i}, {j}] is {c}, must be > 0")));
             }
         }
-        let entries = edges
-            .iter()
-            .zip(weights)
-            .flat_map(|(&[i, j], &c)| [(i, i, c), (j, j, c), (i, j, -c), (j, i, -c)]);
+        let entries =
+            edges.iter().zip(weights).flat_map(|(&[i, j], &c)| [(i, i, c), (j, j, c), (i, j, -c), (j, i, -c)]);
         let system = PinnedSystem::new(rest, edges, entries, "edge reconstruction")?;
         Ok(AcapReconstruction { rest: rest.to_vec(), edges: edges.to_vec(), weights: weights.to_vec(), system })
     }
@@ -248,16 +241,17 @@ impl AcapReconstruction {
     pub fn solve(&self, transforms: &[Mat3]) -> Result<Vec<Vec3>> {
         let n = self.rest.len();
         if transforms.len() != n {
-            return Err(Error::Invalid(format!(
-                "reconstruction: {} transforms for {n} vertices",
-                transforms.len()
-            )));
+            return Err(Error::Invalid(format!("reconstruction: {} transforms for {n} vertices", transforms.len())));
         }
         let m = self.system.n_reduced();
         let mut rhs = vec![0.0; 3 * m];
         for (&[i, j], &c) in self.edges.iter().zip(&self.weights) {
             let (ti, tj) = (&transforms[i], &transforms[j]);
-            let e = [self.rest[i][0] - self.rest[j][0], self.rest[i][1] - self.rest[j][1], self.rest[i][2] - self.rest[j][2]];
+            let e = [
+                self.rest[i][0] - self.rest[j][0],
+                self.rest[i][1] - self.rest[j][1],
+                self.rest[i][2] - self.rest[j][2],
+            ];
             let (ri, rj) = (self.system.row(i), self.system.row(j));
             for k in 0..3 {
                 let d = 0.5

@@ -13,7 +13,6 @@
 //! so that `[ω]× v = ω × v`; a rotation by angle θ (right-hand rule) about the unit axis `a` is
 //! `exp(θ [a]×)`.
 
-
 #![allow(clippy::needless_range_loop)] // index loops over 3-vectors read like the formulas
 use crate::mesh::Vec3;
 use nalgebra::Matrix3;
@@ -177,11 +176,7 @@ pub fn axis_angle(r: &Mat3) -> (Vec3, f64) {
 pub fn exp_so3(w: Vec3) -> Mat3 {
     let t2 = w[0] * w[0] + w[1] * w[1] + w[2] * w[2];
     let t = t2.sqrt();
-    let (a, b) = if t < 1e-6 {
-        (1.0 - t2 / 6.0, 0.5 - t2 / 24.0)
-    } else {
-        (t.sin() / t, (1.0 - t.cos()) / t2)
-    };
+    let (a, b) = if t < 1e-6 { (1.0 - t2 / 6.0, 0.5 - t2 / 24.0) } else { (t.sin() / t, (1.0 - t.cos()) / t2) };
     let k = skew(w);
     let k2 = mat_mul(&k, &k);
     let mut r = IDENTITY;

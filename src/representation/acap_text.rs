@@ -59,9 +59,7 @@ pub fn read_matrices(path: &Path) -> Result<Vec<Vec<Mat3>>> {
         }
         let mut nums = Vec::new();
         for tok in line.split_whitespace() {
-            let x: f64 = tok
-                .parse()
-                .map_err(|_| Error::parse(path, Some(ln + 1), format!("not a number: `{tok}`")))?;
+            let x: f64 = tok.parse().map_err(|_| Error::parse(path, Some(ln + 1), format!("not a number: `{tok}`")))?;
             nums.push(x);
         }
         if nums.len() % 9 != 0 {

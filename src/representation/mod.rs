@@ -135,7 +135,11 @@ pub struct RepresentationOptions {
 
 impl Default for RepresentationOptions {
     fn default() -> Self {
-        RepresentationOptions { acap_consistency: Consistency::Bfs, gradient_normal: NormalConvention::UnitNormal, acap_decoder: acap::AcapOptions::default().decoder }
+        RepresentationOptions {
+            acap_consistency: Consistency::Bfs,
+            gradient_normal: NormalConvention::UnitNormal,
+            acap_decoder: acap::AcapOptions::default().decoder,
+        }
     }
 }
 
@@ -183,7 +187,9 @@ impl Representation {
             RepresentationKind::TriangleGradient => {
                 Codec::TriangleGradient(Box::new(TriangleGradient::new(rest, options.gradient_normal)?))
             }
-            RepresentationKind::Acap => Codec::Acap(Box::new(Acap::with_options(rest, acap::AcapOptions { decoder: options.acap_decoder })?)),
+            RepresentationKind::Acap => {
+                Codec::Acap(Box::new(Acap::with_options(rest, acap::AcapOptions { decoder: options.acap_decoder })?))
+            }
         };
         let topo = Topology::new(rest.n_vertices(), &rest.faces);
         let adjacency = match kind.element() {
