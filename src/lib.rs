@@ -18,6 +18,7 @@ pub mod nn;
 pub mod pipeline;
 pub mod preprocess;
 pub mod representation;
+pub mod rng;
 pub mod synthetic;
 
 pub use error::{Error, Result};

@@ -16,6 +16,7 @@
 
 use crate::error::{Error, Result};
 use crate::mesh::{MeshSequence, TriMesh, Vec3};
+use crate::rng::Rng;
 
 /// Prefix that selects a synthetic dataset in a data path.
 pub const PREFIX: &str = "synthetic:";
@@ -147,21 +148,9 @@ fn bump_profile(z: f64, phi: f64, z0: f64, phi0: f64) -> f64 {
     s * s
 }
 
-/// Small deterministic generator (splitmix64) so the datasets do not depend on a crate's RNG.
-struct SplitMix(u64);
-impl SplitMix {
-    fn next_f64(&mut self) -> f64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^= z >> 31;
-        (z >> 11) as f64 / (1u64 << 53) as f64
-    }
-    /// Uniform in [−1, 1].
-    fn symmetric(&mut self) -> f64 {
-        2.0 * self.next_f64() - 1.0
-    }
+/// Uniform in [−1, 1] from the crate's deterministic generator.
+fn symmetric(rng: &mut Rng) -> f64 {
+    2.0 * rng.uniform() - 1.0
 }
 
 /// Rotation of `p` about the axis through `(0, 0, pivot_z)` along unit `axis` by `angle`.
@@ -197,13 +186,13 @@ fn deform(rest: &TriMesh, bends: (f64, f64), bumps: &[(f64, f64, f64)]) -> Vec<V
 
 fn tube_sequence() -> MeshSequence {
     let rest = tube_mesh();
-    let mut rng = SplitMix(0x7475_6265);
+    let mut rng = Rng { state: 0x7475_6265 };
     let max_bend = 50f64.to_radians();
     let mut frames = vec![rest.positions.clone()];
     for _ in 1..60 {
-        let a = max_bend * rng.symmetric();
-        let b = max_bend * rng.symmetric();
-        let bulge = 0.06 * rng.next_f64();
+        let a = max_bend * symmetric(&mut rng);
+        let b = max_bend * symmetric(&mut rng);
+        let bulge = 0.06 * rng.uniform();
         frames.push(deform(&rest, (a, b), &[(0.5, 0.0, bulge)]));
     }
     named("tube", rest.faces, frames)
@@ -211,10 +200,10 @@ fn tube_sequence() -> MeshSequence {
 
 fn bumps_sequence() -> MeshSequence {
     let rest = tube_mesh();
-    let mut rng = SplitMix(0x6275_6d70);
+    let mut rng = Rng { state: 0x6275_6d70 };
     let mut frames = vec![rest.positions.clone()];
     for _ in 1..40 {
-        let amps: Vec<(f64, f64, f64)> = BUMPS.iter().map(|&(z, phi)| (z, phi, 0.06 * rng.next_f64())).collect();
+        let amps: Vec<(f64, f64, f64)> = BUMPS.iter().map(|&(z, phi)| (z, phi, 0.06 * rng.uniform())).collect();
         frames.push(deform(&rest, (0.0, 0.0), &amps));
     }
     named("bumps", rest.faces, frames)

@@ -37,6 +37,7 @@
 use faer::{Mat, Side};
 
 use crate::mesh::{Topology, Vec3, dist};
+use crate::rng::Rng;
 use crate::{Error, Result};
 
 /// Segmentation hyperparameters (validated by [`SegmentationConfig::validate`]).
@@ -444,38 +445,25 @@ fn node_distances(rest: &[Vec3], topo: &Topology, owner: &[usize], m: usize) -> 
     out
 }
 
-/// splitmix64 pseudo-random numbers (deterministic k-means seeding).
-struct Rng(u64);
-impl Rng {
-    fn next_f64(&mut self) -> f64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^= z >> 31;
-        (z >> 11) as f64 / (1u64 << 53) as f64
-    }
-}
-
 /// k-means of `n` points of dimension `dim` (row-major `y`), `restarts` k-means++ seedings,
 /// Lloyd iterations until no label changes (≤ 300); returns the labels of the run with the
 /// smallest within-cluster sum of squares.
 fn kmeans(y: &[f64], n: usize, k: usize, restarts: usize, seed: u64) -> Vec<usize> {
     let dim = y.len() / n;
     let d2 = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, z)| (x - z) * (x - z)).sum::<f64>();
-    let mut rng = Rng(seed);
+    let mut rng = Rng { state: seed };
     let mut best: Option<(f64, Vec<usize>)> = None;
     for _ in 0..restarts {
         // k-means++ seeding
         let mut centres: Vec<f64> = Vec::with_capacity(k * dim);
-        let first = ((rng.next_f64() * n as f64) as usize).min(n - 1);
+        let first = ((rng.uniform() * n as f64) as usize).min(n - 1);
         centres.extend_from_slice(&y[first * dim..(first + 1) * dim]);
         let mut dmin: Vec<f64> = (0..n).map(|i| d2(&y[i * dim..(i + 1) * dim], &centres[..dim])).collect();
         for _ in 1..k {
             let total: f64 = dmin.iter().sum();
             let mut pick = n - 1;
             if total > 0.0 {
-                let mut t = rng.next_f64() * total;
+                let mut t = rng.uniform() * total;
                 for (i, &d) in dmin.iter().enumerate() {
                     t -= d;
                     if t <= 0.0 {
@@ -484,7 +472,7 @@ fn kmeans(y: &[f64], n: usize, k: usize, restarts: usize, seed: u64) -> Vec<usiz
                     }
                 }
             } else {
-                pick = ((rng.next_f64() * n as f64) as usize).min(n - 1);
+                pick = ((rng.uniform() * n as f64) as usize).min(n - 1);
             }
             let c0 = centres.len();
             centres.extend_from_slice(&y[pick * dim..(pick + 1) * dim]);

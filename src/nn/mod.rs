@@ -49,7 +49,7 @@ pub mod kernels;
 pub mod loss;
 pub mod model;
 pub mod neighbors;
-pub mod rng;
+pub use crate::rng;
 pub mod training;
 
 pub use config::AutoencoderConfig;
