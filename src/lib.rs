@@ -23,3 +23,4 @@ pub mod synthetic;
 
 pub use error::{Error, Result};
 pub mod metrics;
+pub mod eval;

@@ -7,6 +7,7 @@ use anyhow::Result;
 use clap::{Parser, Subcommand};
 
 mod apply;
+mod eval;
 mod features;
 mod geodesic;
 mod inspect;
@@ -42,6 +43,8 @@ pub enum Command {
     Inspect(inspect::InspectArgs),
     /// Train a model from a TOML experiment config (see README for the keys).
     Train(train::TrainArgs),
+    /// Train and evaluate every (dataset, method, K) cell of an eval config; tables and plots.
+    Eval(eval::EvalArgs),
 }
 
 /// Runs one parsed command line.
@@ -56,6 +59,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Geodesic(a) => geodesic::run(a),
         Command::Inspect(a) => inspect::run(a),
         Command::Train(a) => train::run(a),
+        Command::Eval(a) => eval::run(a),
     }
 }
 

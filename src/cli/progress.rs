@@ -2,17 +2,23 @@
 
 use std::time::Duration;
 
-use indicatif::{ProgressBar, ProgressStyle};
+use indicatif::{MultiProgress, ProgressBar, ProgressStyle};
 use meshdeco::pipeline::Progress;
 
 /// Draws one spinner or bar per stage on stderr (hidden when stderr is not a terminal).
 pub struct Bars {
     bar: Option<ProgressBar>,
+    multi: Option<MultiProgress>,
 }
 
 impl Bars {
     pub fn new() -> Self {
-        Bars { bar: None }
+        Bars { bar: None, multi: None }
+    }
+
+    /// Bars drawn as lines of a shared [`MultiProgress`] (e.g. below a whole-sweep bar).
+    pub fn in_multi(multi: &MultiProgress) -> Self {
+        Bars { bar: None, multi: Some(multi.clone()) }
     }
 }
 
@@ -35,6 +41,10 @@ impl Progress for Bars {
             );
             b.enable_steady_tick(Duration::from_millis(120));
             b
+        };
+        let bar = match &self.multi {
+            Some(m) => m.add(bar),
+            None => bar,
         };
         bar.set_prefix(name.to_string());
         self.bar = Some(bar);

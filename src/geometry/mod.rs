@@ -8,3 +8,4 @@ pub mod mass_matrix;
 pub mod normals;
 pub mod rigid_align;
 pub mod sparse_cholesky;
+pub mod farthest_point_sampling;

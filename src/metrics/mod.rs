@@ -13,3 +13,4 @@ pub mod sted;
 pub use edge_distortion::{EdgeDistortion, EdgeDistortionMeter, edge_length_distortion};
 pub use erms::{Alignment, Erms, erms, frame_squared_error};
 pub use sted::{FrameOrder, Sted, StedParams, StedReport, sted};
+pub mod locality;

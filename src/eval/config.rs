@@ -1,0 +1,401 @@
+//! The evaluation config (TOML) of `meshdeco eval`, parsed strictly and validated in full before
+//! any training starts. Errors name the key (`dataset.<name>.<key>`, `method.<label>.<key>`,
+//! `sweep.<key>`, `control_points.<key>`) and the bad value.
+//!
+//! ```toml
+//! name = "scape"                       # report title
+//! [[dataset]]                          # one or more; every key of train's [data] section, plus:
+//! name = "scape"                       #   file-name-safe, unique (cells/<dataset>/…)
+//! ordered = false                      #   true: frames are a time sequence (temporal STED)
+//! path = "../shared/data/scape"
+//! train = "1-36"
+//! test = "37-71"                       #   a test split is required
+//! [[method]]                           # one or more; every key of train's [method] section, plus:
+//! label = "pca"                        #   file-name-safe, unique (the method's name in tables)
+//! kind = "pca"
+//! components = [50]                    #   optional: this method's own K list instead of the sweep
+//! [sweep]
+//! components = [5, 10, 20, 30, 50]     # K of every method without its own list
+//! [control_points]                     # optional: reconstruction from sparse control points
+//! counts = [5, 10, 20, 50, 100, 200]   #   numbers n of control points
+//! trials = 5                           #   random start vertices per n (default 5)
+//! gamma = 0.001                        #   Tikhonov weight (default 1e-3, see control_points)
+//! seed = 0                             #   seed of the start vertices (default 0)
+//! ```
+
+use std::path::Path;
+
+use crate::config::{Config, DataConfig, MethodKind};
+use crate::error::{Error, Result};
+
+/// One dataset of the evaluation.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EvalDataset {
+    /// Name (directory name under `cells/`, row label of the tables).
+    pub name: String,
+    /// Whether the frames are a time sequence (temporal STED is measured on the test frames).
+    pub ordered: bool,
+    /// The validated `[data]` section.
+    pub data: DataConfig,
+    /// The data table as written (without `name` and `ordered`), for the cells' configs.
+    pub table: toml::Table,
+}
+
+/// One method of the evaluation.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EvalMethod {
+    /// Label (directory name under `cells/<dataset>/`, method column of the tables).
+    pub label: String,
+    /// Method kind.
+    pub kind: MethodKind,
+    /// Own K list (opt-out of the sweep), if given.
+    pub components: Option<Vec<usize>>,
+    /// The method table as written (without `label` and `components`).
+    pub table: toml::Table,
+}
+
+/// Sparse control-point reconstruction settings (`[control_points]`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct ControlPointsConfig {
+    /// Numbers of control points n (each ≥ 1, ascending after validation).
+    pub counts: Vec<usize>,
+    /// Random start vertices per n (≥ 1).
+    pub trials: usize,
+    /// Dimensionless Tikhonov weight γ (≥ 0) of the weight fit.
+    pub gamma: f64,
+    /// Seed of the start vertices.
+    pub seed: u64,
+}
+
+/// A validated evaluation config.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EvalConfig {
+    /// Report title.
+    pub name: String,
+    pub datasets: Vec<EvalDataset>,
+    pub methods: Vec<EvalMethod>,
+    /// The sweep's K list (may be empty when every method has its own).
+    pub sweep: Vec<usize>,
+    pub control_points: Option<ControlPointsConfig>,
+}
+
+/// One (dataset, method, K) cell: its resolved `meshdeco train` config.
+#[derive(Debug, Clone)]
+pub struct Cell {
+    /// Index into [`EvalConfig::datasets`].
+    pub dataset: usize,
+    /// Index into [`EvalConfig::methods`].
+    pub method: usize,
+    /// Number of components K.
+    pub k: usize,
+    /// The train config text of the cell (its cache key).
+    pub config_text: String,
+    /// The validated train config.
+    pub config: Config,
+}
+
+fn safe_name(key: &str, s: &str) -> Result<()> {
+    if s.is_empty() || !s.chars().all(|c| c.is_ascii_alphanumeric() || "-_.".contains(c)) || s.starts_with('.') {
+        return Err(Error::config(key, format!("`{s}` must be a non-empty name of letters, digits, '-', '_', '.'")));
+    }
+    Ok(())
+}
+
+fn as_table(key: &str, v: toml::Value) -> Result<toml::Table> {
+    match v {
+        toml::Value::Table(t) => Ok(t),
+        other => Err(Error::config(key, format!("expected a table, got `{other}`"))),
+    }
+}
+
+fn take_string(t: &mut toml::Table, key: &str, full: &str) -> Result<Option<String>> {
+    match t.remove(key) {
+        None => Ok(None),
+        Some(toml::Value::String(s)) => Ok(Some(s)),
+        Some(other) => Err(Error::config(full, format!("`{other}` must be a string"))),
+    }
+}
+
+fn usize_list(key: &str, v: toml::Value) -> Result<Vec<usize>> {
+    let items = match v {
+        toml::Value::Integer(i) => vec![toml::Value::Integer(i)],
+        toml::Value::Array(a) => a,
+        other => return Err(Error::config(key, format!("`{other}` must be a list of positive integers"))),
+    };
+    let mut out = Vec::new();
+    for x in items {
+        match x {
+            toml::Value::Integer(i) if i >= 1 => out.push(i as usize),
+            other => return Err(Error::config(key, format!("`{other}` must be a positive integer"))),
+        }
+    }
+    if out.is_empty() {
+        return Err(Error::config(key, "must not be empty"));
+    }
+    out.sort_unstable();
+    out.dedup();
+    Ok(out)
+}
+
+/// Renames the key of a train-config error into the eval config's namespace.
+fn rekey(e: Error, section: &str, prefix: &str) -> Error {
+    match e {
+        Error::Config { key, message } => {
+            let rest = key.strip_prefix(section).unwrap_or(&key).trim_start_matches('.');
+            Error::config(format!("{prefix}.{rest}"), message)
+        }
+        Error::Parse { message, .. } => Error::config(prefix.to_string(), message),
+        other => other,
+    }
+}
+
+/// Builds the `meshdeco train` config text of a dataset table and a method table.
+pub fn train_config_text(name: &str, data: &toml::Table, method: &toml::Table) -> String {
+    let mut root = toml::Table::new();
+    root.insert("name".into(), name.into());
+    root.insert("data".into(), toml::Value::Table(data.clone()));
+    root.insert("method".into(), toml::Value::Table(method.clone()));
+    toml::to_string(&root).unwrap_or_default()
+}
+
+impl EvalConfig {
+    /// Reads and validates an eval config file.
+    pub fn from_file(path: &Path) -> Result<Self> {
+        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+        Self::from_toml(&text).map_err(|e| match e {
+            Error::Config { key, message } => Error::config(key, format!("{message} (in {})", path.display())),
+            Error::Parse { line, message, .. } => Error::parse(path, line, message),
+            other => other,
+        })
+    }
+
+    /// Parses and validates TOML text.
+    pub fn from_toml(text: &str) -> Result<Self> {
+        let mut root: toml::Table = toml::from_str(text).map_err(|e| {
+            let line = e.span().map(|s| text[..s.start.min(text.len())].matches('\n').count() + 1);
+            Error::parse("<eval config>", line, e.message().to_string())
+        })?;
+        let name = take_string(&mut root, "name", "name")?.unwrap_or_else(|| "evaluation".into());
+        safe_name("name", &name)?;
+
+        let mut datasets = Vec::new();
+        match root.remove("dataset") {
+            Some(toml::Value::Array(a)) => {
+                for (i, v) in a.into_iter().enumerate() {
+                    let mut t = as_table(&format!("dataset[{i}]"), v)?;
+                    let dname = take_string(&mut t, "name", &format!("dataset[{i}].name"))?
+                        .ok_or_else(|| Error::config(format!("dataset[{i}].name"), "is required"))?;
+                    let prefix = format!("dataset.{dname}");
+                    safe_name(&format!("{prefix}.name"), &dname)?;
+                    if datasets.iter().any(|d: &EvalDataset| d.name == dname) {
+                        return Err(Error::config(format!("{prefix}.name"), format!("`{dname}` is given twice")));
+                    }
+                    let ordered = match t.remove("ordered") {
+                        None => false,
+                        Some(toml::Value::Boolean(b)) => b,
+                        Some(other) => {
+                            return Err(Error::config(format!("{prefix}.ordered"), format!("`{other}` must be true or false")));
+                        }
+                    };
+                    let mut probe = toml::Table::new();
+                    probe.insert("kind".into(), "pca".into());
+                    let c = Config::from_toml(&train_config_text("probe", &t, &probe))
+                        .map_err(|e| rekey(e, "data", &prefix))?;
+                    if c.data.test.is_none() {
+                        return Err(Error::config(
+                            format!("{prefix}.test"),
+                            "is required: the evaluation measures on the test split",
+                        ));
+                    }
+                    datasets.push(EvalDataset { name: dname, ordered, data: c.data, table: t });
+                }
+            }
+            Some(_) => return Err(Error::config("dataset", "must be an array of tables ([[dataset]])")),
+            None => return Err(Error::config("dataset", "at least one [[dataset]] is required")),
+        }
+
+        let mut methods = Vec::new();
+        match root.remove("method") {
+            Some(toml::Value::Array(a)) => {
+                for (i, v) in a.into_iter().enumerate() {
+                    let mut t = as_table(&format!("method[{i}]"), v)?;
+                    let label = take_string(&mut t, "label", &format!("method[{i}].label"))?
+                        .ok_or_else(|| Error::config(format!("method[{i}].label"), "is required"))?;
+                    let prefix = format!("method.{label}");
+                    safe_name(&format!("{prefix}.label"), &label)?;
+                    if methods.iter().any(|m: &EvalMethod| m.label == label) {
+                        return Err(Error::config(format!("{prefix}.label"), format!("`{label}` is given twice")));
+                    }
+                    let components =
+                        t.remove("components").map(|v| usize_list(&format!("{prefix}.components"), v)).transpose()?;
+                    let mut probe = t.clone();
+                    probe.insert("components".into(), (components.as_ref().map_or(1, |c| c[0]) as i64).into());
+                    let data = &datasets[0].table;
+                    let c = Config::from_toml(&train_config_text("probe", data, &probe))
+                        .map_err(|e| rekey(e, "method", &prefix))?;
+                    methods.push(EvalMethod { label, kind: c.kind, components, table: t });
+                }
+            }
+            Some(_) => return Err(Error::config("method", "must be an array of tables ([[method]])")),
+            None => return Err(Error::config("method", "at least one [[method]] is required")),
+        }
+
+        let sweep = match root.remove("sweep") {
+            None => Vec::new(),
+            Some(v) => {
+                let mut t = as_table("sweep", v)?;
+                let k = t.remove("components").map(|v| usize_list("sweep.components", v)).transpose()?;
+                if let Some(key) = t.keys().next() {
+                    return Err(Error::config(format!("sweep.{key}"), "unknown key (allowed: components)"));
+                }
+                k.unwrap_or_default()
+            }
+        };
+        if sweep.is_empty()
+            && let Some(m) = methods.iter().find(|m| m.components.is_none())
+        {
+            return Err(Error::config(
+                "sweep.components",
+                format!("is required: method `{}` has no components list of its own", m.label),
+            ));
+        }
+
+        let control_points = match root.remove("control_points") {
+            None => None,
+            Some(v) => {
+                let mut t = as_table("control_points", v)?;
+                let counts = usize_list(
+                    "control_points.counts",
+                    t.remove("counts").ok_or_else(|| Error::config("control_points.counts", "is required"))?,
+                )?;
+                let trials = match t.remove("trials") {
+                    None => 5,
+                    Some(toml::Value::Integer(i)) if i >= 1 => i as usize,
+                    Some(other) => {
+                        return Err(Error::config("control_points.trials", format!("`{other}` must be at least 1")));
+                    }
+                };
+                let gamma = match t.remove("gamma") {
+                    None => 1e-3,
+                    Some(toml::Value::Float(x)) if x.is_finite() && x >= 0.0 => x,
+                    Some(toml::Value::Integer(i)) if i >= 0 => i as f64,
+                    Some(other) => {
+                        return Err(Error::config(
+                            "control_points.gamma",
+                            format!("`{other}` must be a finite non-negative number"),
+                        ));
+                    }
+                };
+                let seed = match t.remove("seed") {
+                    None => 0,
+                    Some(toml::Value::Integer(i)) if i >= 0 => i as u64,
+                    Some(other) => {
+                        return Err(Error::config("control_points.seed", format!("`{other}` must be a non-negative integer")));
+                    }
+                };
+                if let Some(key) = t.keys().next() {
+                    return Err(Error::config(
+                        format!("control_points.{key}"),
+                        "unknown key (allowed: counts, trials, gamma, seed)",
+                    ));
+                }
+                Some(ControlPointsConfig { counts, trials, gamma, seed })
+            }
+        };
+        if let Some(key) = root.keys().next() {
+            return Err(Error::config(
+                key.clone(),
+                "unknown key (allowed: name, [[dataset]], [[method]], [sweep], [control_points])",
+            ));
+        }
+        Ok(EvalConfig { name, datasets, methods, sweep, control_points })
+    }
+
+    /// K values of a method: its own list or the sweep.
+    pub fn ks(&self, method: usize) -> &[usize] {
+        self.methods[method].components.as_deref().unwrap_or(&self.sweep)
+    }
+
+    /// Every (dataset, method, K) cell in dataset, method, K order, with its validated train
+    /// config. Errors (naming the method) when a cell's config does not validate.
+    pub fn cells(&self) -> Result<Vec<Cell>> {
+        let mut out = Vec::new();
+        for (di, d) in self.datasets.iter().enumerate() {
+            for (mi, m) in self.methods.iter().enumerate() {
+                for &k in self.ks(mi) {
+                    let mut t = m.table.clone();
+                    t.insert("components".into(), (k as i64).into());
+                    let name = format!("{}-{}-K{k}", d.name, m.label);
+                    let text = train_config_text(&name, &d.table, &t);
+                    let config = Config::from_toml(&text).map_err(|e| rekey(e, "method", &format!("method.{}", m.label)))?;
+                    out.push(Cell { dataset: di, method: mi, k, config_text: text, config });
+                }
+            }
+        }
+        Ok(out)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const GOOD: &str = r#"
+name = "t"
+[[dataset]]
+name = "tube"
+path = "synthetic:tube"
+train = "every:2"
+test = "rest"
+ordered = true
+[[method]]
+label = "pca"
+kind = "pca"
+[[method]]
+label = "ae"
+kind = "autoencoder"
+components = [4]
+iterations = 10
+[sweep]
+components = [6, 2, 4]
+[control_points]
+counts = [10, 5]
+"#;
+
+    #[test]
+    fn parses_cells_and_defaults() {
+        let c = EvalConfig::from_toml(GOOD).unwrap();
+        assert_eq!(c.sweep, vec![2, 4, 6]);
+        assert!(c.datasets[0].ordered);
+        let cells = c.cells().unwrap();
+        let ks: Vec<(usize, usize)> = cells.iter().map(|c| (c.method, c.k)).collect();
+        assert_eq!(ks, vec![(0, 2), (0, 4), (0, 6), (1, 4)]);
+        assert_eq!(cells[3].config.kind, MethodKind::Autoencoder);
+        assert_eq!(cells[3].config.method.iterations, Some(10));
+        let cp = c.control_points.clone().unwrap();
+        assert_eq!((cp.counts, cp.trials, cp.gamma, cp.seed), (vec![5, 10], 5, 1e-3, 0));
+        // The cell text is deterministic and differs between cells.
+        assert_eq!(c.cells().unwrap()[0].config_text, cells[0].config_text);
+        assert_ne!(cells[0].config_text, cells[1].config_text);
+    }
+
+    #[test]
+    fn errors_name_the_key() {
+        let cases = [
+            (GOOD.replace("train = \"every:2\"", "trian = \"every:2\""), "trian"),
+            (GOOD.replace("iterations = 10", "iteratons = 10"), "iteratons"),
+            (GOOD.replace("iterations = 10", "sparsity = 1.0"), "method.ae.sparsity"),
+            (GOOD.replace("[sweep]", "[sweep]\nsteps = 3"), "sweep.steps"),
+            (GOOD.replace("counts = [10, 5]", "counts = [10, 0]"), "control_points.counts"),
+            (GOOD.replace("counts = [10, 5]", "counts = [10]\ntrails = 3"), "control_points.trails"),
+            (GOOD.replace("test = \"rest\"", ""), "dataset.tube.test"),
+            (GOOD.replace("name = \"t\"", "name = \"t\"\nsweeep = 1"), "sweeep"),
+            (GOOD.replace("label = \"ae\"", "label = \"pca\""), "method.pca.label"),
+            (GOOD.replace("train = \"every:2\"", "train = \"9-3\""), "dataset.tube.train"),
+        ];
+        for (text, needle) in cases {
+            let e = EvalConfig::from_toml(&text).unwrap_err().to_string();
+            assert!(e.contains(needle), "`{needle}` not in `{e}`");
+        }
+    }
+}

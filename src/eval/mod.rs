@@ -1,0 +1,489 @@
+//! `meshdeco eval`: trains every (dataset, method, K) cell of an evaluation config through the
+//! normal training pipeline, measures it on the test split and writes the comparison tables and
+//! plots the papers show (Neumann et al. 2013 Fig. 4/5, Huang et al. 2014 Fig. 13, Tan et al.
+//! 2018 Table 1 / Fig. 3 / Fig. 6).
+//!
+//! Output directory `DIR`:
+//! - `cells/<dataset>/<method label>/K<k>/`: the cell's normal artefact directory (as written by
+//!   `meshdeco train`), plus `cell.json` (the cell's measured [`CellResult`] and the train
+//!   config text it was made from) and, for the largest K of a method with control points,
+//!   `control_points.json`;
+//! - `results.csv`: one row per cell (columns in [`report::RESULTS_HEADER`]);
+//! - `control_points.csv`: Erms versus number of control points (if `[control_points]`);
+//! - `erms_<dataset>.png`, `sted_<dataset>.png`, `control_points_<dataset>.png`: the plots;
+//! - `report.md`: one table per dataset with the plots embedded.
+//!
+//! Measurements per cell (test split unless said otherwise):
+//! - train and test Erms ([`crate::metrics::erms`]); representations that drop translation
+//!   (triangle gradients, ACAP) are centroid-aligned, the `alignment` column says which. Train
+//!   Erms uses the stored training weights/codes; test Erms encodes each test shape with the
+//!   model's own encoder (linear models: constrained least squares; autoencoder: its encoder);
+//! - STED ([`crate::metrics::sted`], default parameters: 1-ring, c = 0.5): the spatial part, and
+//!   for datasets marked `ordered = true` the temporal part over the test frames in order;
+//! - locality: median over components of the in-support energy share (as measured by training,
+//!   `metrics.json`; none for region PCA), and of the support size and number of connected
+//!   support regions at 1 % of each component's peak ([`crate::metrics::locality`]);
+//! - seconds: the fit time reported by training (`train_seconds` of `metrics.json`).
+//!
+//! Caching: a cell whose `cell.json` holds the same train config text is reused without loading
+//! any data; otherwise it is (re)trained. `cell.json` is written last, atomically, so an
+//! interrupted cell is never taken as finished. An interrupted autoencoder cell resumes from its
+//! checkpoint when its config is unchanged. Training is seeded, so a rerun from scratch gives the
+//! same numbers (except seconds).
+
+pub mod config;
+pub mod control_points;
+pub mod plots;
+pub mod report;
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+
+use serde::{Deserialize, Serialize};
+
+pub use config::{Cell, ControlPointsConfig, EvalConfig, EvalDataset, EvalMethod};
+use control_points::{ControlPointErms, PointModel, erms_curve};
+
+use crate::artifact;
+use crate::config::MethodKind;
+use crate::error::{Error, Result};
+use crate::mesh::{MeshSequence, Vec3};
+use crate::metrics::erms::{Alignment, erms};
+use crate::metrics::locality::{SUPPORT_THRESHOLD, support_regions};
+use crate::metrics::sted::{FrameOrder, Sted, StedParams};
+use crate::pipeline::autoencoder::{self, AeArtifact, CHECKPOINT_FILE};
+use crate::pipeline::linear::{self, LinearArtifact};
+use crate::pipeline::metrics_file::{Metrics, median};
+use crate::pipeline::region::{self, RegionArtifact};
+use crate::pipeline::{Progress, Silent};
+use crate::preprocess::{self, Prepared};
+
+/// File name of a cell's measured result.
+pub const CELL_FILE: &str = "cell.json";
+/// File name of the pending marker (the train config text of a cell being trained).
+pub const PENDING_FILE: &str = "eval_cell.toml";
+/// File name of a cell's cached control-point curve.
+pub const CONTROL_POINTS_FILE: &str = "control_points.json";
+
+/// The measured result of one (dataset, method, K) cell; one row of `results.csv`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct CellResult {
+    /// The cell's train config text (cache key).
+    pub config_text: String,
+    pub dataset: String,
+    /// Method label of the eval config.
+    pub method: String,
+    /// Method kind (`pca`, `splocs`, `region-pca`, `autoencoder`).
+    pub kind: String,
+    /// Representation the method ran on.
+    pub representation: String,
+    /// Number of components K requested (region PCA: the total budget).
+    #[serde(rename = "K")]
+    pub k: usize,
+    /// Erms over the training frames (data units × 1000).
+    pub train_erms: f64,
+    /// Erms over the test frames.
+    pub test_erms: f64,
+    /// Alignment of both Erms values (`none` or `centroid`).
+    pub alignment: String,
+    /// STED spatial part over the test frames.
+    pub sted_spatial: f64,
+    /// STED temporal part over the test frames (ordered datasets only).
+    pub sted_temporal: Option<f64>,
+    /// Median in-support energy share of the components (training's measure).
+    pub in_support_share: Option<f64>,
+    /// Median support size (elements above 1 % of the component's peak).
+    pub support_size: Option<f64>,
+    /// Median number of connected support regions.
+    pub support_regions: Option<f64>,
+    /// Fit time of training, seconds.
+    pub seconds: f64,
+    pub train_frames: usize,
+    pub test_frames: usize,
+}
+
+/// Cached control-point curve of a cell.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+struct ControlPointsCache {
+    key: String,
+    rows: Vec<ControlPointErms>,
+}
+
+/// One row of `control_points.csv`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ControlPointRow {
+    pub dataset: String,
+    pub method: String,
+    pub k: usize,
+    pub erms: ControlPointErms,
+}
+
+/// Options of [`run`].
+#[derive(Debug, Clone, Default)]
+pub struct EvalOptions {
+    /// Only re-read finished cells and redraw; error if a cell is missing.
+    pub replot: bool,
+    /// Set (e.g. by Ctrl-C) to stop after the current cell (the autoencoder stops at once,
+    /// keeping its checkpoint).
+    pub stop: Option<Arc<AtomicBool>>,
+}
+
+/// What [`run`] did.
+#[derive(Debug, Clone)]
+pub struct EvalOutcome {
+    pub results: Vec<CellResult>,
+    pub control_points: Vec<ControlPointRow>,
+    /// Cells trained in this run.
+    pub trained: usize,
+    /// Cells reused from an earlier run.
+    pub reused: usize,
+    /// Files written (results, report, plots).
+    pub files: Vec<PathBuf>,
+}
+
+/// Artefact directory of a cell.
+pub fn cell_dir(out: &Path, dataset: &str, method: &str, k: usize) -> PathBuf {
+    out.join("cells").join(dataset).join(method).join(format!("K{k}"))
+}
+
+/// The preprocessed data of one dataset, in data units.
+struct DatasetData {
+    prep: Prepared,
+    train: Vec<Vec<Vec3>>,
+    test: Vec<Vec<Vec3>>,
+    sted: Sted,
+}
+
+impl DatasetData {
+    fn load(d: &EvalDataset) -> Result<Self> {
+        let prep = preprocess::prepare(&d.data)?;
+        let truth = |idx: &[usize]| -> Vec<Vec<Vec3>> {
+            idx.iter().map(|&f| prep.sequence.frames[f].iter().map(|p| prep.unit_box.invert(*p)).collect()).collect()
+        };
+        let (train, test) = (truth(&prep.train), truth(&prep.test));
+        let sted = Sted::new(prep.rest.n_vertices(), &prep.rest.faces, StedParams::default())?;
+        Ok(DatasetData { prep, train, test, sted })
+    }
+
+    fn test_sequence(&self) -> MeshSequence {
+        MeshSequence { faces: self.prep.sequence.faces.clone(), frames: self.test.clone(), names: Vec::new() }
+    }
+}
+
+/// A trained model of any kind, loaded from its artefact directory.
+enum Trained {
+    Linear(LinearArtifact),
+    Region(RegionArtifact),
+    Ae(AeArtifact),
+}
+
+impl Trained {
+    fn load(kind: MethodKind, dir: &Path) -> Result<Self> {
+        Ok(match kind {
+            MethodKind::Pca | MethodKind::Splocs => Trained::Linear(LinearArtifact::load(dir)?),
+            MethodKind::RegionPca => Trained::Region(RegionArtifact::load(dir)?),
+            MethodKind::Autoencoder => Trained::Ae(AeArtifact::load(dir)?),
+        })
+    }
+
+    fn representation(&self) -> String {
+        match self {
+            Trained::Linear(a) => a.header.representation.clone(),
+            Trained::Region(a) => a.header.representation.clone(),
+            Trained::Ae(a) => a.header.representation.clone(),
+        }
+    }
+
+    fn alignment(&self) -> Alignment {
+        match self {
+            Trained::Linear(a) => a.alignment(),
+            Trained::Region(_) => Alignment::None,
+            Trained::Ae(_) => Alignment::Centroid,
+        }
+    }
+
+    /// Reconstruction of the training frames from the stored weights / codes (region PCA:
+    /// re-encoded).
+    fn train_reconstruction(&self, ds: &DatasetData) -> Result<Vec<Vec<Vec3>>> {
+        match self {
+            Trained::Linear(a) => a.decode_rows(&a.model.reconstruct()?),
+            Trained::Region(a) => a.reconstruct_frames(&MeshSequence {
+                faces: ds.prep.sequence.faces.clone(),
+                frames: ds.train.clone(),
+                names: Vec::new(),
+            }),
+            Trained::Ae(a) => a.decode_codes(&a.train_codes),
+        }
+    }
+
+    /// Encode + reconstruct frames given in data units.
+    fn reconstruct(&self, seq: &MeshSequence) -> Result<Vec<Vec<Vec3>>> {
+        match self {
+            Trained::Linear(a) => {
+                let w = a.encode_frames(seq)?;
+                a.decode_rows(&a.model.reconstruct_weights(&w, seq.n_frames())?)
+            }
+            Trained::Region(a) => a.reconstruct_frames(seq),
+            Trained::Ae(a) => a.decode_codes(&a.encode_frames(seq)?),
+        }
+    }
+
+    /// Per component: group norms per element, and the element adjacency.
+    fn component_norms(&self) -> (Vec<Vec<f64>>, &[Vec<usize>]) {
+        match self {
+            Trained::Linear(a) => (
+                (0..a.model.n_components).map(|k| a.model.component_group_norms(k)).collect(),
+                a.representation.element_adjacency(),
+            ),
+            Trained::Region(a) => {
+                let n = a.model.n_vertices;
+                let mut out = Vec::new();
+                for r in &a.model.regions {
+                    for p in 0..r.n_components {
+                        let mut norms = vec![0.0; n];
+                        for (l, &v) in r.vertices.iter().enumerate() {
+                            norms[v] = (0..3).map(|c| r.at(p, l, c).powi(2)).sum::<f64>().sqrt();
+                        }
+                        out.push(norms);
+                    }
+                }
+                (out, a.representation.element_adjacency())
+            }
+            Trained::Ae(a) => {
+                let c = a.model.components_matrix();
+                let n = a.rest.n_vertices();
+                let norms = c
+                    .chunks_exact((9 * n).max(1))
+                    .map(|row| {
+                        row.chunks_exact(9).map(|g| g.iter().map(|&x| (x as f64).powi(2)).sum::<f64>().sqrt()).collect()
+                    })
+                    .collect();
+                (norms, a.representation.element_adjacency())
+            }
+        }
+    }
+}
+
+fn check_finite(what: &str, cell: &str, x: f64) -> Result<f64> {
+    if x.is_finite() { Ok(x) } else { Err(Error::Numerical(format!("{cell}: {what} is not finite ({x})"))) }
+}
+
+/// Measures a trained cell on its dataset.
+fn measure(cell: &Cell, cfg: &EvalConfig, dir: &Path, ds: &DatasetData, metrics: &Metrics) -> Result<CellResult> {
+    let d = &cfg.datasets[cell.dataset];
+    let m = &cfg.methods[cell.method];
+    let name = format!("{}/{}/K{}", d.name, m.label, cell.k);
+    let model = Trained::load(cell.config.kind, dir)?;
+    let alignment = model.alignment();
+    let train_erms = erms(&ds.train, &model.train_reconstruction(ds)?, alignment)?;
+    let test_rec = model.reconstruct(&ds.test_sequence())?;
+    let test_erms = erms(&ds.test, &test_rec, alignment)?;
+    let order = if d.ordered { FrameOrder::Sequence } else { FrameOrder::Unordered };
+    let sted = ds.sted.evaluate(&ds.test, &test_rec, order)?;
+    let (norms, adjacency) = model.component_norms();
+    let mut sizes = Vec::new();
+    let mut regions = Vec::new();
+    for n in &norms {
+        let s = support_regions(n, adjacency, SUPPORT_THRESHOLD)?;
+        sizes.push(s.size as f64);
+        regions.push(s.regions as f64);
+    }
+    Ok(CellResult {
+        config_text: cell.config_text.clone(),
+        dataset: d.name.clone(),
+        method: m.label.clone(),
+        kind: cell.config.kind.name().to_string(),
+        representation: model.representation(),
+        k: cell.k,
+        train_erms: check_finite("train Erms", &name, train_erms)?,
+        test_erms: check_finite("test Erms", &name, test_erms)?,
+        alignment: alignment.to_string(),
+        sted_spatial: check_finite("STED", &name, sted.spatial)?,
+        sted_temporal: sted.temporal.map(|t| check_finite("temporal STED", &name, t)).transpose()?,
+        in_support_share: metrics.median_energy_share.filter(|x| x.is_finite()),
+        support_size: median(&sizes),
+        support_regions: median(&regions),
+        seconds: metrics.train_seconds,
+        train_frames: ds.train.len(),
+        test_frames: ds.test.len(),
+    })
+}
+
+fn read_cached(dir: &Path, text: &str) -> Option<CellResult> {
+    let path = dir.join(CELL_FILE);
+    if !path.is_file() {
+        return None;
+    }
+    artifact::read_json::<CellResult>(&path).ok().filter(|r| r.config_text == text)
+}
+
+fn stopped(opts: &EvalOptions) -> bool {
+    opts.stop.as_ref().is_some_and(|s| s.load(Ordering::SeqCst))
+}
+
+fn interrupted() -> Error {
+    Error::Invalid("interrupted: finished cells are kept; rerun the same command to continue".into())
+}
+
+/// Trains a cell into `dir` (resuming an interrupted autoencoder with the same config).
+fn train_cell(cell: &Cell, dir: &Path, opts: &EvalOptions, inner: &mut dyn Progress) -> Result<Metrics> {
+    let pending = dir.join(PENDING_FILE);
+    let same_pending = std::fs::read_to_string(&pending).is_ok_and(|t| t == cell.config_text);
+    // A stale result must never survive a retrain.
+    let stale = dir.join(CELL_FILE);
+    if stale.exists() {
+        std::fs::remove_file(&stale).map_err(|e| Error::io(&stale, e))?;
+    }
+    std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+    artifact::write_atomic(&pending, cell.config_text.as_bytes())?;
+    let c = &cell.config;
+    let outcome = match c.kind {
+        MethodKind::Pca | MethodKind::Splocs => linear::train(c, dir, inner)?,
+        MethodKind::RegionPca => region::train(c, dir, inner)?,
+        MethodKind::Autoencoder => {
+            let resume = same_pending && dir.join(CHECKPOINT_FILE).is_file();
+            match autoencoder::train(c, dir, resume, opts.stop.clone(), inner) {
+                Ok(o) => o,
+                Err(_) if resume && !stopped(opts) => autoencoder::train(c, dir, false, opts.stop.clone(), inner)?,
+                Err(e) => return Err(e),
+            }
+        }
+    };
+    Ok(outcome.metrics)
+}
+
+/// Control-point key of a cell (its config text plus the control-point settings).
+fn control_key(cell: &Cell, cp: &ControlPointsConfig) -> String {
+    format!(
+        "{}\n# control points: counts {:?}, trials {}, gamma {}, seed {}\n",
+        cell.config_text, cp.counts, cp.trials, cp.gamma, cp.seed
+    )
+}
+
+/// Whether a method can be driven by control points here (displacement-based linear models).
+pub fn control_points_supported(m: &EvalMethod) -> bool {
+    let rep = m.table.get("representation").and_then(|v| v.as_str()).unwrap_or("displacement");
+    match m.kind {
+        MethodKind::Pca | MethodKind::Splocs | MethodKind::RegionPca => rep == "displacement",
+        MethodKind::Autoencoder => false,
+    }
+}
+
+/// Runs the evaluation into `out` (see the module docs). `sweep` reports one step per cell,
+/// `inner` the stages of the cell being trained.
+pub fn run(
+    cfg: &EvalConfig,
+    out: &Path,
+    opts: &EvalOptions,
+    sweep: &mut dyn Progress,
+    inner: &mut dyn Progress,
+) -> Result<EvalOutcome> {
+    let cells = cfg.cells()?;
+    let mut data: Vec<Option<DatasetData>> = cfg.datasets.iter().map(|_| None).collect();
+    let mut results = Vec::with_capacity(cells.len());
+    let (mut trained, mut reused) = (0, 0);
+    sweep.stage("eval", cells.len() as u64);
+    for (i, cell) in cells.iter().enumerate() {
+        let d = &cfg.datasets[cell.dataset];
+        let m = &cfg.methods[cell.method];
+        let label = format!("{}/{}/K{}", d.name, m.label, cell.k);
+        sweep.step(i as u64, &label);
+        let dir = cell_dir(out, &d.name, &m.label, cell.k);
+        if let Some(r) = read_cached(&dir, &cell.config_text) {
+            results.push(r);
+            reused += 1;
+            continue;
+        }
+        if opts.replot {
+            return Err(Error::Invalid(format!(
+                "--replot: cell {label} has no result in {} (run without --replot to train it)",
+                dir.display()
+            )));
+        }
+        if stopped(opts) {
+            return Err(interrupted());
+        }
+        if data[cell.dataset].is_none() {
+            data[cell.dataset] = Some(DatasetData::load(d)?);
+        }
+        let ds = data[cell.dataset].as_ref().expect("loaded above");
+        let metrics = train_cell(cell, &dir, opts, inner).map_err(|e| {
+            if stopped(opts) { interrupted() } else { Error::Invalid(format!("cell {label}: {e}")) }
+        })?;
+        let r = measure(cell, cfg, &dir, ds, &metrics)?;
+        artifact::write_json(&dir.join(CELL_FILE), &r)?;
+        let pending = dir.join(PENDING_FILE);
+        let _ = std::fs::remove_file(&pending);
+        results.push(r);
+        trained += 1;
+    }
+    sweep.step(cells.len() as u64, "done");
+    sweep.finish_stage();
+
+    let mut cp_rows = Vec::new();
+    if let Some(cp) = &cfg.control_points {
+        let jobs: Vec<&Cell> = cells
+            .iter()
+            .filter(|c| control_points_supported(&cfg.methods[c.method]))
+            .filter(|c| cfg.ks(c.method).last() == Some(&c.k))
+            .collect();
+        sweep.stage("control points", jobs.len() as u64);
+        for (i, cell) in jobs.into_iter().enumerate() {
+            let d = &cfg.datasets[cell.dataset];
+            let m = &cfg.methods[cell.method];
+            sweep.step(i as u64, &format!("{}/{}/K{}", d.name, m.label, cell.k));
+            let dir = cell_dir(out, &d.name, &m.label, cell.k);
+            let path = dir.join(CONTROL_POINTS_FILE);
+            let key = control_key(cell, cp);
+            let cached = artifact::read_json::<ControlPointsCache>(&path).ok().filter(|c| c.key == key);
+            let rows = match cached {
+                Some(c) => c.rows,
+                None => {
+                    if opts.replot {
+                        return Err(Error::Invalid(format!(
+                            "--replot: no control-point result in {} (run without --replot)",
+                            dir.display()
+                        )));
+                    }
+                    if stopped(opts) {
+                        return Err(interrupted());
+                    }
+                    if data[cell.dataset].is_none() {
+                        data[cell.dataset] = Some(DatasetData::load(d)?);
+                    }
+                    let ds = data[cell.dataset].as_ref().expect("loaded above");
+                    let rows = match Trained::load(cell.config.kind, &dir)? {
+                        Trained::Linear(a) => {
+                            erms_curve(PointModel::Linear(&a), &ds.test, &cp.counts, cp.trials, cp.gamma, cp.seed)?
+                        }
+                        Trained::Region(a) => {
+                            erms_curve(PointModel::Region(&a), &ds.test, &cp.counts, cp.trials, cp.gamma, cp.seed)?
+                        }
+                        Trained::Ae(_) => Vec::new(),
+                    };
+                    if let Some(r) = rows.iter().find(|r| !r.erms_mean.is_finite()) {
+                        return Err(Error::Numerical(format!(
+                            "{}/{}: control-point Erms for n = {} is not finite",
+                            d.name, m.label, r.n
+                        )));
+                    }
+                    artifact::write_json(&path, &ControlPointsCache { key, rows: rows.clone() })?;
+                    rows
+                }
+            };
+            for r in rows {
+                cp_rows.push(ControlPointRow { dataset: d.name.clone(), method: m.label.clone(), k: cell.k, erms: r });
+            }
+        }
+        sweep.finish_stage();
+    }
+
+    let files = report::write_all(cfg, out, &results, &cp_rows)?;
+    Ok(EvalOutcome { results, control_points: cp_rows, trained, reused, files })
+}
+
+/// [`run`] without progress reporting.
+pub fn run_silent(cfg: &EvalConfig, out: &Path, opts: &EvalOptions) -> Result<EvalOutcome> {
+    run(cfg, out, opts, &mut Silent, &mut Silent)
+}
