@@ -19,7 +19,8 @@
 //!   Erms uses the stored training weights/codes; test Erms encodes each test shape with the
 //!   model's own encoder (linear models: constrained least squares; autoencoder: its encoder);
 //! - STED ([`crate::metrics::sted`], default parameters: 1-ring, c = 0.5): the spatial part, and
-//!   for datasets marked `ordered = true` the temporal part over the test frames in order;
+//!   for datasets marked `ordered = true` the temporal part over the test frames in order (after
+//!   the same alignment as Erms, since per-frame translations change the temporal part);
 //! - locality: median over components of the in-support energy share (as measured by training,
 //!   `metrics.json`; none for region PCA), and of the support size and number of connected
 //!   support regions at 1 % of each component's peak ([`crate::metrics::locality`]);
@@ -265,6 +266,17 @@ impl Trained {
     }
 }
 
+/// Translates `result` so that its vertex centroid equals that of `truth`.
+fn centroid_align(result: &mut [Vec3], truth: &[Vec3]) {
+    let n = truth.len().max(1) as f64;
+    let shift: Vec3 = std::array::from_fn(|k| truth.iter().zip(result.iter()).map(|(t, r)| t[k] - r[k]).sum::<f64>() / n);
+    for p in result.iter_mut() {
+        for k in 0..3 {
+            p[k] += shift[k];
+        }
+    }
+}
+
 fn check_finite(what: &str, cell: &str, x: f64) -> Result<f64> {
     if x.is_finite() { Ok(x) } else { Err(Error::Numerical(format!("{cell}: {what} is not finite ({x})"))) }
 }
@@ -277,8 +289,14 @@ fn measure(cell: &Cell, cfg: &EvalConfig, dir: &Path, ds: &DatasetData, metrics:
     let model = Trained::load(cell.config.kind, dir)?;
     let alignment = model.alignment();
     let train_erms = erms(&ds.train, &model.train_reconstruction(ds)?, alignment)?;
-    let test_rec = model.reconstruct(&ds.test_sequence())?;
+    let mut test_rec = model.reconstruct(&ds.test_sequence())?;
     let test_erms = erms(&ds.test, &test_rec, alignment)?;
+    if alignment == Alignment::Centroid {
+        // The same alignment for STED (its temporal part sees per-frame translations).
+        for (r, t) in test_rec.iter_mut().zip(&ds.test) {
+            centroid_align(r, t);
+        }
+    }
     let order = if d.ordered { FrameOrder::Sequence } else { FrameOrder::Unordered };
     let sted = ds.sted.evaluate(&ds.test, &test_rec, order)?;
     let (norms, adjacency) = model.component_norms();

@@ -142,28 +142,26 @@ pub fn write_all(cfg: &EvalConfig, out: &Path, results: &[CellResult], cp: &[Con
             &series_of(&|r| Some(r.test_erms)),
         )?;
         let sted_png = format!("sted_{}.png", d.name);
-        let temporal = d.ordered;
         line_plot(
             &out.join(&sted_png),
-            &format!("{}: STED ({}) vs K", d.name, if temporal { "spatial and temporal" } else { "spatial" }),
+            &format!("{}: STED (spatial) vs K", d.name),
             "components K",
-            "STED",
-            &if temporal {
-                let mut s = series_of(&|r| Some(r.sted_spatial));
-                for x in s.iter_mut() {
-                    x.label = format!("{} (spatial)", x.label);
-                }
-                let mut t = series_of(&|r| r.sted_temporal);
-                for x in t.iter_mut() {
-                    x.label = format!("{} (temporal)", x.label);
-                }
-                s.extend(t);
-                s
-            } else {
-                series_of(&|r| Some(r.sted_spatial))
-            },
+            "STED spatial",
+            &series_of(&|r| Some(r.sted_spatial)),
         )?;
         let _ = writeln!(md, "![test Erms vs K]({erms_png})\n\n![STED vs K]({sted_png})\n");
+        if d.ordered {
+            let png = format!("sted_temporal_{}.png", d.name);
+            line_plot(
+                &out.join(&png),
+                &format!("{}: STED (temporal) vs K", d.name),
+                "components K",
+                "STED temporal",
+                &series_of(&|r| r.sted_temporal),
+            )?;
+            let _ = writeln!(md, "![temporal STED vs K]({png})\n");
+            files.push(out.join(png));
+        }
         files.push(out.join(erms_png));
         files.push(out.join(sted_png));
 

@@ -1,0 +1,183 @@
+//! `meshdeco eval` on built-in synthetic data: the results table has one row per (dataset,
+//! method, K) cell with finite numbers, a rerun reuses every cell and reproduces the table byte
+//! for byte, a fresh run reproduces the numbers (seeded training), a changed method block
+//! retrains only its cells, interrupted or stale cells are never taken as finished, and bad
+//! config keys are named in the error.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
+
+use meshdeco::eval::{CELL_FILE, EvalConfig, EvalOptions, cell_dir, report::RESULTS_HEADER, run_silent};
+
+const CONFIG: &str = r#"
+name = "tiny"
+[[dataset]]
+name = "tube"
+path = "synthetic:tube"
+train = "every:3"
+test = "rest"
+ordered = true
+
+[[method]]
+label = "pca"
+kind = "pca"
+
+[[method]]
+label = "splocs"
+kind = "splocs"
+components = [3]
+max_iterations = 2
+sparsity = 2.0
+
+[[method]]
+label = "ae"
+kind = "autoencoder"
+components = [3]
+iterations = 8
+checkpoint_every = 4
+seed = 3
+
+[sweep]
+components = [2, 4]
+
+[control_points]
+counts = [3, 6]
+trials = 2
+"#;
+
+fn tmp(tag: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("meshdeco-eval-{tag}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    d
+}
+
+fn read(p: &Path) -> String {
+    std::fs::read_to_string(p).unwrap_or_else(|e| panic!("{}: {e}", p.display()))
+}
+
+/// Rows of results.csv without the seconds column (wall time differs between fresh runs).
+fn without_seconds(csv: &str) -> Vec<String> {
+    csv.lines().map(|l| l.rsplit_once(',').map(|(a, _)| a.to_string()).unwrap_or_default()).collect()
+}
+
+#[test]
+fn sweep_table_reuse_reproducibility_and_retraining() {
+    let cfg = EvalConfig::from_toml(CONFIG).unwrap();
+    let a = tmp("a");
+    let o = run_silent(&cfg, &a, &EvalOptions::default()).unwrap();
+    assert_eq!((o.trained, o.reused), (4, 0));
+    let csv = read(&a.join("results.csv"));
+    let lines: Vec<&str> = csv.lines().collect();
+    assert_eq!(lines[0], RESULTS_HEADER);
+    assert_eq!(lines.len(), 1 + 4, "{csv}");
+    let n_cols = RESULTS_HEADER.split(',').count();
+    let mut keys = Vec::new();
+    for l in &lines[1..] {
+        let f: Vec<&str> = l.split(',').collect();
+        assert_eq!(f.len(), n_cols, "{l}");
+        keys.push((f[1].to_string(), f[3].to_string()));
+        // train_erms, test_erms, sted_spatial, sted_temporal (ordered), seconds: finite numbers.
+        for i in [4, 5, 7, 8, 12] {
+            let v: f64 = f[i].parse().unwrap_or_else(|_| panic!("column {i} of `{l}`"));
+            assert!(v.is_finite() && v >= 0.0, "column {i} of `{l}`");
+        }
+        let regions: f64 = f[11].parse().unwrap();
+        assert!(regions >= 1.0, "{l}");
+    }
+    let want: Vec<(String, String)> =
+        [("pca", "2"), ("pca", "4"), ("splocs", "3"), ("ae", "3")].iter().map(|(m, k)| (m.to_string(), k.to_string())).collect();
+    assert_eq!(keys, want);
+    // Translation-free ACAP is centroid-aligned, displacements are not.
+    assert!(lines[4].contains(",acap,3,") && lines[4].contains(",centroid,"), "{}", lines[4]);
+    assert!(lines[1].contains(",displacement,2,") && lines[1].contains(",none,"), "{}", lines[1]);
+    // More PCA components fit the training set better.
+    let e = |l: &str| l.split(',').nth(4).unwrap().parse::<f64>().unwrap();
+    assert!(e(lines[2]) < e(lines[1]));
+    // Control points for the displacement models at their largest K; report and plots exist.
+    let cp = read(&a.join("control_points.csv"));
+    assert_eq!(cp.lines().count(), 1 + 2 * 2, "{cp}");
+    assert!(cp.lines().skip(1).all(|l| l.starts_with("tube,pca,4,") || l.starts_with("tube,splocs,3,")), "{cp}");
+    for f in ["report.md", "erms_tube.png", "sted_tube.png", "sted_temporal_tube.png", "control_points_tube.png"] {
+        assert!(a.join(f).is_file(), "{f} missing");
+    }
+    assert!(read(&a.join("report.md")).contains("| splocs | displacement | 3 |"));
+
+    // Rerun into the same directory: everything reused, identical table.
+    let o = run_silent(&cfg, &a, &EvalOptions::default()).unwrap();
+    assert_eq!((o.trained, o.reused), (0, 4));
+    assert_eq!(read(&a.join("results.csv")), csv);
+    assert_eq!(read(&a.join("control_points.csv")), cp);
+    // --replot works from the cached cells alone.
+    let o = run_silent(&cfg, &a, &EvalOptions { replot: true, stop: None }).unwrap();
+    assert_eq!(o.reused, 4);
+
+    // A fresh directory gives the same numbers (seeded), apart from the wall time.
+    let b = tmp("b");
+    run_silent(&cfg, &b, &EvalOptions::default()).unwrap();
+    assert_eq!(without_seconds(&read(&b.join("results.csv"))), without_seconds(&csv));
+    assert_eq!(read(&b.join("control_points.csv")), cp);
+    std::fs::remove_dir_all(&b).unwrap();
+
+    // A changed method block retrains only that method's cell.
+    let changed = EvalConfig::from_toml(&CONFIG.replace("sparsity = 2.0", "sparsity = 4.0")).unwrap();
+    let o = run_silent(&changed, &a, &EvalOptions::default()).unwrap();
+    assert_eq!((o.trained, o.reused), (1, 3));
+    let new_csv = read(&a.join("results.csv"));
+    let (old, new) = (without_seconds(&csv), without_seconds(&new_csv));
+    assert_eq!(old[..3], new[..3]);
+    assert_eq!(old[4], new[4]);
+    assert_ne!(old[3], new[3]);
+
+    // A damaged (partial) cell result is not taken as finished: that cell is retrained.
+    let dir = cell_dir(&a, "tube", "pca", 4);
+    std::fs::write(dir.join(CELL_FILE), "{ \"config_text\": ").unwrap();
+    let o = run_silent(&changed, &a, &EvalOptions::default()).unwrap();
+    assert_eq!((o.trained, o.reused), (1, 3));
+    assert_eq!(without_seconds(&read(&a.join("results.csv"))), new);
+    std::fs::remove_dir_all(&a).unwrap();
+}
+
+#[test]
+fn interrupted_and_replot_without_cells_leave_nothing_finished() {
+    let cfg = EvalConfig::from_toml(CONFIG).unwrap();
+    let d = tmp("stop");
+    let stop = Arc::new(AtomicBool::new(true));
+    let e = run_silent(&cfg, &d, &EvalOptions { replot: false, stop: Some(stop) }).unwrap_err().to_string();
+    assert!(e.contains("interrupted"), "{e}");
+    assert!(!cell_dir(&d, "tube", "pca", 2).join(CELL_FILE).exists());
+    let e = run_silent(&cfg, &d, &EvalOptions { replot: true, stop: None }).unwrap_err().to_string();
+    assert!(e.contains("--replot") && e.contains("tube/pca/K2"), "{e}");
+    let _ = std::fs::remove_dir_all(&d);
+}
+
+#[test]
+fn bad_keys_are_named() {
+    let cases = [
+        (CONFIG.replace("train = \"every:3\"", "trian = \"every:3\""), "trian"),
+        (CONFIG.replace("max_iterations = 2", "max_iteratons = 2"), "max_iteratons"),
+        (CONFIG.replace("max_iterations = 2", "layers = 2"), "method.splocs.layers"),
+        (CONFIG.replace("trials = 2", "trails = 2"), "control_points.trails"),
+        (CONFIG.replace("[sweep]", "[sweep]\nstep = 1"), "sweep.step"),
+        (CONFIG.replace("name = \"tiny\"", "name = \"tiny\"\nmethods = 1"), "methods"),
+    ];
+    for (text, needle) in &cases {
+        let e = EvalConfig::from_toml(text).unwrap_err().to_string();
+        assert!(e.contains(needle), "`{needle}` not in `{e}`");
+    }
+    // Through the command line: non-zero exit, the key and the file in the message, no panic.
+    let d = tmp("badkey");
+    std::fs::create_dir_all(&d).unwrap();
+    let f = d.join("bad.toml");
+    std::fs::write(&f, &cases[3].0).unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_meshdeco"))
+        .args(["eval", "--config", f.to_str().unwrap(), "--out", d.join("out").to_str().unwrap()])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
+    assert!(err.contains("control_points.trails") && err.contains("bad.toml") && !err.contains("panicked"), "{err}");
+    assert!(!d.join("out").exists());
+    std::fs::remove_dir_all(&d).unwrap();
+}
