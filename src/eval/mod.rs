@@ -431,6 +431,9 @@ pub fn run(
         })?;
         let r = measure(cell, cfg, &dir, ds, &metrics)?;
         artifact::write_json(&dir.join(CELL_FILE), &r)?;
+        // Use the values as stored (JSON text round trip), so a first run and a rerun that
+        // reuses the cell write identical tables.
+        let r: CellResult = artifact::read_json(&dir.join(CELL_FILE))?;
         let pending = dir.join(PENDING_FILE);
         let _ = std::fs::remove_file(&pending);
         results.push(r);
@@ -486,8 +489,8 @@ pub fn run(
                             d.name, m.label, r.n
                         )));
                     }
-                    artifact::write_json(&path, &ControlPointsCache { key, rows: rows.clone() })?;
-                    rows
+                    artifact::write_json(&path, &ControlPointsCache { key, rows })?;
+                    artifact::read_json::<ControlPointsCache>(&path)?.rows
                 }
             };
             for r in rows {
