@@ -614,6 +614,19 @@ admm = { rho = 10, iterations = 10 }
     }
 
     #[test]
+    fn engine_and_device_are_checked() {
+        let base = "[data]\npath = \"synthetic:tube\"\n[method]\nkind = \"autoencoder\"\n";
+        let ok = Config::from_toml(&format!("{base}engine = \"graph\"\ndevice = \"cpu\"\n")).unwrap();
+        assert_eq!(ok.method.engine.as_deref(), Some("graph"));
+        for (line, key) in [("engine = \"fast\"", "method.engine"), ("device = \"tpu\"", "method.device")] {
+            let e = Config::from_toml(&format!("{base}{line}\n")).unwrap_err().to_string();
+            assert!(e.contains(key), "{e}");
+        }
+        let pca = "[data]\npath = \"synthetic:tube\"\n[method]\nkind = \"pca\"\nengine = \"graph\"\n";
+        assert!(Config::from_toml(pca).unwrap_err().to_string().contains("engine"));
+    }
+
+    #[test]
     fn syntax_errors_carry_a_line() {
         let e = Config::from_toml("name = \"a\"\n[data]\npath = 3\n[method]\nkind = \"pca\"\n").unwrap_err();
         match e {
