@@ -10,6 +10,7 @@ mod apply;
 mod features;
 mod geodesic;
 mod inspect;
+mod pose;
 mod progress;
 mod train;
 
@@ -42,6 +43,8 @@ pub enum Command {
     Inspect(inspect::InspectArgs),
     /// Train a model from a TOML experiment config (see README for the keys).
     Train(train::TrainArgs),
+    /// Pose a trained model by dragging vertices: constraints JSON {"vertex": [x, y, z]} → mesh.
+    Pose(pose::PoseArgs),
 }
 
 /// Runs one parsed command line.
@@ -56,6 +59,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Geodesic(a) => geodesic::run(a),
         Command::Inspect(a) => inspect::run(a),
         Command::Train(a) => train::run(a),
+        Command::Pose(a) => pose::run(a),
     }
 }
 
