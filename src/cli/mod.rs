@@ -11,6 +11,7 @@ mod eval;
 mod features;
 mod geodesic;
 mod inspect;
+mod pose;
 mod progress;
 mod train;
 
@@ -45,6 +46,8 @@ pub enum Command {
     Train(train::TrainArgs),
     /// Train and evaluate every (dataset, method, K) cell of an eval config; tables and plots.
     Eval(eval::EvalArgs),
+    /// Pose a trained model by dragging vertices: constraints JSON {"vertex": [x, y, z]} → mesh.
+    Pose(pose::PoseArgs),
 }
 
 /// Runs one parsed command line.
@@ -60,6 +63,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Inspect(a) => inspect::run(a),
         Command::Train(a) => train::run(a),
         Command::Eval(a) => eval::run(a),
+        Command::Pose(a) => pose::run(a),
     }
 }
 

@@ -46,6 +46,7 @@ pub mod data;
 pub mod engine;
 pub mod inference;
 pub mod kernels;
+pub mod latent_fit;
 pub mod loss;
 pub mod model;
 pub mod neighbors;

@@ -4,7 +4,9 @@
 
 pub mod autoencoder;
 pub mod geodesic_support;
+pub mod ae_pose;
 pub mod linear;
+pub mod pose;
 pub mod metrics_file;
 pub mod region;
 

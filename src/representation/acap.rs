@@ -495,6 +495,18 @@ impl Acap {
         AcapFrame::stack(&self.encode_sequence(frames, consistency)?)
     }
 
+    /// Adjoint of [`Acap::decode_transforms`] (an affine map): for a gradient `grad` (N × 3)
+    /// with respect to the decoded positions, the gradient with respect to every T_i (N,
+    /// row-major 3×3). Costs one solve with the decoder's factor. Both decoders treat the three
+    /// coordinates alike, so the gradient of coordinate c of one vertex touches only row c of
+    /// every T_i, with the same coefficients for every c.
+    pub fn decode_transforms_adjoint(&self, grad: &[Vec3]) -> Result<Vec<Mat3>> {
+        match &self.decoder {
+            Decoder::FitInverse(f) => f.solve_adjoint(grad),
+            Decoder::Edge(r) => r.solve_adjoint(grad),
+        }
+    }
+
     /// [`Acap::decode_frame`] for every frame of an F × N × 9 array, in parallel (rayon).
     pub fn decode_sequence(&self, features: &Features) -> Result<Vec<Vec<Vec3>>> {
         if features.n_elements != self.n_vertices() || features.width != WIDTH {

@@ -42,7 +42,7 @@
 #![allow(clippy::needless_range_loop)] // index loops over 3-vectors read like the formulas
 
 use crate::mesh::Vec3;
-use crate::representation::acap_reconstruct::PinnedSystem;
+use crate::representation::acap_reconstruct::{PinnedSystem, edge_term_adjoint};
 use crate::representation::acap_rotation::{Mat3, mat_vec};
 use crate::{Error, Result};
 
@@ -206,6 +206,46 @@ impl FitInverse {
             }
         }
         self.system.solve(&mut rhs)
+    }
+}
+
+impl FitInverse {
+    /// Adjoint of [`FitInverse::solve`] (affine in the transforms): for a gradient `grad`
+    /// (N × 3) with respect to the positions, the gradient with respect to every transform
+    /// (N, row-major 3×3). One solve with the same factor.
+    pub fn solve_adjoint(&self, grad: &[Vec3]) -> Result<Vec<Mat3>> {
+        let n = self.g_sum.len();
+        if grad.len() != n {
+            return Err(Error::Invalid(format!("fit inverse adjoint: {} gradients for {n} vertices", grad.len())));
+        }
+        let lam = self.system.solve_adjoint(grad)?;
+        let mrows = self.system.n_reduced();
+        let at = |c: usize, v: usize| {
+            let r = self.system.row(v);
+            if r == usize::MAX { 0.0 } else { lam[c * mrows + r] }
+        };
+        let mut out = vec![[[0.0; 3]; 3]; n];
+        for i in 0..n {
+            let (s, e) = (self.ring_offsets[i], self.ring_offsets[i + 1]);
+            if s == e {
+                continue;
+            }
+            for c in 0..3 {
+                let li = at(c, i);
+                let mut y = [-self.g_sum[i][0] * li, -self.g_sum[i][1] * li, -self.g_sum[i][2] * li];
+                for k in s..e {
+                    let lj = at(c, self.ring[k]);
+                    for m in 0..3 {
+                        y[m] += self.g[k][m] * lj;
+                    }
+                }
+                out[i][c] = project(self.h[i], y);
+            }
+        }
+        if let Some(EdgeTerm { rest, edges, weights }) = &self.edge_term {
+            edge_term_adjoint(rest, edges, weights, &self.system, &lam, &mut out);
+        }
+        Ok(out)
     }
 }
 

@@ -154,6 +154,47 @@ impl PinnedSystem {
         self.reduced[v]
     }
 
+    /// Adjoint of [`Self::solve`]: for a gradient `grad` (N × 3) with respect to the returned
+    /// positions, the gradient with respect to the right-hand side (3 × [`Self::n_reduced`],
+    /// column-major). The centring is a symmetric projection and the reduced matrix is
+    /// symmetric, so this is one solve with the same factor.
+    pub(crate) fn solve_adjoint(&self, grad: &[Vec3]) -> Result<Vec<f64>> {
+        let n = self.reduced.len();
+        let mut sums = vec![[0.0; 3]; self.centroids.len()];
+        for v in 0..n {
+            for k in 0..3 {
+                sums[self.component[v]][k] += grad[v][k];
+            }
+        }
+        let m = self.n_reduced();
+        let mut rhs = vec![0.0; 3 * m];
+        for v in 0..n {
+            let r = self.reduced[v];
+            if r == usize::MAX {
+                continue;
+            }
+            let c = self.component[v];
+            let cnt = self.centroids[c].1 as f64;
+            for k in 0..3 {
+                rhs[k * m + r] = grad[v][k] - sums[c][k] / cnt;
+            }
+        }
+        if let Some(symbolic) = &self.symbolic {
+            if rhs.iter().any(|v| !v.is_finite()) {
+                return Err(Error::Numerical("reconstruction adjoint: non-finite gradient".into()));
+            }
+            let llt = LltRef::new(symbolic, &self.values);
+            let mut mem = MemBuffer::new(symbolic.solve_in_place_scratch::<f64>(3, Par::Seq));
+            llt.solve_in_place_with_conj(
+                Conj::No,
+                MatMut::from_column_major_slice_mut(&mut rhs[..3 * m], m, 3),
+                Par::Seq,
+                MemStack::new(&mut mem),
+            );
+        }
+        Ok(rhs)
+    }
+
     /// Solves for three right-hand sides given column-major in `rhs` (3 × [`Self::n_reduced`],
     /// overwritten) and returns the N positions, each component centred on its reference
     /// centroid.
@@ -266,6 +307,48 @@ impl AcapReconstruction {
             }
         }
         self.system.solve(&mut rhs)
+    }
+}
+
+impl AcapReconstruction {
+    /// Adjoint of [`AcapReconstruction::solve`] (the map from transforms to positions is affine):
+    /// for a gradient `grad` (N × 3) with respect to the positions, the gradient with respect to
+    /// every transform (N, row-major 3×3).
+    pub fn solve_adjoint(&self, grad: &[Vec3]) -> Result<Vec<Mat3>> {
+        let n = self.rest.len();
+        if grad.len() != n {
+            return Err(Error::Invalid(format!("reconstruction adjoint: {} gradients for {n} vertices", grad.len())));
+        }
+        let lam = self.system.solve_adjoint(grad)?;
+        let mut out = vec![[[0.0; 3]; 3]; n];
+        edge_term_adjoint(&self.rest, &self.edges, &self.weights, &self.system, &lam, &mut out);
+        Ok(out)
+    }
+}
+
+/// Adds the adjoint of the edge right-hand side Σ c_ij ½(T_i + T_j)(q_i − q_j) (scattered to
+/// rows i, −j) for the right-hand-side gradient `lam` (3 × reduced rows, column-major) to `out`.
+pub(crate) fn edge_term_adjoint(
+    rest: &[Vec3],
+    edges: &[[usize; 2]],
+    weights: &[f64],
+    system: &PinnedSystem,
+    lam: &[f64],
+    out: &mut [Mat3],
+) {
+    let m = system.n_reduced();
+    for (&[i, j], &c) in edges.iter().zip(weights) {
+        let e = [rest[i][0] - rest[j][0], rest[i][1] - rest[j][1], rest[i][2] - rest[j][2]];
+        let (ri, rj) = (system.row(i), system.row(j));
+        for k in 0..3 {
+            let li = if ri != usize::MAX { lam[k * m + ri] } else { 0.0 };
+            let lj = if rj != usize::MAX { lam[k * m + rj] } else { 0.0 };
+            let d = 0.5 * c * (li - lj);
+            for q in 0..3 {
+                out[i][k][q] += d * e[q];
+                out[j][k][q] += d * e[q];
+            }
+        }
     }
 }
 

@@ -1,0 +1,137 @@
+//! `meshdeco pose`: direct-manipulation posing of a trained model from vertex constraints.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{Context, Result, bail};
+use clap::Args;
+use meshdeco::mesh::{self, TriMesh, Vec3};
+use meshdeco::methods::posing::PoseConfig;
+use meshdeco::pipeline::ae_pose::AePoseConfig;
+use meshdeco::pipeline::pose::{PoseModel, PoseOptions, ball, displacement_share};
+
+use super::apply::write_mesh;
+
+#[derive(Debug, Args)]
+#[command(after_help = "CONSTRAINTS FILE: a JSON object mapping 0-based vertex indices (as strings) to target \
+positions in data units, e.g. {\"123\": [0.1, -0.02, 0.35], \"4071\": [0.0, 0.2, 0.3]}.
+
+START: without --from, linear models start from all weights 0 (their offset: the training mean for \
+PCA, the rest shape for SPLOCS), region PCA from all coefficients 0 (the region means), the \
+autoencoder from the code of its rest mesh.
+
+MODELS: pca and splocs on displacements (Lewis-Anjyo, Tena et al. Eq. 8, honouring non-negative \
+weights), region-pca (Eq. 9/10), autoencoder (Gauss-Newton on the latent code through the decoder \
+and the ACAP reconstruction). Linear models on triangle gradients are refused.")]
+pub struct PoseArgs {
+    /// Model directory written by `meshdeco train` (or its model.json).
+    pub model: PathBuf,
+    /// Constraints: JSON object {"vertex index": [x, y, z], ...} (data units).
+    #[arg(long, short)]
+    pub constraints: PathBuf,
+    /// Start pose: a mesh file (OBJ/PLY/OFF, the model's connectivity) whose encoding gives the
+    /// start weights (default: see START below).
+    #[arg(long)]
+    pub from: Option<PathBuf>,
+    /// Output mesh (.obj, .ply or .off), written atomically.
+    #[arg(long, short)]
+    pub out: PathBuf,
+    /// γ: pull towards the start weights, dimensionless (Eq. 8/10 regulariser, scaled by the
+    /// mean squared response of one weight at the constrained vertices; also the autoencoder's).
+    #[arg(long, default_value_t = 0.025)]
+    pub gamma: f64,
+    /// β: boundary consistency between regions (region PCA only).
+    #[arg(long, default_value_t = 1.0)]
+    pub beta: f64,
+    /// Gauss-Newton iterations at most (autoencoder only).
+    #[arg(long, default_value_t = 30)]
+    pub max_iterations: usize,
+    /// Radius (fraction of the rest mesh's bounding-box diagonal) of the ball around each
+    /// constrained vertex in which the reported displacement-energy share is measured.
+    #[arg(long, default_value_t = 0.2)]
+    pub local_radius: f64,
+}
+
+/// Reads a constraints file: sorted (vertex, target) pairs.
+pub fn read_constraints(path: &Path, n_vertices: usize) -> Result<Vec<(usize, Vec3)>> {
+    let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let map: BTreeMap<String, Vec<f64>> = serde_json::from_str(&text).map_err(|e| {
+        anyhow::anyhow!(
+            "{}: line {} column {}: {e} (expected a JSON object {{\"vertex index\": [x, y, z], ...}})",
+            path.display(),
+            e.line(),
+            e.column()
+        )
+    })?;
+    if map.is_empty() {
+        bail!("{}: no constraint given", path.display());
+    }
+    let mut out = Vec::with_capacity(map.len());
+    for (k, v) in &map {
+        let i: usize = k
+            .trim()
+            .parse()
+            .map_err(|_| anyhow::anyhow!("{}: key `{k}` is not a vertex index", path.display()))?;
+        if i >= n_vertices {
+            bail!("{}: vertex {i} out of range (the model has {n_vertices} vertices, 0..{})", path.display(), n_vertices - 1);
+        }
+        if v.len() != 3 || v.iter().any(|x| !x.is_finite()) {
+            bail!("{}: target of vertex {i} must be 3 finite numbers, got {v:?}", path.display());
+        }
+        out.push((i, [v[0], v[1], v[2]]));
+    }
+    Ok(out)
+}
+
+pub fn run(a: PoseArgs) -> Result<()> {
+    let model = PoseModel::load(&a.model).with_context(|| format!("loading model {}", a.model.display()))?;
+    let rest = model.rest();
+    let n = rest.n_vertices();
+    let cons = read_constraints(&a.constraints, n)?;
+    let from = match &a.from {
+        Some(p) => {
+            let m = mesh::load_mesh(p)?;
+            if m.faces != rest.faces {
+                bail!("{}: connectivity differs from the model's rest mesh", p.display());
+            }
+            println!("start: encoding of {}", p.display());
+            Some(m.positions)
+        }
+        None => {
+            println!("start: {}", model.default_start_description());
+            None
+        }
+    };
+    let opts = PoseOptions {
+        linear: PoseConfig { gamma: a.gamma, beta: a.beta },
+        ae: AePoseConfig { gamma: a.gamma, max_iterations: a.max_iterations, ..Default::default() },
+    };
+    let w0 = model.start_weights(from.as_deref())?;
+    let vertices: Vec<usize> = cons.iter().map(|c| c.0).collect();
+    let targets: Vec<Vec3> = cons.iter().map(|c| c.1).collect();
+    let t0 = Instant::now();
+    let res = model.pose(&vertices, &targets, &w0, &opts)?;
+    let secs = t0.elapsed().as_secs_f64();
+    println!("{} model, {} constraint(s), solved in {:.1} ms", model.method(), cons.len(), 1e3 * secs);
+    let (lo, hi) = rest.bounding_box();
+    let diag = mesh::dist(lo, hi);
+    for (&v, t) in vertices.iter().zip(&targets) {
+        let drag = mesh::dist(res.start[v], *t);
+        let err = mesh::dist(res.positions[v], *t);
+        let rel = if drag > 0.0 { format!(" ({:.2}% of the drag {drag:.4})", 100.0 * err / drag) } else { String::new() };
+        let ball_set = ball(&rest.positions, v, a.local_radius * diag);
+        let mut line = format!(
+            "vertex {v}: distance to target {err:.6}{rel}; displacement energy within {:.0}% of the diagonal: {:.3}",
+            100.0 * a.local_radius,
+            displacement_share(&res.start, &res.positions, &ball_set)
+        );
+        if let Some((name, set)) = model.locality_set(v) {
+            line += &format!(", in {name}: {:.3}", displacement_share(&res.start, &res.positions, &set));
+        }
+        println!("{line}");
+    }
+    write_mesh(&a.out, &TriMesh::new(res.positions, rest.faces.clone()))?;
+    println!("wrote {}", a.out.display());
+    Ok(())
+}

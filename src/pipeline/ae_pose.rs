@@ -1,0 +1,345 @@
+//! Direct-manipulation posing of a trained autoencoder: find a latent code z whose decoded,
+//! reconstructed mesh puts a few constrained vertices at target positions.
+//!
+//! ```text
+//! min_z  Σ_a ‖p_a(z) − t_a‖² + λ‖z − z0‖²,      λ = γ · trace(J(z0)ᵀJ(z0)) / K
+//! ```
+//!
+//! where p_a(z) is constrained vertex a of `ACAP-decode(unscale(decoder(z)))` in the model's
+//! space (unit box when the model was trained with `data.unit_box`; targets are given in data
+//! units and mapped there), J the Jacobian of the stacked p_a, and γ dimensionless (like
+//! [`crate::methods::posing::PoseConfig::gamma`]: λ is relative to the mean squared response of
+//! one latent dimension at the constrained vertices).
+//!
+//! **Gradient.** The ACAP decoder is affine in the per-vertex gradients T_i = exp(logR_i)·S_i
+//! and treats the coordinates alike: p_a = Σ_i T_i g_{a,i} + κ_a with g_{a,i} ∈ R³. The weights
+//! g_a (N × 3) come from one adjoint solve with the decoder's factor per constrained vertex
+//! ([`Acap::decode_transforms_adjoint`]), computed once in [`AePoser::new`]; κ_a is the
+//! reference centroid. Per evaluation, p_a costs O(N); its gradient with respect to the scaled
+//! features is chained per vertex through T_i(f_i) (S part exact, exp part by central
+//! differences of Rodrigues' formula, step 1e-6) and the feature scaling, then back through the
+//! network decoder with [`DecoderVjp`] (one batched backward pass for the 3·C rows of J).
+//!
+//! **Solver.** Gauss–Newton on the K unknowns (normal equations JᵀJ + λI, Cholesky) with
+//! backtracking on the true objective; stops when the objective decreases by less than
+//! `tolerance` (relative) or after `max_iterations`.
+//!
+//! Factor once / solve many: build an [`AePoser`] per model and constrained-vertex set (C
+//! adjoint solves), then call [`AePoser::solve`] per drag event or per set of control points.
+
+use faer::Mat;
+use faer::linalg::solvers::Solve;
+use serde::{Deserialize, Serialize};
+
+use super::autoencoder::AeArtifact;
+use crate::error::{Error, Result};
+use crate::mesh::Vec3;
+use crate::nn::latent_fit::DecoderVjp;
+use crate::representation::acap::Acap;
+use crate::representation::acap_rotation::{Mat3, exp_so3, mat_mul, unskew};
+
+/// Hyperparameters of [`AePoser`].
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct AePoseConfig {
+    /// γ ≥ 0 (dimensionless): pull towards the start code. Default 0.025.
+    pub gamma: f64,
+    /// Gauss–Newton iterations at most (≥ 1). Default 30.
+    pub max_iterations: usize,
+    /// Stop when the objective decreases by less than this fraction in one iteration (> 0).
+    /// Default 1e-6.
+    pub tolerance: f64,
+}
+
+impl Default for AePoseConfig {
+    fn default() -> Self {
+        AePoseConfig { gamma: 0.025, max_iterations: 30, tolerance: 1e-6 }
+    }
+}
+
+impl AePoseConfig {
+    /// Checks the ranges (errors carry the bad value).
+    pub fn validate(&self) -> Result<()> {
+        if !(self.gamma.is_finite() && self.gamma >= 0.0) {
+            return Err(Error::config("gamma", format!("gamma ({}) must be finite and non-negative", self.gamma)));
+        }
+        if self.max_iterations == 0 {
+            return Err(Error::config("max_iterations", "max_iterations (0) must be at least 1"));
+        }
+        if !(self.tolerance.is_finite() && self.tolerance > 0.0) {
+            return Err(Error::config("tolerance", format!("tolerance ({}) must be finite and > 0", self.tolerance)));
+        }
+        Ok(())
+    }
+}
+
+/// Outcome details of one [`AePoser::solve_report`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct AePoseReport {
+    /// Gauss–Newton iterations run.
+    pub iterations: usize,
+    /// Σ_a ‖p_a − t_a‖² at the start code (model units²).
+    pub start_cost: f64,
+    /// Σ_a ‖p_a − t_a‖² at the returned code (model units²).
+    pub final_cost: f64,
+}
+
+/// Latent-code posing of an autoencoder for a fixed set of constrained vertices (see the module
+/// docs). Build once per model and vertex set; [`AePoser::solve`] per drag event.
+pub struct AePoser<'a> {
+    artifact: &'a AeArtifact,
+    decoder: DecoderVjp,
+    vertices: Vec<usize>,
+    /// Per constrained vertex: g_a (N × 3) of p_a = Σ_i T_i g_{a,i} + κ_a.
+    g: Vec<Vec<Vec3>>,
+    kappa: Vec<Vec3>,
+    /// Per feature dimension (9): ∂f/∂x̂ = 1/a of the scaling, and its centre c.
+    unscale: [(f64, f64); 9],
+    config: AePoseConfig,
+}
+
+/// T = exp(logR)·S from the 9 unscaled ACAP features of one vertex (DESIGN.md layout).
+fn transform(f: &[f64]) -> Mat3 {
+    let r = exp_so3(unskew(&[[0.0, f[0], f[1]], [-f[0], 0.0, f[2]], [-f[1], -f[2], 0.0]]));
+    let s = [[f[3], f[4], f[5]], [f[4], f[6], f[7]], [f[5], f[7], f[8]]];
+    mat_mul(&r, &s)
+}
+
+/// ∂T/∂f_q for q = 0..9 (rotation part by central differences, S part exact).
+fn transform_jacobian(f: &[f64]) -> [Mat3; 9] {
+    const H: f64 = 1e-6;
+    let mut out = [[[0.0; 3]; 3]; 9];
+    let mut fp = [0.0; 9];
+    fp.copy_from_slice(&f[..9]);
+    for (q, o) in out.iter_mut().enumerate().take(3) {
+        let mut a = fp;
+        let mut b = fp;
+        a[q] += H;
+        b[q] -= H;
+        let (ta, tb) = (transform(&a), transform(&b));
+        for i in 0..3 {
+            for j in 0..3 {
+                o[i][j] = (ta[i][j] - tb[i][j]) / (2.0 * H);
+            }
+        }
+    }
+    let r = exp_so3(unskew(&[[0.0, f[0], f[1]], [-f[0], 0.0, f[2]], [-f[1], -f[2], 0.0]]));
+    // S entries: (q, [(row, col)]) of the symmetric matrix.
+    let pos: [&[(usize, usize)]; 6] =
+        [&[(0, 0)], &[(0, 1), (1, 0)], &[(0, 2), (2, 0)], &[(1, 1)], &[(1, 2), (2, 1)], &[(2, 2)]];
+    for (q, cells) in pos.iter().enumerate() {
+        let mut ds = [[0.0; 3]; 3];
+        for &(i, j) in cells.iter() {
+            ds[i][j] = 1.0;
+        }
+        out[q + 3] = mat_mul(&r, &ds);
+    }
+    out
+}
+
+impl<'a> AePoser<'a> {
+    /// Prepares posing of `artifact` with the constrained `vertices` (indices into the rest
+    /// mesh, distinct or not). Runs one adjoint solve per vertex. Errors on an empty or
+    /// out-of-range vertex list, a model that is not ACAP, or a bad config.
+    pub fn new(artifact: &'a AeArtifact, vertices: &[usize], config: &AePoseConfig) -> Result<Self> {
+        config.validate()?;
+        let n = artifact.rest.n_vertices();
+        if vertices.is_empty() {
+            return Err(Error::Invalid("autoencoder posing: no constrained vertex given".into()));
+        }
+        if let Some(&v) = vertices.iter().find(|&&v| v >= n) {
+            return Err(Error::Invalid(format!("autoencoder posing: constrained vertex {v} out of range ({n} vertices)")));
+        }
+        let acap: &Acap = artifact.representation.acap().ok_or_else(|| {
+            Error::Invalid(format!(
+                "autoencoder posing needs the ACAP representation, the model uses {}",
+                artifact.representation.kind().name()
+            ))
+        })?;
+        let decoder = DecoderVjp::new(&artifact.model)?;
+        if decoder.n_vertices() != n {
+            return Err(Error::Invalid(format!("autoencoder has {} vertices, rest mesh {n}", decoder.n_vertices())));
+        }
+        let zero_t = acap.decode_transforms(&vec![[[0.0; 3]; 3]; n])?;
+        let mut g = Vec::with_capacity(vertices.len());
+        let mut kappa = Vec::with_capacity(vertices.len());
+        for &v in vertices {
+            let mut grad = vec![[0.0; 3]; n];
+            grad[v] = [1.0, 0.0, 0.0];
+            let adj = acap.decode_transforms_adjoint(&grad)?;
+            g.push(adj.iter().map(|t| t[0]).collect::<Vec<Vec3>>());
+            kappa.push(zero_t[v]);
+        }
+        // Feature scaling x̂ = (f − c)·a per dimension: recover (1/a, c) from the inverse map.
+        let mut zero = vec![0.0; 9];
+        let mut one = vec![1.0; 9];
+        artifact.header.scaling.invert_in_place(&mut zero)?;
+        artifact.header.scaling.invert_in_place(&mut one)?;
+        let unscale = std::array::from_fn(|q| (one[q] - zero[q], zero[q]));
+        Ok(AePoser { artifact, decoder, vertices: vertices.to_vec(), g, kappa, unscale, config: *config })
+    }
+
+    /// The constrained vertices.
+    pub fn vertices(&self) -> &[usize] {
+        &self.vertices
+    }
+
+    /// Unscaled features f (N × 9) from scaled x̂.
+    fn unscaled(&self, xs: &[f64]) -> Vec<f64> {
+        xs.chunks_exact(9).flat_map(|v| (0..9).map(move |q| v[q] * self.unscale[q].0 + self.unscale[q].1)).collect()
+    }
+
+    /// Constrained positions (model units) from scaled features.
+    fn positions(&self, xs: &[f64]) -> Vec<Vec3> {
+        let f = self.unscaled(xs);
+        let t: Vec<Mat3> = f.chunks_exact(9).map(transform).collect();
+        self.g
+            .iter()
+            .zip(&self.kappa)
+            .map(|(g, k)| {
+                let mut p = *k;
+                for (ti, gi) in t.iter().zip(g) {
+                    for (c, pc) in p.iter_mut().enumerate() {
+                        *pc += ti[c][0] * gi[0] + ti[c][1] * gi[1] + ti[c][2] * gi[2];
+                    }
+                }
+                p
+            })
+            .collect()
+    }
+
+    /// Constrained positions (model units) of code `z`.
+    fn eval(&self, z: &[f64]) -> Result<Vec<Vec3>> {
+        Ok(self.positions(&self.decoder.decode(z)?))
+    }
+
+    /// Constrained positions (model units) and their Jacobian with respect to z (3·C rows of K,
+    /// row 3a + c = ∂p_a[c]/∂z).
+    pub fn positions_and_jacobian(&self, z: &[f64]) -> Result<(Vec<Vec3>, Vec<Vec<f64>>)> {
+        let nv = self.vertices.len();
+        let mut pos = Vec::new();
+        let (_, jac) = self.decoder.decode_vjp(z, 3 * nv, &mut |xs: &[f64]| {
+            pos = self.positions(xs);
+            let f = self.unscaled(xs);
+            let n = f.len() / 9;
+            let mut u = vec![vec![0.0; 9 * n]; 3 * nv];
+            for i in 0..n {
+                let dt = transform_jacobian(&f[9 * i..9 * i + 9]);
+                for (a, g) in self.g.iter().enumerate() {
+                    let gi = g[i];
+                    if gi == [0.0; 3] {
+                        continue;
+                    }
+                    for (q, dtq) in dt.iter().enumerate() {
+                        let s = self.unscale[q].0;
+                        for c in 0..3 {
+                            u[3 * a + c][9 * i + q] = s * (dtq[c][0] * gi[0] + dtq[c][1] * gi[1] + dtq[c][2] * gi[2]);
+                        }
+                    }
+                }
+            }
+            Ok(u)
+        })?;
+        Ok((pos, jac))
+    }
+
+    /// Constrained positions in data units for code `z` (cheap: no full reconstruction).
+    pub fn constrained_positions(&self, z: &[f64]) -> Result<Vec<Vec3>> {
+        let ub = self.artifact.header.unit_box;
+        Ok(self.eval(z)?.into_iter().map(|p| ub.invert(p)).collect())
+    }
+
+    /// Posed code and mesh: `targets` (one per constrained vertex, data units), start code `z0`
+    /// (K numbers, e.g. the current pose's). Returns (code z, all N positions in data units).
+    pub fn solve(&self, targets: &[Vec3], z0: &[f64]) -> Result<(Vec<f64>, Vec<Vec3>)> {
+        let (z, p, _) = self.solve_report(targets, z0)?;
+        Ok((z, p))
+    }
+
+    /// [`AePoser::solve`] plus iteration count and start/final constraint cost.
+    pub fn solve_report(&self, targets: &[Vec3], z0: &[f64]) -> Result<(Vec<f64>, Vec<Vec3>, AePoseReport)> {
+        let nv = self.vertices.len();
+        let k = self.decoder.n_components();
+        if targets.len() != nv {
+            return Err(Error::Invalid(format!("autoencoder posing: {} targets for {nv} constrained vertices", targets.len())));
+        }
+        if let Some(i) = targets.iter().position(|t| t.iter().any(|x| !x.is_finite())) {
+            return Err(Error::Invalid(format!("autoencoder posing: target {i} is not finite ({:?})", targets[i])));
+        }
+        if z0.len() != k || z0.iter().any(|x| !x.is_finite()) {
+            return Err(Error::Invalid(format!("autoencoder posing: start code must be {k} finite numbers")));
+        }
+        let ub = self.artifact.header.unit_box;
+        let t: Vec<Vec3> = targets.iter().map(|&p| ub.apply(p)).collect();
+        let data_cost = |p: &[Vec3]| -> f64 {
+            p.iter().zip(&t).map(|(a, b)| (0..3).map(|c| (a[c] - b[c]).powi(2)).sum::<f64>()).sum()
+        };
+        let mut z = z0.to_vec();
+        let mut lambda = None;
+        let mut start_cost = f64::NAN;
+        let mut cost = f64::NAN;
+        let mut iterations = 0;
+        for it in 0..self.config.max_iterations {
+            let (p, jac) = self.positions_and_jacobian(&z)?;
+            let dc = data_cost(&p);
+            let lam = *lambda.get_or_insert_with(|| {
+                let tr: f64 = jac.iter().flatten().map(|x| x * x).sum();
+                self.config.gamma * tr / k as f64
+            });
+            let reg = |z: &[f64]| lam * z.iter().zip(z0).map(|(a, b)| (a - b).powi(2)).sum::<f64>();
+            if it == 0 {
+                start_cost = dc;
+                cost = dc + reg(&z);
+            }
+            // Normal equations (JᵀJ + λI) δ = −(Jᵀr + λ(z − z0)).
+            let r: Vec<f64> = p.iter().zip(&t).flat_map(|(a, b)| (0..3).map(move |c| a[c] - b[c])).collect();
+            let mut h = Mat::<f64>::from_fn(k, k, |i, j| {
+                jac.iter().map(|row| row[i] * row[j]).sum::<f64>() + if i == j { lam } else { 0.0 }
+            });
+            let md = (0..k).map(|i| h[(i, i)]).fold(0.0f64, f64::max);
+            for i in 0..k {
+                h[(i, i)] += 1e-12 * md + 1e-300;
+            }
+            let mut rhs = Mat::<f64>::from_fn(k, 1, |i, _| {
+                -(jac.iter().zip(&r).map(|(row, ri)| row[i] * ri).sum::<f64>() + lam * (z[i] - z0[i]))
+            });
+            let llt = h.llt(faer::Side::Lower).map_err(|e| Error::Numerical(format!("autoencoder posing: {e:?}")))?;
+            llt.solve_in_place(rhs.as_mut());
+            let delta: Vec<f64> = (0..k).map(|i| rhs[(i, 0)]).collect();
+            iterations = it + 1;
+            // Backtracking on the true objective.
+            let mut step = 1.0;
+            let mut accepted = None;
+            for _ in 0..12 {
+                let zn: Vec<f64> = z.iter().zip(&delta).map(|(a, d)| a + step * d).collect();
+                let cn = data_cost(&self.eval(&zn)?) + reg(&zn);
+                if cn < cost {
+                    accepted = Some((zn, cn));
+                    break;
+                }
+                step *= 0.5;
+            }
+            let Some((zn, cn)) = accepted else { break };
+            let decrease = (cost - cn) / cost.max(f64::MIN_POSITIVE);
+            z = zn;
+            cost = cn;
+            if decrease < self.config.tolerance {
+                break;
+            }
+        }
+        let final_cost = data_cost(&self.eval(&z)?);
+        let positions = self.artifact.decode_codes(std::slice::from_ref(&z))?.remove(0);
+        Ok((z, positions, AePoseReport { iterations, start_cost, final_cost }))
+    }
+}
+
+/// One-shot [`AePoser`]: posed (code, data-unit positions) meeting `targets` at `vertices` from
+/// `z0`.
+pub fn pose_autoencoder(
+    artifact: &AeArtifact,
+    vertices: &[usize],
+    targets: &[Vec3],
+    z0: &[f64],
+    config: &AePoseConfig,
+) -> Result<(Vec<f64>, Vec<Vec3>)> {
+    AePoser::new(artifact, vertices, config)?.solve(targets, z0)
+}
