@@ -102,6 +102,7 @@ impl DecoderVjp {
     /// features x̂, N × 9) and returns (x̂, [J(z)ᵀ u_m for every m], K numbers each).
     ///
     /// `m` is the number of cotangents `cotangents` will return (it sizes the batch).
+    #[allow(clippy::type_complexity)]
     pub fn decode_vjp(
         &self,
         z: &[f64],

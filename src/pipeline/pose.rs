@@ -24,6 +24,7 @@ use crate::methods::posing::{LinearPoser, PoseConfig, RegionPoser, energy_share}
 use crate::representation::RepresentationKind;
 
 /// A loaded model of any kind that can be posed.
+#[allow(clippy::large_enum_variant)]
 pub enum PoseModel {
     /// `pca` or `splocs`.
     Linear(LinearArtifact),
