@@ -97,8 +97,15 @@ fn sweep_table_reuse_reproducibility_and_retraining() {
     assert!(e(lines[2]) < e(lines[1]));
     // Control points for the displacement models at their largest K; report and plots exist.
     let cp = read(&a.join("control_points.csv"));
-    assert_eq!(cp.lines().count(), 1 + 2 * 2, "{cp}");
-    assert!(cp.lines().skip(1).all(|l| l.starts_with("tube,pca,4,") || l.starts_with("tube,splocs,3,")), "{cp}");
+    assert_eq!(cp.lines().count(), 1 + 3 * 2, "{cp}");
+    assert!(
+        cp.lines().skip(1).all(|l| ["tube,pca,4,", "tube,splocs,3,", "tube,ae,3,"].iter().any(|p| l.starts_with(p))),
+        "{cp}"
+    );
+    for l in cp.lines().skip(1) {
+        let mean: f64 = l.split(',').nth(4).unwrap().parse().unwrap();
+        assert!(mean.is_finite() && mean > 0.0, "{l}");
+    }
     for f in ["report.md", "erms_tube.png", "sted_tube.png", "sted_temporal_tube.png", "control_points_tube.png"] {
         assert!(a.join(f).is_file(), "{f} missing");
     }

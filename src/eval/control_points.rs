@@ -16,8 +16,14 @@
 //! plain least squares. The full shape is then the model's reconstruction from w, measured
 //! against the test shape with Erms (no alignment: displacement models keep translation).
 //!
-//! Models whose decoding is nonlinear in the weights (triangle gradients, ACAP) are not fitted
-//! here.
+//! Autoencoder: the latent code is optimised to meet the points
+//! ([`crate::pipeline::ae_pose::AePoser`], Gauss–Newton, the same γ, start code = the training
+//! reference shape's code). Its ACAP decoding fixes the centroid, so a global translation t is
+//! fitted alongside (alternating: code for the targets shifted by −t, then t = mean residual
+//! at the control points; [`AE_TRANSLATION_ROUNDS`] rounds, warm-started), and the result is
+//! the decoded shape moved by t — measured, like the linear models, without further alignment.
+//!
+//! SPLOCS on triangle gradients (nonlinear Poisson decoding of rotations) is not fitted here.
 
 use serde::{Deserialize, Serialize};
 
@@ -27,6 +33,8 @@ use crate::geometry::graph_distance::EdgeGraph;
 use crate::mesh::Vec3;
 use crate::methods::posing::{LinearPoser, PoseConfig, RegionPoser};
 use crate::metrics::erms::{Alignment, erms};
+use crate::pipeline::ae_pose::{AePoseConfig, AePoser};
+use crate::pipeline::autoencoder::AeArtifact;
 use crate::pipeline::linear::LinearArtifact;
 use crate::pipeline::region::RegionArtifact;
 use crate::representation::RepresentationKind;
@@ -38,6 +46,21 @@ pub enum PointModel<'a> {
     Linear(&'a LinearArtifact),
     /// Region-based PCA.
     Region(&'a RegionArtifact),
+    /// The autoencoder (latent-code optimisation).
+    Ae(&'a AeArtifact),
+}
+
+/// Alternation rounds of code and translation in the autoencoder's control-point fit.
+pub const AE_TRANSLATION_ROUNDS: usize = 3;
+
+impl<'a> PointModel<'a> {
+    fn reborrow(&self) -> PointModel<'a> {
+        match *self {
+            PointModel::Linear(a) => PointModel::Linear(a),
+            PointModel::Region(a) => PointModel::Region(a),
+            PointModel::Ae(a) => PointModel::Ae(a),
+        }
+    }
 }
 
 impl PointModel<'_> {
@@ -46,6 +69,7 @@ impl PointModel<'_> {
         match self {
             PointModel::Linear(a) => &a.rest.positions,
             PointModel::Region(a) => &a.rest.positions,
+            PointModel::Ae(a) => &a.rest.positions,
         }
     }
 
@@ -53,6 +77,7 @@ impl PointModel<'_> {
         match self {
             PointModel::Linear(a) => &a.rest.faces,
             PointModel::Region(a) => &a.rest.faces,
+            PointModel::Ae(a) => &a.rest.faces,
         }
     }
 
@@ -60,6 +85,7 @@ impl PointModel<'_> {
         match self {
             PointModel::Linear(a) => a.header.unit_box.apply(p),
             PointModel::Region(a) => a.header.unit_box.apply(p),
+            PointModel::Ae(a) => a.header.unit_box.apply(p),
         }
     }
 }
@@ -75,6 +101,7 @@ pub struct ControlPointFit<'a> {
     vertices: Vec<usize>,
     linear: Option<LinearPoser<'a>>,
     region: Option<RegionPoser<'a>>,
+    ae: Option<AePoser<'a>>,
 }
 
 impl<'a> ControlPointFit<'a> {
@@ -82,7 +109,7 @@ impl<'a> ControlPointFit<'a> {
     /// Errors for a model that is not displacement-based, an empty or out-of-range vertex set,
     /// or a negative γ.
     pub fn new(model: PointModel<'a>, vertices: &[usize], gamma: f64) -> Result<Self> {
-        let (mut linear, mut region) = (None, None);
+        let (mut linear, mut region, mut ae) = (None, None, None);
         match &model {
             PointModel::Linear(a) => {
                 if !linear_supported(a) {
@@ -96,8 +123,11 @@ impl<'a> ControlPointFit<'a> {
             PointModel::Region(a) => {
                 region = Some(RegionPoser::new(&a.model, vertices, &PoseConfig { gamma, beta: a.header.beta })?);
             }
+            PointModel::Ae(a) => {
+                ae = Some(AePoser::new(a, vertices, &AePoseConfig { gamma, ..Default::default() })?);
+            }
         }
-        Ok(ControlPointFit { model, vertices: vertices.to_vec(), linear, region })
+        Ok(ControlPointFit { model, vertices: vertices.to_vec(), linear, region, ae })
     }
 
     /// Reconstructs one shape (data units) from its positions at the control vertices only:
@@ -106,6 +136,23 @@ impl<'a> ControlPointFit<'a> {
         let rest = self.model.rest();
         if shape.len() != rest.len() {
             return Err(Error::Invalid(format!("shape has {} vertices, the model {}", shape.len(), rest.len())));
+        }
+        if let (PointModel::Ae(a), Some(poser)) = (&self.model, &self.ae) {
+            let targets: Vec<Vec3> = self.vertices.iter().map(|&v| shape[v]).collect();
+            let mut z = a.reference_code().to_vec();
+            let mut t = [0.0; 3];
+            let mut positions = Vec::new();
+            for _ in 0..AE_TRANSLATION_ROUNDS {
+                let shifted: Vec<Vec3> = targets.iter().map(|p| [p[0] - t[0], p[1] - t[1], p[2] - t[2]]).collect();
+                let (z_new, pos) = poser.solve(&shifted, &z)?;
+                z = z_new;
+                let m = self.vertices.len() as f64;
+                t = std::array::from_fn(|k| {
+                    self.vertices.iter().zip(&targets).map(|(&v, p)| p[k] - pos[v][k]).sum::<f64>() / m
+                });
+                positions = pos;
+            }
+            return Ok(positions.into_iter().map(|p| [p[0] + t[0], p[1] + t[1], p[2] + t[2]]).collect());
         }
         let targets: Vec<Vec3> = self
             .vertices
@@ -168,14 +215,7 @@ pub fn erms_curve(
     for start in start_vertices(nv, trials, seed) {
         let points = sampler.sample(max_n, start)?;
         for (i, &n) in counts.iter().enumerate() {
-            let fit = ControlPointFit::new(
-                match &model {
-                    PointModel::Linear(a) => PointModel::Linear(a),
-                    PointModel::Region(a) => PointModel::Region(a),
-                },
-                &points[..n],
-                gamma,
-            )?;
+            let fit = ControlPointFit::new(model.reborrow(), &points[..n], gamma)?;
             let rec = test.iter().map(|s| fit.reconstruct(s)).collect::<Result<Vec<_>>>()?;
             per_n[i].push(erms(test, &rec, Alignment::None)?);
         }
@@ -255,11 +295,11 @@ mod tests {
             // γ = 0: plain (constrained) least squares on 18 equations for 3 unknowns.
             let fit = ControlPointFit::new(PointModel::Linear(&a), &pts, 0.0).unwrap();
             let rec = fit.reconstruct(&truth).unwrap();
-            let e = erms(&[truth.clone()], &[rec], Alignment::None).unwrap();
+            let e = erms(std::slice::from_ref(&truth), &[rec], Alignment::None).unwrap();
             assert!(e < 1e-6, "{constraint:?}: Erms {e}");
             // A small regulariser moves the answer only slightly.
             let fit = ControlPointFit::new(PointModel::Linear(&a), &pts, 1e-3).unwrap();
-            let e = erms(&[truth.clone()], &[fit.reconstruct(&truth).unwrap()], Alignment::None).unwrap();
+            let e = erms(std::slice::from_ref(&truth), &[fit.reconstruct(&truth).unwrap()], Alignment::None).unwrap();
             assert!(e > 0.0 && e < 5.0, "{constraint:?}: regularised Erms {e}");
         }
     }
@@ -271,7 +311,7 @@ mod tests {
         let truth = a.synthesize(&[-0.8, 0.5, 0.5]).unwrap();
         let pts = farthest_point_sampling_on(&a.rest.positions, &a.rest.faces, 10);
         let rec = ControlPointFit::new(PointModel::Linear(&a), &pts, 0.0).unwrap().reconstruct(&truth).unwrap();
-        let e = erms(&[truth.clone()], &[rec], Alignment::None).unwrap();
+        let e = erms(std::slice::from_ref(&truth), &[rec], Alignment::None).unwrap();
         assert!(e > 1.0, "Erms {e}");
         let b = model(WeightConstraint::Unconstrained, UnitBox::identity());
         let rec = ControlPointFit::new(PointModel::Linear(&b), &pts, 0.0).unwrap().reconstruct(&truth).unwrap();

@@ -176,7 +176,7 @@ impl DatasetData {
 enum Trained {
     Linear(LinearArtifact),
     Region(RegionArtifact),
-    Ae(AeArtifact),
+    Ae(Box<AeArtifact>),
 }
 
 impl Trained {
@@ -184,7 +184,7 @@ impl Trained {
         Ok(match kind {
             MethodKind::Pca | MethodKind::Splocs => Trained::Linear(LinearArtifact::load(dir)?),
             MethodKind::RegionPca => Trained::Region(RegionArtifact::load(dir)?),
-            MethodKind::Autoencoder => Trained::Ae(AeArtifact::load(dir)?),
+            MethodKind::Autoencoder => Trained::Ae(Box::new(AeArtifact::load(dir)?)),
         })
     }
 
@@ -379,12 +379,13 @@ fn control_key(cell: &Cell, cp: &ControlPointsConfig) -> String {
     )
 }
 
-/// Whether a method can be driven by control points here (displacement-based linear models).
+/// Whether a method can be driven by control points here (displacement-based linear models and
+/// the autoencoder).
 pub fn control_points_supported(m: &EvalMethod) -> bool {
     let rep = m.table.get("representation").and_then(|v| v.as_str()).unwrap_or("displacement");
     match m.kind {
         MethodKind::Pca | MethodKind::Splocs | MethodKind::RegionPca => rep == "displacement",
-        MethodKind::Autoencoder => false,
+        MethodKind::Autoencoder => true,
     }
 }
 
@@ -481,7 +482,9 @@ pub fn run(
                         Trained::Region(a) => {
                             erms_curve(PointModel::Region(&a), &ds.test, &cp.counts, cp.trials, cp.gamma, cp.seed)?
                         }
-                        Trained::Ae(_) => Vec::new(),
+                        Trained::Ae(a) => {
+                            erms_curve(PointModel::Ae(&a), &ds.test, &cp.counts, cp.trials, cp.gamma, cp.seed)?
+                        }
                     };
                     if let Some(r) = rows.iter().find(|r| !r.erms_mean.is_finite()) {
                         return Err(Error::Numerical(format!(
