@@ -19,6 +19,8 @@
 //! [control_points]                     # optional: reconstruction from sparse control points
 //! counts = [5, 10, 20, 50, 100, 200]   #   numbers n of control points
 //! trials = 5                           #   random start vertices per n (default 5)
+//! autoencoder_trials = 1               #   the same for the autoencoder (default 1: its fit is
+//!                                      #   an iterative optimisation, about 1 s per shape)
 //! gamma = 0.001                        #   Tikhonov weight (default 1e-3, see control_points)
 //! seed = 0                             #   seed of the start vertices (default 0)
 //! ```
@@ -61,6 +63,8 @@ pub struct ControlPointsConfig {
     pub counts: Vec<usize>,
     /// Random start vertices per n (≥ 1).
     pub trials: usize,
+    /// Random start vertices per n for the autoencoder (≥ 1; its fit is iterative and slow).
+    pub autoencoder_trials: usize,
     /// Dimensionless Tikhonov weight γ (≥ 0) of the weight fit.
     pub gamma: f64,
     /// Seed of the start vertices.
@@ -275,6 +279,16 @@ impl EvalConfig {
                         return Err(Error::config("control_points.trials", format!("`{other}` must be at least 1")));
                     }
                 };
+                let autoencoder_trials = match t.remove("autoencoder_trials") {
+                    None => 1,
+                    Some(toml::Value::Integer(i)) if i >= 1 => i as usize,
+                    Some(other) => {
+                        return Err(Error::config(
+                            "control_points.autoencoder_trials",
+                            format!("`{other}` must be at least 1"),
+                        ));
+                    }
+                };
                 let gamma = match t.remove("gamma") {
                     None => 1e-3,
                     Some(toml::Value::Float(x)) if x.is_finite() && x >= 0.0 => x,
@@ -296,10 +310,10 @@ impl EvalConfig {
                 if let Some(key) = t.keys().next() {
                     return Err(Error::config(
                         format!("control_points.{key}"),
-                        "unknown key (allowed: counts, trials, gamma, seed)",
+                        "unknown key (allowed: counts, trials, autoencoder_trials, gamma, seed)",
                     ));
                 }
-                Some(ControlPointsConfig { counts, trials, gamma, seed })
+                Some(ControlPointsConfig { counts, trials, autoencoder_trials, gamma, seed })
             }
         };
         if let Some(key) = root.keys().next() {

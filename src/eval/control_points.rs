@@ -51,7 +51,7 @@ pub enum PointModel<'a> {
 }
 
 /// Alternation rounds of code and translation in the autoencoder's control-point fit.
-pub const AE_TRANSLATION_ROUNDS: usize = 3;
+pub const AE_TRANSLATION_ROUNDS: usize = 2;
 
 impl<'a> PointModel<'a> {
     fn reborrow(&self) -> PointModel<'a> {

@@ -374,8 +374,8 @@ fn train_cell(cell: &Cell, dir: &Path, opts: &EvalOptions, inner: &mut dyn Progr
 /// Control-point key of a cell (its config text plus the control-point settings).
 fn control_key(cell: &Cell, cp: &ControlPointsConfig) -> String {
     format!(
-        "{}\n# control points: counts {:?}, trials {}, gamma {}, seed {}\n",
-        cell.config_text, cp.counts, cp.trials, cp.gamma, cp.seed
+        "{}\n# control points: counts {:?}, trials {}, autoencoder trials {}, gamma {}, seed {}\n",
+        cell.config_text, cp.counts, cp.trials, cp.autoencoder_trials, cp.gamma, cp.seed
     )
 }
 
@@ -483,7 +483,7 @@ pub fn run(
                             erms_curve(PointModel::Region(&a), &ds.test, &cp.counts, cp.trials, cp.gamma, cp.seed)?
                         }
                         Trained::Ae(a) => {
-                            erms_curve(PointModel::Ae(&a), &ds.test, &cp.counts, cp.trials, cp.gamma, cp.seed)?
+                            erms_curve(PointModel::Ae(&a), &ds.test, &cp.counts, cp.autoencoder_trials, cp.gamma, cp.seed)?
                         }
                     };
                     if let Some(r) = rows.iter().find(|r| !r.erms_mean.is_finite()) {

@@ -178,9 +178,17 @@ pub fn write_all(cfg: &EvalConfig, out: &Path, results: &[CellResult], cp: &[Con
             }
             let _ = writeln!(
                 md,
-                "### {}: reconstruction from n control points (test Erms, mean of {} farthest-point trials)\n",
+                "### {}: reconstruction from n control points\n\nTest Erms (no alignment), mean over farthest-point \
+                 trials (random start vertex); trials per method: {}.\n",
                 d.name,
-                cps[0].erms.trials
+                labels
+                    .iter()
+                    .map(|(m, _)| format!(
+                        "{m} {}",
+                        cps.iter().find(|r| r.method == *m).map_or(0, |r| r.erms.trials)
+                    ))
+                    .collect::<Vec<_>>()
+                    .join(", ")
             );
             md.push_str("| method | K |");
             for n in &counts {
