@@ -86,8 +86,10 @@ fn sweep_table_reuse_reproducibility_and_retraining() {
         let regions: f64 = f[11].parse().unwrap();
         assert!(regions >= 1.0, "{l}");
     }
-    let want: Vec<(String, String)> =
-        [("pca", "2"), ("pca", "4"), ("splocs", "3"), ("ae", "3")].iter().map(|(m, k)| (m.to_string(), k.to_string())).collect();
+    let want: Vec<(String, String)> = [("pca", "2"), ("pca", "4"), ("splocs", "3"), ("ae", "3")]
+        .iter()
+        .map(|(m, k)| (m.to_string(), k.to_string()))
+        .collect();
     assert_eq!(keys, want);
     // Translation-free ACAP is centroid-aligned, displacements are not.
     assert!(lines[4].contains(",acap,3,") && lines[4].contains(",centroid,"), "{}", lines[4]);

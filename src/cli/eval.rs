@@ -27,7 +27,8 @@ pub struct EvalArgs {
 
 pub fn run(a: EvalArgs) -> Result<()> {
     let t0 = Instant::now();
-    let cfg = EvalConfig::from_file(&a.config).with_context(|| format!("reading eval config {}", a.config.display()))?;
+    let cfg =
+        EvalConfig::from_file(&a.config).with_context(|| format!("reading eval config {}", a.config.display()))?;
     let out = a.out.clone().unwrap_or_else(|| PathBuf::from("checkpoints").join(format!("eval-{}", cfg.name)));
     let stop = Arc::new(AtomicBool::new(false));
     let flag = stop.clone();
@@ -72,5 +73,3 @@ pub fn run(a: EvalArgs) -> Result<()> {
     }
     Ok(())
 }
-
-

@@ -198,7 +198,10 @@ impl EvalConfig {
                         None => false,
                         Some(toml::Value::Boolean(b)) => b,
                         Some(other) => {
-                            return Err(Error::config(format!("{prefix}.ordered"), format!("`{other}` must be true or false")));
+                            return Err(Error::config(
+                                format!("{prefix}.ordered"),
+                                format!("`{other}` must be true or false"),
+                            ));
                         }
                     };
                     let mut probe = toml::Table::new();
@@ -304,7 +307,10 @@ impl EvalConfig {
                     None => 0,
                     Some(toml::Value::Integer(i)) if i >= 0 => i as u64,
                     Some(other) => {
-                        return Err(Error::config("control_points.seed", format!("`{other}` must be a non-negative integer")));
+                        return Err(Error::config(
+                            "control_points.seed",
+                            format!("`{other}` must be a non-negative integer"),
+                        ));
                     }
                 };
                 if let Some(key) = t.keys().next() {
@@ -341,7 +347,8 @@ impl EvalConfig {
                     t.insert("components".into(), (k as i64).into());
                     let name = format!("{}-{}-K{k}", d.name, m.label);
                     let text = train_config_text(&name, &d.table, &t);
-                    let config = Config::from_toml(&text).map_err(|e| rekey(e, "method", &format!("method.{}", m.label)))?;
+                    let config =
+                        Config::from_toml(&text).map_err(|e| rekey(e, "method", &format!("method.{}", m.label)))?;
                     out.push(Cell { dataset: di, method: mi, k, config_text: text, config });
                 }
             }

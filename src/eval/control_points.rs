@@ -236,9 +236,9 @@ pub fn erms_curve(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::methods::{LinearModel, WeightConstraint};
     use crate::mesh::TriMesh;
     use crate::mesh::primitives::icosphere;
+    use crate::methods::{LinearModel, WeightConstraint};
     use crate::pipeline::linear::LinearHeader;
     use crate::preprocess::UnitBox;
     use crate::representation::{Representation, RepresentationOptions};

@@ -269,7 +269,8 @@ impl Trained {
 /// Translates `result` so that its vertex centroid equals that of `truth`.
 fn centroid_align(result: &mut [Vec3], truth: &[Vec3]) {
     let n = truth.len().max(1) as f64;
-    let shift: Vec3 = std::array::from_fn(|k| truth.iter().zip(result.iter()).map(|(t, r)| t[k] - r[k]).sum::<f64>() / n);
+    let shift: Vec3 =
+        std::array::from_fn(|k| truth.iter().zip(result.iter()).map(|(t, r)| t[k] - r[k]).sum::<f64>() / n);
     for p in result.iter_mut() {
         for k in 0..3 {
             p[k] += shift[k];
@@ -427,9 +428,8 @@ pub fn run(
             data[cell.dataset] = Some(DatasetData::load(d)?);
         }
         let ds = data[cell.dataset].as_ref().expect("loaded above");
-        let metrics = train_cell(cell, &dir, opts, inner).map_err(|e| {
-            if stopped(opts) { interrupted() } else { Error::Invalid(format!("cell {label}: {e}")) }
-        })?;
+        let metrics = train_cell(cell, &dir, opts, inner)
+            .map_err(|e| if stopped(opts) { interrupted() } else { Error::Invalid(format!("cell {label}: {e}")) })?;
         let r = measure(cell, cfg, &dir, ds, &metrics)?;
         artifact::write_json(&dir.join(CELL_FILE), &r)?;
         // Use the values as stored (JSON text round trip), so a first run and a rerun that
@@ -482,9 +482,14 @@ pub fn run(
                         Trained::Region(a) => {
                             erms_curve(PointModel::Region(&a), &ds.test, &cp.counts, cp.trials, cp.gamma, cp.seed)?
                         }
-                        Trained::Ae(a) => {
-                            erms_curve(PointModel::Ae(&a), &ds.test, &cp.counts, cp.autoencoder_trials, cp.gamma, cp.seed)?
-                        }
+                        Trained::Ae(a) => erms_curve(
+                            PointModel::Ae(&a),
+                            &ds.test,
+                            &cp.counts,
+                            cp.autoencoder_trials,
+                            cp.gamma,
+                            cp.seed,
+                        )?,
                     };
                     if let Some(r) = rows.iter().find(|r| !r.erms_mean.is_finite()) {
                         return Err(Error::Numerical(format!(

@@ -96,10 +96,11 @@ pub fn line_plot(path: &Path, title: &str, x_label: &str, y_label: &str, series:
     let text = font_ready();
     let pts: Vec<(f64, f64)> =
         series.iter().flat_map(|s| s.points.iter().copied()).filter(|(x, y)| x.is_finite() && y.is_finite()).collect();
-    let (mut x0, mut x1, mut y0, mut y1) = pts.iter().fold(
-        (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY),
-        |(a, b, c, d), &(x, y)| (a.min(x), b.max(x), c.min(y), d.max(y)),
-    );
+    let (mut x0, mut x1, mut y0, mut y1) = pts
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY), |(a, b, c, d), &(x, y)| {
+            (a.min(x), b.max(x), c.min(y), d.max(y))
+        });
     if pts.is_empty() {
         (x0, x1, y0, y1) = (0.0, 1.0, 0.0, 1.0);
     }
@@ -107,7 +108,8 @@ pub fn line_plot(path: &Path, title: &str, x_label: &str, y_label: &str, series:
         y0 = 0.0;
     }
     let (dx, dy) = ((x1 - x0).max(1e-9), (y1 - y0).max(1e-9));
-    let (x0, x1, y0, y1) = (x0 - 0.05 * dx, x1 + 0.05 * dx, if y0 == 0.0 { 0.0 } else { y0 - 0.05 * dy }, y1 + 0.08 * dy);
+    let (x0, x1, y0, y1) =
+        (x0 - 0.05 * dx, x1 + 0.05 * dx, if y0 == 0.0 { 0.0 } else { y0 - 0.05 * dy }, y1 + 0.08 * dy);
 
     let mut buf = vec![255u8; (SIZE.0 * SIZE.1 * 3) as usize];
     {
@@ -136,16 +138,13 @@ pub fn line_plot(path: &Path, title: &str, x_label: &str, y_label: &str, series:
         for (i, s) in series.iter().enumerate() {
             let color = COLORS[i % COLORS.len()];
             let p: Vec<(f64, f64)> = s.points.iter().copied().filter(|(x, y)| x.is_finite() && y.is_finite()).collect();
-            let line = chart
-                .draw_series(LineSeries::new(p.clone(), color.stroke_width(2)))
-                .map_err(|e| plot_err(path, e))?;
+            let line =
+                chart.draw_series(LineSeries::new(p.clone(), color.stroke_width(2))).map_err(|e| plot_err(path, e))?;
             if text {
                 line.label(s.label.clone())
                     .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2)));
             }
-            chart
-                .draw_series(p.iter().map(|&xy| Circle::new(xy, 4, color.filled())))
-                .map_err(|e| plot_err(path, e))?;
+            chart.draw_series(p.iter().map(|&xy| Circle::new(xy, 4, color.filled()))).map_err(|e| plot_err(path, e))?;
         }
         if text && !series.is_empty() {
             chart
@@ -162,8 +161,7 @@ pub fn line_plot(path: &Path, title: &str, x_label: &str, y_label: &str, series:
     let img = image::RgbImage::from_raw(SIZE.0, SIZE.1, buf)
         .ok_or_else(|| Error::Invalid(format!("{}: bitmap buffer size mismatch", path.display())))?;
     let mut png = Vec::new();
-    img.write_to(&mut std::io::Cursor::new(&mut png), image::ImageOutputFormat::Png)
-        .map_err(|e| plot_err(path, e))?;
+    img.write_to(&mut std::io::Cursor::new(&mut png), image::ImageOutputFormat::Png).map_err(|e| plot_err(path, e))?;
     write_atomic(path, &png)
 }
 

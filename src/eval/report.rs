@@ -51,8 +51,11 @@ pub fn control_points_csv(rows: &[ControlPointRow]) -> String {
     let mut s = format!("{CONTROL_POINTS_HEADER}\n");
     for r in rows {
         let e = &r.erms;
-        let _ =
-            writeln!(s, "{},{},{},{},{},{},{},{}", r.dataset, r.method, r.k, e.n, e.erms_mean, e.erms_min, e.erms_max, e.trials);
+        let _ = writeln!(
+            s,
+            "{},{},{},{},{},{},{},{}",
+            r.dataset, r.method, r.k, e.n, e.erms_mean, e.erms_min, e.erms_max, e.trials
+        );
     }
     s
 }
@@ -183,10 +186,7 @@ pub fn write_all(cfg: &EvalConfig, out: &Path, results: &[CellResult], cp: &[Con
                 d.name,
                 labels
                     .iter()
-                    .map(|(m, _)| format!(
-                        "{m} {}",
-                        cps.iter().find(|r| r.method == *m).map_or(0, |r| r.erms.trials)
-                    ))
+                    .map(|(m, _)| format!("{m} {}", cps.iter().find(|r| r.method == *m).map_or(0, |r| r.erms.trials)))
                     .collect::<Vec<_>>()
                     .join(", ")
             );
@@ -209,7 +209,11 @@ pub fn write_all(cfg: &EvalConfig, out: &Path, results: &[CellResult], cp: &[Con
                 .iter()
                 .map(|(m, k)| Series {
                     label: format!("{m} (K = {k})"),
-                    points: cps.iter().filter(|r| r.method == *m).map(|r| (r.erms.n as f64, r.erms.erms_mean)).collect(),
+                    points: cps
+                        .iter()
+                        .filter(|r| r.method == *m)
+                        .map(|r| (r.erms.n as f64, r.erms.erms_mean))
+                        .collect(),
                 })
                 .collect();
             let png = format!("control_points_{}.png", d.name);
