@@ -22,6 +22,7 @@
 //! autoencoder_trials = 1               #   the same for the autoencoder (default 1: its fit is
 //!                                      #   an iterative optimisation, about 1 s per shape)
 //! gamma = 0.001                        #   Tikhonov weight (default 1e-3, see control_points)
+//! methods = ["pca", "splocs"]          #   method labels to include (default: every supported)
 //! seed = 0                             #   seed of the start vertices (default 0)
 //! ```
 
@@ -69,6 +70,8 @@ pub struct ControlPointsConfig {
     pub gamma: f64,
     /// Seed of the start vertices.
     pub seed: u64,
+    /// Method labels to include (`None`: every method that supports control points).
+    pub methods: Option<Vec<String>>,
 }
 
 /// A validated evaluation config.
@@ -313,13 +316,39 @@ impl EvalConfig {
                         ));
                     }
                 };
+                let methods_list = match t.remove("methods") {
+                    None => None,
+                    Some(toml::Value::Array(a)) => {
+                        let mut v = Vec::new();
+                        for x in a {
+                            match x {
+                                toml::Value::String(l) if methods.iter().any(|m: &EvalMethod| m.label == l) => {
+                                    v.push(l)
+                                }
+                                other => {
+                                    return Err(Error::config(
+                                        "control_points.methods",
+                                        format!("`{other}` is not the label of a [[method]]"),
+                                    ));
+                                }
+                            }
+                        }
+                        Some(v)
+                    }
+                    Some(other) => {
+                        return Err(Error::config(
+                            "control_points.methods",
+                            format!("`{other}` must be a list of labels"),
+                        ));
+                    }
+                };
                 if let Some(key) = t.keys().next() {
                     return Err(Error::config(
                         format!("control_points.{key}"),
-                        "unknown key (allowed: counts, trials, autoencoder_trials, gamma, seed)",
+                        "unknown key (allowed: counts, trials, autoencoder_trials, gamma, seed, methods)",
                     ));
                 }
-                Some(ControlPointsConfig { counts, trials, autoencoder_trials, gamma, seed })
+                Some(ControlPointsConfig { counts, trials, autoencoder_trials, gamma, seed, methods: methods_list })
             }
         };
         if let Some(key) = root.keys().next() {
@@ -410,6 +439,7 @@ counts = [10, 5]
             (GOOD.replace("counts = [10, 5]", "counts = [10, 0]"), "control_points.counts"),
             (GOOD.replace("counts = [10, 5]", "counts = [10]\ntrails = 3"), "control_points.trails"),
             (GOOD.replace("test = \"rest\"", ""), "dataset.tube.test"),
+            (GOOD.replace("counts = [10, 5]", "counts = [10]\nmethods = [\"ica\"]"), "control_points.methods"),
             (GOOD.replace("name = \"t\"", "name = \"t\"\nsweeep = 1"), "sweeep"),
             (GOOD.replace("label = \"ae\"", "label = \"pca\""), "method.pca.label"),
             (GOOD.replace("train = \"every:2\"", "train = \"9-3\""), "dataset.tube.train"),

@@ -448,6 +448,7 @@ pub fn run(
         let jobs: Vec<&Cell> = cells
             .iter()
             .filter(|c| control_points_supported(&cfg.methods[c.method]))
+            .filter(|c| cp.methods.as_ref().is_none_or(|l| l.contains(&cfg.methods[c.method].label)))
             .filter(|c| cfg.ks(c.method).last() == Some(&c.k))
             .collect();
         sweep.stage("control points", jobs.len() as u64);
