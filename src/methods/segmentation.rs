@@ -65,6 +65,12 @@ pub struct SegmentationConfig {
     /// k whose clusters are all compact (useful when few frames make chance correlations split
     /// a cluster at some k but not at larger ones).
     pub keep_searching: bool,
+    /// Fragment merging, in [0, 1): after k-means, every vertex-connected piece of a cluster
+    /// other than its largest piece, smaller than `min_piece` × the cluster's size, is handed to
+    /// the neighbouring cluster it shares most edges with. 0 (default, the paper) disables it.
+    /// With few training frames, chance correlations scatter small islands of a cluster across
+    /// the surface, which the compactness test then rejects (see `notes/posing.md`).
+    pub min_piece: f64,
 }
 
 impl Default for SegmentationConfig {
@@ -79,6 +85,7 @@ impl Default for SegmentationConfig {
             max_nodes: 1500,
             seed: 1,
             keep_searching: false,
+            min_piece: 0.0,
         }
     }
 }
@@ -105,6 +112,9 @@ impl SegmentationConfig {
         }
         if self.restarts == 0 {
             return Err(Error::config("restarts", "restarts (0) must be at least 1"));
+        }
+        if !(0.0..1.0).contains(&self.min_piece) {
+            return Err(Error::config("min_piece", format!("min_piece ({}) must lie in [0, 1)", self.min_piece)));
         }
         if self.max_nodes < 2 {
             return Err(Error::config("max_nodes", format!("max_nodes ({}) must be at least 2", self.max_nodes)));
@@ -260,6 +270,10 @@ pub fn segment(
         let node_labels = kmeans(&leading(k), n_nodes, k, config.restarts, config.seed);
         let mut l: Vec<usize> = owner.iter().map(|&o| node_labels[o]).collect();
         remove_spurs(&mut l, faces, &topo);
+        if config.min_piece > 0.0 {
+            merge_fragments(&mut l, k, &topo, config.min_piece);
+            remove_spurs(&mut l, faces, &topo);
+        }
         relabel(&l)
     };
     let labels = match config.regions {
@@ -316,6 +330,78 @@ fn remove_spurs(labels: &mut [usize], faces: &[[usize; 3]], topo: &Topology) {
         }
         if !changed {
             break;
+        }
+    }
+}
+
+/// Hands every edge-connected piece of a cluster that is not its largest piece and has fewer
+/// than `min_piece` × the cluster's vertices to the neighbouring cluster sharing most edges with
+/// it (up to 3 passes).
+fn merge_fragments(labels: &mut [usize], k: usize, topo: &Topology, min_piece: f64) {
+    let n = labels.len();
+    for _ in 0..3 {
+        // Pieces: connected components of the graph of same-label edges.
+        let mut piece = vec![usize::MAX; n];
+        let mut sizes: Vec<usize> = Vec::new();
+        let mut stack = Vec::new();
+        for s in 0..n {
+            if piece[s] != usize::MAX {
+                continue;
+            }
+            let id = sizes.len();
+            piece[s] = id;
+            stack.push(s);
+            let mut size = 0;
+            while let Some(v) = stack.pop() {
+                size += 1;
+                for &u in topo.neighbors(v) {
+                    if piece[u] == usize::MAX && labels[u] == labels[v] {
+                        piece[u] = id;
+                        stack.push(u);
+                    }
+                }
+            }
+            sizes.push(size);
+        }
+        let mut cluster_size = vec![0usize; k.max(labels.iter().max().map_or(0, |&m| m + 1))];
+        let mut largest = vec![usize::MAX; cluster_size.len()];
+        for v in 0..n {
+            cluster_size[labels[v]] += 1;
+        }
+        for v in 0..n {
+            let (l, p) = (labels[v], piece[v]);
+            if largest[l] == usize::MAX || sizes[p] > sizes[largest[l]] {
+                largest[l] = p;
+            }
+        }
+        // Per small piece, count edges to each other label.
+        let mut votes: std::collections::HashMap<usize, Vec<(usize, usize)>> = std::collections::HashMap::new();
+        for v in 0..n {
+            let (l, p) = (labels[v], piece[v]);
+            if p == largest[l] || sizes[p] as f64 >= min_piece * cluster_size[l] as f64 {
+                continue;
+            }
+            let e = votes.entry(p).or_default();
+            for &u in topo.neighbors(v) {
+                if labels[u] != l {
+                    match e.iter_mut().find(|c| c.0 == labels[u]) {
+                        Some(c) => c.1 += 1,
+                        None => e.push((labels[u], 1)),
+                    }
+                }
+            }
+        }
+        let target: std::collections::HashMap<usize, usize> = votes
+            .into_iter()
+            .filter_map(|(p, c)| c.into_iter().max_by_key(|c| (c.1, usize::MAX - c.0)).map(|c| (p, c.0)))
+            .collect();
+        if target.is_empty() {
+            break;
+        }
+        for v in 0..n {
+            if let Some(&t) = target.get(&piece[v]) {
+                labels[v] = t;
+            }
         }
     }
 }
