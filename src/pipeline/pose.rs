@@ -157,26 +157,18 @@ impl PoseModel {
         Ok(PoseResult { start, positions, weights })
     }
 
-    /// The vertices a drag of `v` should stay in, with a name: the region containing `v`
-    /// (region PCA, the first one when `v` is shared), the support of the component with the
+    /// The vertices a drag of `v` should stay in, with a name: the grown region(s) containing
+    /// `v` (region PCA; several when `v` is a shared boundary vertex), the support of the component with the
     /// largest magnitude at `v` (linear models: vertices above 10⁻³ of that component's largest
     /// magnitude), or `None` (autoencoder).
     pub fn locality_set(&self, v: usize) -> Option<(String, Vec<usize>)> {
         match self {
             PoseModel::Region(a) => {
-                let l = *a.labels.get(v)?;
-                let set: Vec<usize> = (0..a.labels.len()).filter(|&u| a.labels[u] == l).collect();
                 let grown = a.model.memberships();
-                let mut region: Vec<usize> = grown
-                    .iter()
-                    .enumerate()
-                    .filter(|(_, m)| m.iter().any(|&(r, _)| r == grown[v][0].0))
-                    .map(|(u, _)| u)
-                    .collect();
-                if region.is_empty() {
-                    region = set;
-                }
-                Some((format!("region {} ({} vertices)", grown[v][0].0, region.len()), region))
+                let mine: Vec<usize> = grown.get(v)?.iter().map(|&(r, _)| r).collect();
+                let set: Vec<usize> = (0..grown.len()).filter(|&u| grown[u].iter().any(|(r, _)| mine.contains(r))).collect();
+                let names: Vec<String> = mine.iter().map(|r| r.to_string()).collect();
+                Some((format!("region(s) {} ({} vertices)", names.join("+"), set.len()), set))
             }
             PoseModel::Linear(a) => {
                 let m = &a.model;
