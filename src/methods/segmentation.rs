@@ -271,7 +271,7 @@ pub fn segment(
         let mut l: Vec<usize> = owner.iter().map(|&o| node_labels[o]).collect();
         remove_spurs(&mut l, faces, &topo);
         if config.min_piece > 0.0 {
-            merge_fragments(&mut l, k, &topo, config.min_piece);
+            merge_fragments(&mut l, faces, &topo, config.min_piece);
             remove_spurs(&mut l, faces, &topo);
         }
         relabel(&l)
@@ -334,51 +334,51 @@ fn remove_spurs(labels: &mut [usize], faces: &[[usize; 3]], topo: &Topology) {
     }
 }
 
-/// Hands every edge-connected piece of a cluster that is not its largest piece and has fewer
-/// than `min_piece` × the cluster's vertices to the neighbouring cluster sharing most edges with
-/// it (up to 3 passes).
-fn merge_fragments(labels: &mut [usize], k: usize, topo: &Topology, min_piece: f64) {
+/// Hands every piece of a cluster that is not its largest piece and has fewer than
+/// `min_piece` × the cluster's vertices to the neighbouring cluster sharing most edges with it
+/// (up to 3 passes). Pieces are those of the compactness test: vertices joined through
+/// triangles lying entirely in the cluster; a vertex in no such triangle is a piece of its own.
+fn merge_fragments(labels: &mut [usize], faces: &[[usize; 3]], topo: &Topology, min_piece: f64) {
+    use std::collections::HashMap;
     let n = labels.len();
+    fn find(p: &mut [usize], mut x: usize) -> usize {
+        while p[x] != x {
+            p[x] = p[p[x]];
+            x = p[x];
+        }
+        x
+    }
     for _ in 0..3 {
-        // Pieces: connected components of the graph of same-label edges.
-        let mut piece = vec![usize::MAX; n];
-        let mut sizes: Vec<usize> = Vec::new();
-        let mut stack = Vec::new();
-        for s in 0..n {
-            if piece[s] != usize::MAX {
-                continue;
-            }
-            let id = sizes.len();
-            piece[s] = id;
-            stack.push(s);
-            let mut size = 0;
-            while let Some(v) = stack.pop() {
-                size += 1;
-                for &u in topo.neighbors(v) {
-                    if piece[u] == usize::MAX && labels[u] == labels[v] {
-                        piece[u] = id;
-                        stack.push(u);
+        let mut parent: Vec<usize> = (0..n).collect();
+        for f in faces {
+            if labels[f[0]] == labels[f[1]] && labels[f[1]] == labels[f[2]] {
+                let a = find(&mut parent, f[0]);
+                for &v in &f[1..] {
+                    let b = find(&mut parent, v);
+                    if a != b {
+                        parent[b] = a;
                     }
                 }
             }
-            sizes.push(size);
         }
-        let mut cluster_size = vec![0usize; k.max(labels.iter().max().map_or(0, |&m| m + 1))];
-        let mut largest = vec![usize::MAX; cluster_size.len()];
+        let piece: Vec<usize> = (0..n).map(|v| find(&mut parent, v)).collect();
+        let mut size: HashMap<usize, usize> = HashMap::new();
+        let mut cluster_size: HashMap<usize, usize> = HashMap::new();
         for v in 0..n {
-            cluster_size[labels[v]] += 1;
+            *size.entry(piece[v]).or_default() += 1;
+            *cluster_size.entry(labels[v]).or_default() += 1;
         }
+        let mut largest: HashMap<usize, usize> = HashMap::new();
         for v in 0..n {
-            let (l, p) = (labels[v], piece[v]);
-            if largest[l] == usize::MAX || sizes[p] > sizes[largest[l]] {
-                largest[l] = p;
+            let e = largest.entry(labels[v]).or_insert(piece[v]);
+            if size[&piece[v]] > size[e] {
+                *e = piece[v];
             }
         }
-        // Per small piece, count edges to each other label.
-        let mut votes: std::collections::HashMap<usize, Vec<(usize, usize)>> = std::collections::HashMap::new();
+        let mut votes: HashMap<usize, Vec<(usize, usize)>> = HashMap::new();
         for v in 0..n {
             let (l, p) = (labels[v], piece[v]);
-            if p == largest[l] || sizes[p] as f64 >= min_piece * cluster_size[l] as f64 {
+            if largest[&l] == p || size[&p] as f64 >= min_piece * cluster_size[&l] as f64 {
                 continue;
             }
             let e = votes.entry(p).or_default();
@@ -391,7 +391,7 @@ fn merge_fragments(labels: &mut [usize], k: usize, topo: &Topology, min_piece: f
                 }
             }
         }
-        let target: std::collections::HashMap<usize, usize> = votes
+        let target: HashMap<usize, usize> = votes
             .into_iter()
             .filter_map(|(p, c)| c.into_iter().max_by_key(|c| (c.1, usize::MAX - c.0)).map(|c| (p, c.0)))
             .collect();
