@@ -81,7 +81,9 @@ fn bench_ae(c: &mut Criterion) {
                 dir.display()
             ))
             .unwrap();
-            eprintln!("training a 30-iteration SCAPE autoencoder for the posing benchmark (set MESHDECO_AE_MODEL to skip)");
+            eprintln!(
+                "training a 30-iteration SCAPE autoencoder for the posing benchmark (set MESHDECO_AE_MODEL to skip)"
+            );
             autoencoder::train(&cfg, &out, false, None, &mut meshdeco::pipeline::Silent).unwrap();
             out
         }

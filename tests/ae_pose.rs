@@ -33,7 +33,9 @@ fn acap_decode_adjoint_matches_forward() {
             let g: Vec<Vec3> = (0..n).map(|_| std::array::from_fn(|_| rng.uniform() - 0.5)).collect();
             let lhs: f64 = (0..n).map(|v| (0..3).map(|c| g[v][c] * (p[v][c] - p0[v][c])).sum::<f64>()).sum();
             let adj = acap.decode_transforms_adjoint(&g).unwrap();
-            let rhs: f64 = (0..n).map(|v| (0..3).map(|i| (0..3).map(|j| adj[v][i][j] * t[v][i][j]).sum::<f64>()).sum::<f64>()).sum();
+            let rhs: f64 = (0..n)
+                .map(|v| (0..3).map(|i| (0..3).map(|j| adj[v][i][j] * t[v][i][j]).sum::<f64>()).sum::<f64>())
+                .sum();
             eprintln!("{n} vertices, {decoder:?}: <g, Ap> = {lhs:.12}, <A*g, T> = {rhs:.12}");
             assert!((lhs - rhs).abs() <= 1e-9 * lhs.abs().max(1.0), "{lhs} vs {rhs}");
         }
@@ -67,13 +69,14 @@ seed = 1
 fn autoencoder_drag_reduces_error_and_jacobian_matches_finite_differences() {
     let (a, out) = tiny_ae();
     let rest = a.rest_in_data_units();
-    let z0 = a.encode_frames(&meshdeco::mesh::MeshSequence {
-        faces: rest.faces.clone(),
-        frames: vec![rest.positions.clone()],
-        names: vec!["rest".into()],
-    })
-    .unwrap()
-    .remove(0);
+    let z0 = a
+        .encode_frames(&meshdeco::mesh::MeshSequence {
+            faces: rest.faces.clone(),
+            frames: vec![rest.positions.clone()],
+            names: vec!["rest".into()],
+        })
+        .unwrap()
+        .remove(0);
     let start = a.decode_codes(std::slice::from_ref(&z0)).unwrap().remove(0);
     // The most-moving vertex of the training data: the one the model can move.
     let k = z0.len();

@@ -22,8 +22,8 @@ pub struct RenderArgs {
 }
 
 pub fn run(a: RenderArgs) -> Result<()> {
-    let view = render::View::parse(&a.view)
-        .with_context(|| format!("--view: `{}` is not one of front, side, top", a.view))?;
+    let view =
+        render::View::parse(&a.view).with_context(|| format!("--view: `{}` is not one of front, side, top", a.view))?;
     let (w, h) = a
         .size
         .split_once(['x', 'X'])

@@ -106,8 +106,8 @@ pub fn render(mesh: &TriMesh, colors: Option<&[[u8; 3]]>, opts: &RenderOptions) 
         q.iter().map(|p| [0.5 * w as f64 + s * (p[0] - cx), 0.5 * h as f64 - s * (p[1] - cy), p[2]]).collect();
     // Light from the camera, a little up and to the left.
     let light = {
-        let l = [-0.3, 0.4, 1.0];
-        let len = (l[0] * l[0] + l[1] * l[1] + l[2] * l[2] as f64).sqrt();
+        let l: Vec3 = [-0.3, 0.4, 1.0];
+        let len = (l[0] * l[0] + l[1] * l[1] + l[2] * l[2]).sqrt();
         [l[0] / len, l[1] / len, l[2] / len]
     };
     let mut depth = vec![f64::NEG_INFINITY; w * h];
