@@ -105,12 +105,7 @@ impl DecoderVjp {
     /// features x̂, N × 9) and returns (x̂, [J(z)ᵀ u_m for every m], K numbers each).
     ///
     /// `m` is the number of cotangents `cotangents` will return (it sizes the batch).
-    pub fn decode_vjp(
-        &self,
-        z: &[f64],
-        m: usize,
-        cotangents: Cotangents<'_>,
-    ) -> Result<(Vec<f64>, Vec<Vec<f64>>)> {
+    pub fn decode_vjp(&self, z: &[f64], m: usize, cotangents: Cotangents<'_>) -> Result<(Vec<f64>, Vec<Vec<f64>>)> {
         self.check_code(z)?;
         let (n, k) = (self.weights.n, self.weights.k);
         let l = self.weights.layers.len();
