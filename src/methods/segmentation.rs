@@ -768,6 +768,36 @@ mod tests {
     }
 
     #[test]
+    fn fragment_merging_removes_small_islands_only() {
+        // 12 × 12-vertex grid: left half cluster 0, right half cluster 1, a 2 × 2-cell island of
+        // cluster 0 inside the right half, and a large second piece of cluster 1 on the left.
+        let g = crate::mesh::primitives::grid(11, 11, 1.0);
+        let topo = Topology::new(g.n_vertices(), &g.faces);
+        let at = |x: usize, y: usize| y * 12 + x;
+        let mut labels: Vec<usize> = (0..144).map(|v| usize::from(v % 12 >= 6)).collect();
+        for y in 4..7 {
+            for x in 8..11 {
+                labels[at(x, y)] = 0;
+            }
+        }
+        assert!(!all_compact(&labels, 2, &g.faces));
+        let mut merged = labels.clone();
+        merge_fragments(&mut merged, &g.faces, &topo, 0.3);
+        assert!(all_compact(&merged, 2, &g.faces), "island not merged");
+        assert!((0..144).filter(|&v| labels[v] != merged[v]).all(|v| labels[v] == 0 && v % 12 >= 8));
+        // A piece above the fraction stays (and the cluster stays non-compact).
+        let mut big: Vec<usize> = (0..144).map(|v| usize::from(v % 12 >= 6)).collect();
+        for y in 0..12 {
+            for x in 9..12 {
+                big[at(x, y)] = 0;
+            }
+        }
+        let before = big.clone();
+        merge_fragments(&mut big, &g.faces, &topo, 0.3);
+        assert_eq!(big, before);
+    }
+
+    #[test]
     fn compactness_detects_split_cluster() {
         // Two triangles sharing no vertex, same label: not compact.
         let faces = [[0, 1, 2], [3, 4, 5], [2, 3, 6]];
