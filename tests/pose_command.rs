@@ -138,5 +138,11 @@ fn bad_constraint_files_fail_with_reasons() {
         assert!(!e.contains("panicked"), "{e}");
         assert!(!d.join("x.obj").exists());
     }
+    // Linear models on triangle gradients are refused, naming method and representation.
+    let tg = train(&d, "pca-tg", "kind = \"pca\"\ncomponents = 3\nrepresentation = \"triangle-gradient\"");
+    std::fs::write(d.join("ok.json"), "{\"3\": [0, 0, 0]}").unwrap();
+    let o = meshdeco(&["pose", tg.to_str().unwrap(), "--constraints", "ok.json", "--out", "x.obj"], &d);
+    let e = String::from_utf8_lossy(&o.stderr).into_owned();
+    assert!(!o.status.success() && e.contains("`pca` model on the `triangle-gradient` representation"), "{e}");
     std::fs::remove_dir_all(&d).unwrap();
 }
