@@ -39,6 +39,8 @@
 //! | `theta` | autoencoder | 5.0 | hinge threshold of the max-weight term |
 //! | `checkpoint_every` | autoencoder | 200 | iterations between checkpoints |
 //! | `scaling` | autoencoder | `per-dimension` | feature scaling: `per-dimension` \| `grouped` (the reference code) |
+//! | `engine` | autoencoder | `hand` | `hand` (hand-written CPU step, fast) \| `graph` (Burn autodiff graph on `device`) |
+//! | `device` | autoencoder | `cpu` | `cpu` \| `wgpu` (needs `engine = "graph"` and a build with `--features wgpu`) |
 //! | `consistency` | autoencoder, pca | `global` | ACAP rotation consistency: `bfs` \| `global` |
 //! | `lambda`, `r`, `threshold`, `regions`, `max_regions`, `beta`, `gamma` | region-pca | see region-pca docs | segmentation and coupling |
 //! | `min_piece`, `keep_searching` | region-pca | 0, false | fragment merging and search past the first non-compact k (`SegmentationConfig`) |
@@ -223,6 +225,8 @@ pub struct RawMethod {
     pub checkpoint_every: Option<usize>,
     pub scaling: Option<String>,
     pub consistency: Option<String>,
+    pub engine: Option<String>,
+    pub device: Option<String>,
     pub lambda: Option<f64>,
     pub r: Option<f64>,
     pub threshold: Option<f64>,
@@ -327,6 +331,8 @@ fn allowed_keys(kind: MethodKind) -> &'static [&'static str] {
             "checkpoint_every",
             "scaling",
             "consistency",
+            "engine",
+            "device",
         ],
     }
 }
@@ -507,6 +513,16 @@ fn check_method_values(kind: MethodKind, m: &RawMethod) -> Result<()> {
     {
         return Err(Error::config("method.scaling", format!("`{s}`: expected per-dimension or grouped")));
     }
+    if let Some(s) = &m.engine
+        && crate::nn::config::Engine::parse(s).is_none()
+    {
+        return Err(Error::config("method.engine", format!("`{s}`: expected hand or graph")));
+    }
+    if let Some(s) = &m.device
+        && crate::nn::config::ComputeDevice::parse(s).is_none()
+    {
+        return Err(Error::config("method.device", format!("`{s}`: expected cpu or wgpu")));
+    }
     if let Some(s) = &m.consistency
         && s != "bfs"
         && s != "global"
@@ -602,6 +618,19 @@ admm = { rho = 10, iterations = 10 }
         );
         assert!(FrameSelection::parse("k", "every:0").is_err());
         assert!(FrameSelection::parse("k", "x").is_err());
+    }
+
+    #[test]
+    fn engine_and_device_are_checked() {
+        let base = "[data]\npath = \"synthetic:tube\"\n[method]\nkind = \"autoencoder\"\n";
+        let ok = Config::from_toml(&format!("{base}engine = \"graph\"\ndevice = \"cpu\"\n")).unwrap();
+        assert_eq!(ok.method.engine.as_deref(), Some("graph"));
+        for (line, key) in [("engine = \"fast\"", "method.engine"), ("device = \"tpu\"", "method.device")] {
+            let e = Config::from_toml(&format!("{base}{line}\n")).unwrap_err().to_string();
+            assert!(e.contains(key), "{e}");
+        }
+        let pca = "[data]\npath = \"synthetic:tube\"\n[method]\nkind = \"pca\"\nengine = \"graph\"\n";
+        assert!(Config::from_toml(pca).unwrap_err().to_string().contains("engine"));
     }
 
     #[test]

@@ -43,6 +43,55 @@ pub struct AutoencoderConfig {
     pub checkpoint_every: usize,
     /// Seed of the initialisation and of the mini-batch draws.
     pub seed: u64,
+    /// How the loss and its gradients are computed (same mathematics either way).
+    pub engine: Engine,
+    /// Where the [`Engine::Graph`] computation runs.
+    pub device: ComputeDevice,
+}
+
+/// How a training step computes the loss and the gradients.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Engine {
+    /// Hand-written `f32` forward and backward pass on the CPU (SIMD, rayon): the fast default.
+    #[default]
+    Hand,
+    /// Burn's autodiff graph of the same model and loss ([`super::loss::reference_loss`]) on
+    /// [`AutoencoderConfig::device`]: the way onto a GPU, about 20–40× slower on the CPU.
+    Graph,
+}
+
+impl Engine {
+    /// Parses `hand` | `graph`.
+    pub fn parse(s: &str) -> Option<Self> {
+        match s {
+            "hand" => Some(Engine::Hand),
+            "graph" => Some(Engine::Graph),
+            _ => None,
+        }
+    }
+}
+
+/// The Burn device of the [`Engine::Graph`] computation.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ComputeDevice {
+    /// Burn's ndarray backend on the CPU.
+    #[default]
+    Cpu,
+    /// Burn's wgpu backend on the default GPU adapter (needs a build with `--features wgpu`).
+    Wgpu,
+}
+
+impl ComputeDevice {
+    /// Parses `cpu` | `wgpu`.
+    pub fn parse(s: &str) -> Option<Self> {
+        match s {
+            "cpu" => Some(ComputeDevice::Cpu),
+            "wgpu" => Some(ComputeDevice::Wgpu),
+            _ => None,
+        }
+    }
 }
 
 impl Default for AutoencoderConfig {
@@ -64,6 +113,8 @@ impl Default for AutoencoderConfig {
             d_max: 0.4,
             checkpoint_every: 200,
             seed: 0,
+            engine: Engine::Hand,
+            device: ComputeDevice::Cpu,
         }
     }
 }
@@ -114,6 +165,21 @@ impl AutoencoderConfig {
         if self.d_min >= self.d_max {
             return Err(bad("d_min", format!("d_min ({}) must be below d_max ({})", self.d_min, self.d_max)));
         }
+        if self.device == ComputeDevice::Wgpu {
+            if self.engine != Engine::Graph {
+                return Err(bad(
+                    "device",
+                    "device = \"wgpu\" needs engine = \"graph\" (the hand engine is CPU code)".into(),
+                ));
+            }
+            if !cfg!(feature = "wgpu") {
+                return Err(bad(
+                    "device",
+                    "device = \"wgpu\" needs a build with the wgpu feature (cargo build --release --features wgpu)"
+                        .into(),
+                ));
+            }
+        }
         Ok(())
     }
 
@@ -126,6 +192,9 @@ impl AutoencoderConfig {
         b.iterations = 0;
         a.checkpoint_every = 0;
         b.checkpoint_every = 0;
+        // Both engines compute the same step; a run may switch between them.
+        (a.engine, a.device) = (Engine::Hand, ComputeDevice::Cpu);
+        (b.engine, b.device) = (Engine::Hand, ComputeDevice::Cpu);
         if a != b {
             let sa = serde_json::to_string(&a).unwrap_or_default();
             let sb = serde_json::to_string(&b).unwrap_or_default();

@@ -18,13 +18,14 @@ use burn::tensor::{Bytes, Device, Tensor, TensorData};
 use serde::Serialize;
 
 use super::checkpoint::{Checkpoint, CheckpointHeader};
-use super::config::AutoencoderConfig;
+use super::config::{AutoencoderConfig, ComputeDevice, Engine};
 use super::data::TrainingData;
 use super::engine::{self, Grads, Weights, Workspace};
 use super::inference::Autoencoder;
 use super::kernels::padded_width;
+use super::loss::reference_loss;
 use super::loss::{CenterDistances, LossTerms, SupportMaps};
-use super::model::{AutoencoderModule, COMPONENT_BLOCK};
+use super::model::{AutoencoderModule, COMPONENT_BLOCK, NeighborTensors};
 use super::neighbors::NeighborIndex;
 use super::rng::Rng;
 use crate::error::{Error, Result};
@@ -36,6 +37,22 @@ use rayon::prelude::*;
 #[allow(deprecated)]
 pub fn default_device() -> Device {
     Device::ndarray().autodiff()
+}
+
+/// The autodiff device a run's parameters live on: the CPU device, or with
+/// [`ComputeDevice::Wgpu`] (a build with the `wgpu` feature) Burn's wgpu backend on the default
+/// adapter.
+pub fn training_device(device: ComputeDevice) -> Result<Device> {
+    match device {
+        ComputeDevice::Cpu => Ok(default_device()),
+        #[cfg(feature = "wgpu")]
+        ComputeDevice::Wgpu => Ok(Device::wgpu(burn::tensor::DeviceKind::DefaultDevice).autodiff()),
+        #[cfg(not(feature = "wgpu"))]
+        ComputeDevice::Wgpu => Err(Error::config(
+            "method.device",
+            "device = \"wgpu\" needs a build with the wgpu feature (cargo build --release --features wgpu)",
+        )),
+    }
 }
 
 /// What a run reports after every step (for a progress bar and a JSONL log).
@@ -106,6 +123,8 @@ pub struct Trainer<'a> {
     workspace: Workspace,
     grads: Grads,
     full_batch: Option<Vec<f32>>,
+    /// Neighbour index tensors of the [`Engine::Graph`] step (built on its first step).
+    graph_neighbors: Option<NeighborTensors>,
     last_loss: Option<LossTerms>,
     timings: StepTimings,
 }
@@ -140,7 +159,7 @@ impl<'a> Trainer<'a> {
                 neighbors.n_vertices()
             )));
         }
-        let device = default_device();
+        let device = training_device(config.device)?;
         let module = config.init(data.n_vertices(), &device);
         let b = config.batch_size.unwrap_or(data.n_shapes()).min(data.n_shapes());
         let workspace = Workspace::new(data.n_vertices(), config.components, config.layers, padded_width(b));
@@ -162,6 +181,7 @@ impl<'a> Trainer<'a> {
             iteration: 0,
             workspace,
             full_batch,
+            graph_neighbors: None,
             last_loss: None,
             timings: StepTimings::default(),
         })
@@ -259,6 +279,22 @@ impl<'a> Trainer<'a> {
         let t2 = Instant::now();
         let n_shapes = self.data.n_shapes();
         let b = self.config.batch_size.unwrap_or(n_shapes).min(n_shapes);
+        if self.config.engine == Engine::Graph {
+            let idx: Vec<usize> =
+                if b == n_shapes { (0..n_shapes).collect() } else { self.rng.sample_distinct(n_shapes, b) };
+            self.weights = w;
+            let terms = self.graph_step(&idx)?;
+            self.iteration += 1;
+            self.last_loss = Some(terms);
+            let t3 = Instant::now();
+            self.timings = StepTimings {
+                snapshot: (t1 - t0).as_secs_f64(),
+                support: (t2 - t1).as_secs_f64(),
+                forward_backward: (t3 - t2).as_secs_f64(),
+                optimizer: 0.0,
+            };
+            return Ok(terms);
+        }
         let batch_owned;
         let x: &[f32] = match &self.full_batch {
             Some(x) => x,
@@ -312,6 +348,44 @@ impl<'a> Trainer<'a> {
     /// Phase timings of the last completed step.
     pub fn last_step_timings(&self) -> StepTimings {
         self.timings
+    }
+
+    /// One step of [`Engine::Graph`]: Burn autodiff of [`reference_loss`] on the run's device,
+    /// then the same optimizers as the hand engine (so checkpoints are interchangeable). Errors
+    /// and leaves the parameters untouched when the loss is not finite.
+    fn graph_step(&mut self, idx: &[usize]) -> Result<LossTerms> {
+        let nb = self.graph_neighbors.get_or_insert_with(|| NeighborTensors::new(self.neighbors, &self.device));
+        let module = self.module.take().expect("module present between steps");
+        let x = self.data.batch_tensor(idx, &self.device);
+        let (loss, terms) = reference_loss(&module, x, nb, &self.maps, &self.config);
+        if !terms.is_finite() {
+            self.module = Some(module);
+            return Err(Error::Numerical(format!(
+                "the loss is not finite at iteration {} (reconstruction {}, sparsity {}, hinge {}); \
+                 training stopped and no checkpoint was written for it",
+                self.iteration + 1,
+                terms.reconstruction,
+                terms.sparsity,
+                terms.hinge
+            )));
+        }
+        let mut grads = GradientsParams::from_grads(loss.backward(), &module);
+        let AutoencoderModule { layers, components } = module;
+        let lr = self.config.learning_rate;
+        let mut blocks = Vec::with_capacity(components.len());
+        for (p, o) in components.into_iter().zip(self.block_optimizers.iter_mut()) {
+            match grads.remove::<2>(p.id) {
+                Some(g) => {
+                    let mut gp = GradientsParams::new();
+                    gp.register(p.id, g);
+                    blocks.push(o.step(lr, p, gp));
+                }
+                None => blocks.push(p),
+            }
+        }
+        let layers = self.optimizer.step(lr, layers, grads);
+        self.module = Some(AutoencoderModule { layers, components: blocks });
+        Ok(terms)
     }
 
     /// Registers the hand-computed gradients with Burn and runs Burn's Adam: the layers and
@@ -441,6 +515,7 @@ impl<'a> Trainer<'a> {
 
     /// The trained model for inference.
     pub fn into_model(self) -> Result<Autoencoder> {
-        Autoencoder::new(self.config, self.module.unwrap(), self.neighbors.clone())
+        let module = self.module.unwrap().to_device(&default_device());
+        Autoencoder::new(self.config, module, self.neighbors.clone())
     }
 }

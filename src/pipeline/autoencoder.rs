@@ -109,6 +109,8 @@ pub fn autoencoder_config(cfg: &Config) -> Result<AutoencoderConfig> {
         d_max,
         checkpoint_every: m.checkpoint_every.unwrap_or(d.checkpoint_every),
         seed: m.seed.unwrap_or(d.seed),
+        engine: m.engine.as_deref().and_then(crate::nn::config::Engine::parse).unwrap_or(d.engine),
+        device: m.device.as_deref().and_then(crate::nn::config::ComputeDevice::parse).unwrap_or(d.device),
         ..d
     };
     c.validate().map_err(|e| match e {
