@@ -12,6 +12,7 @@ mod geodesic;
 mod inspect;
 mod pose;
 mod progress;
+mod render;
 mod train;
 
 /// Sparse, localized deformation components from meshes that share one connectivity.
@@ -45,6 +46,8 @@ pub enum Command {
     Train(train::TrainArgs),
     /// Pose a trained model by dragging vertices: constraints JSON {"vertex": [x, y, z]} → mesh.
     Pose(pose::PoseArgs),
+    /// Picture of a mesh as PNG (z-buffer, Lambert shading × vertex colours of a PLY).
+    Render(render::RenderArgs),
 }
 
 /// Runs one parsed command line.
@@ -60,6 +63,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Inspect(a) => inspect::run(a),
         Command::Train(a) => train::run(a),
         Command::Pose(a) => pose::run(a),
+        Command::Render(a) => render::run(a),
     }
 }
 
