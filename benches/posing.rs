@@ -60,9 +60,62 @@ fn bench(c: &mut Criterion) {
     });
 }
 
+/// One autoencoder drag solve on SCAPE (2161 vertices, K = 50): the model from
+/// `MESHDECO_AE_MODEL` (an artefact directory of `meshdeco train` on SCAPE), else a small model
+/// trained here for 30 iterations (the solve's cost does not depend on training quality).
+/// Skips, saying why, when `../shared/data/scape` is absent.
+fn bench_ae(c: &mut Criterion) {
+    use meshdeco::pipeline::ae_pose::{AePoseConfig, AePoser};
+    use meshdeco::pipeline::autoencoder::{self, AeArtifact};
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/scape");
+    if !dir.exists() {
+        eprintln!("skipping pose_solve_autoencoder_scape: {} absent", dir.display());
+        return;
+    }
+    let model_dir = match std::env::var("MESHDECO_AE_MODEL") {
+        Ok(p) => std::path::PathBuf::from(p),
+        Err(_) => {
+            let out = std::env::temp_dir().join(format!("meshdeco-bench-ae-pose-{}", std::process::id()));
+            let cfg = meshdeco::config::Config::from_toml(&format!(
+                "name = \"scape-bench\"\n[data]\npath = \"{}\"\ntrain = \"1-36\"\n[method]\nkind = \"autoencoder\"\ncomponents = 50\niterations = 30\n",
+                dir.display()
+            ))
+            .unwrap();
+            eprintln!(
+                "training a 30-iteration SCAPE autoencoder for the posing benchmark (set MESHDECO_AE_MODEL to skip)"
+            );
+            autoencoder::train(&cfg, &out, false, None, &mut meshdeco::pipeline::Silent).unwrap();
+            out
+        }
+    };
+    let a = AeArtifact::load(&model_dir).unwrap();
+    let z0 = a.reference_code().to_vec();
+    let start = a.decode_codes(std::slice::from_ref(&z0)).unwrap().remove(0);
+    let v = 412.min(start.len() - 1);
+    let t = [start[v][0] + 0.02, start[v][1] + 0.03, start[v][2]];
+    let poser = AePoser::new(&a, &[v], &AePoseConfig::default()).unwrap();
+    let (_, p, rep) = poser.solve_report(&[t], &z0).unwrap();
+    eprintln!(
+        "SCAPE autoencoder drag of vertex {v} by {:.4}: landing error {:.4}, {} Gauss-Newton iterations",
+        meshdeco::mesh::dist(start[v], t),
+        meshdeco::mesh::dist(p[v], t),
+        rep.iterations
+    );
+    c.bench_function("pose_solve_autoencoder_scape", |b| b.iter(|| black_box(poser.solve(&[t], &z0).unwrap())));
+    c.bench_function("pose_build_autoencoder_scape", |b| {
+        b.iter(|| black_box(AePoser::new(&a, &[v], &AePoseConfig::default()).unwrap()))
+    });
+}
+
+criterion_group! {
+    name = ae_benches;
+    config = Criterion::default().sample_size(10).measurement_time(std::time::Duration::from_secs(5));
+    targets = bench_ae
+}
+
 criterion_group! {
     name = benches;
     config = Criterion::default().sample_size(20).measurement_time(std::time::Duration::from_secs(3));
     targets = bench
 }
-criterion_main!(benches);
+criterion_main!(benches, ae_benches);

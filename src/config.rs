@@ -43,6 +43,7 @@
 //! | `device` | autoencoder | `cpu` | `cpu` \| `wgpu` (needs `engine = "graph"` and a build with `--features wgpu`) |
 //! | `consistency` | autoencoder, pca | `global` | ACAP rotation consistency: `bfs` \| `global` |
 //! | `lambda`, `r`, `threshold`, `regions`, `max_regions`, `beta`, `gamma` | region-pca | see region-pca docs | segmentation and coupling |
+//! | `min_piece`, `keep_searching` | region-pca | 0, false | fragment merging and search past the first non-compact k (`SegmentationConfig`) |
 
 use std::path::{Path, PathBuf};
 
@@ -233,6 +234,10 @@ pub struct RawMethod {
     pub max_regions: Option<usize>,
     pub beta: Option<f64>,
     pub gamma: Option<f64>,
+    /// region-pca: fragment merging fraction in [0, 1) (see `SegmentationConfig::min_piece`).
+    pub min_piece: Option<f64>,
+    /// region-pca: try every k up to `max_regions` and keep the largest compact one.
+    pub keep_searching: Option<bool>,
 }
 
 /// A painted vertex set: inline indices or a file of whitespace/comma-separated indices.
@@ -308,6 +313,8 @@ fn allowed_keys(kind: MethodKind) -> &'static [&'static str] {
             "beta",
             "gamma",
             "geodesic_m",
+            "min_piece",
+            "keep_searching",
         ],
         MethodKind::Autoencoder => &[
             "components",

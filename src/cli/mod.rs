@@ -13,6 +13,7 @@ mod geodesic;
 mod inspect;
 mod pose;
 mod progress;
+mod render;
 mod train;
 
 /// Sparse, localized deformation components from meshes that share one connectivity.
@@ -48,6 +49,8 @@ pub enum Command {
     Eval(eval::EvalArgs),
     /// Pose a trained model by dragging vertices: constraints JSON {"vertex": [x, y, z]} → mesh.
     Pose(pose::PoseArgs),
+    /// Picture of a mesh as PNG (z-buffer, Lambert shading × vertex colours of a PLY).
+    Render(render::RenderArgs),
 }
 
 /// Runs one parsed command line.
@@ -64,6 +67,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Train(a) => train::run(a),
         Command::Eval(a) => eval::run(a),
         Command::Pose(a) => pose::run(a),
+        Command::Render(a) => render::run(a),
     }
 }
 

@@ -8,6 +8,7 @@ pub mod load;
 pub mod obj;
 pub mod off;
 pub mod ply;
+pub mod render;
 pub mod sequence;
 pub mod topology;
 pub mod write;

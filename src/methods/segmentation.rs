@@ -65,6 +65,12 @@ pub struct SegmentationConfig {
     /// k whose clusters are all compact (useful when few frames make chance correlations split
     /// a cluster at some k but not at larger ones).
     pub keep_searching: bool,
+    /// Fragment merging, in [0, 1): after k-means, every vertex-connected piece of a cluster
+    /// other than its largest piece, smaller than `min_piece` × the cluster's size, is handed to
+    /// the neighbouring cluster it shares most edges with. 0 (default, the paper) disables it.
+    /// With few training frames, chance correlations scatter small islands of a cluster across
+    /// the surface, which the compactness test then rejects (see `notes/posing.md`).
+    pub min_piece: f64,
 }
 
 impl Default for SegmentationConfig {
@@ -79,6 +85,7 @@ impl Default for SegmentationConfig {
             max_nodes: 1500,
             seed: 1,
             keep_searching: false,
+            min_piece: 0.0,
         }
     }
 }
@@ -105,6 +112,9 @@ impl SegmentationConfig {
         }
         if self.restarts == 0 {
             return Err(Error::config("restarts", "restarts (0) must be at least 1"));
+        }
+        if !(0.0..1.0).contains(&self.min_piece) {
+            return Err(Error::config("min_piece", format!("min_piece ({}) must lie in [0, 1)", self.min_piece)));
         }
         if self.max_nodes < 2 {
             return Err(Error::config("max_nodes", format!("max_nodes ({}) must be at least 2", self.max_nodes)));
@@ -260,6 +270,10 @@ pub fn segment(
         let node_labels = kmeans(&leading(k), n_nodes, k, config.restarts, config.seed);
         let mut l: Vec<usize> = owner.iter().map(|&o| node_labels[o]).collect();
         remove_spurs(&mut l, faces, &topo);
+        if config.min_piece > 0.0 {
+            merge_fragments(&mut l, faces, &topo, config.min_piece);
+            remove_spurs(&mut l, faces, &topo);
+        }
         relabel(&l)
     };
     let labels = match config.regions {
@@ -316,6 +330,78 @@ fn remove_spurs(labels: &mut [usize], faces: &[[usize; 3]], topo: &Topology) {
         }
         if !changed {
             break;
+        }
+    }
+}
+
+/// Hands every piece of a cluster that is not its largest piece and has fewer than
+/// `min_piece` × the cluster's vertices to the neighbouring cluster sharing most edges with it
+/// (up to 3 passes). Pieces are those of the compactness test: vertices joined through
+/// triangles lying entirely in the cluster; a vertex in no such triangle is a piece of its own.
+fn merge_fragments(labels: &mut [usize], faces: &[[usize; 3]], topo: &Topology, min_piece: f64) {
+    use std::collections::HashMap;
+    let n = labels.len();
+    fn find(p: &mut [usize], mut x: usize) -> usize {
+        while p[x] != x {
+            p[x] = p[p[x]];
+            x = p[x];
+        }
+        x
+    }
+    for _ in 0..3 {
+        let mut parent: Vec<usize> = (0..n).collect();
+        for f in faces {
+            if labels[f[0]] == labels[f[1]] && labels[f[1]] == labels[f[2]] {
+                let a = find(&mut parent, f[0]);
+                for &v in &f[1..] {
+                    let b = find(&mut parent, v);
+                    if a != b {
+                        parent[b] = a;
+                    }
+                }
+            }
+        }
+        let piece: Vec<usize> = (0..n).map(|v| find(&mut parent, v)).collect();
+        let mut size: HashMap<usize, usize> = HashMap::new();
+        let mut cluster_size: HashMap<usize, usize> = HashMap::new();
+        for v in 0..n {
+            *size.entry(piece[v]).or_default() += 1;
+            *cluster_size.entry(labels[v]).or_default() += 1;
+        }
+        let mut largest: HashMap<usize, usize> = HashMap::new();
+        for v in 0..n {
+            let e = largest.entry(labels[v]).or_insert(piece[v]);
+            if size[&piece[v]] > size[e] {
+                *e = piece[v];
+            }
+        }
+        let mut votes: HashMap<usize, Vec<(usize, usize)>> = HashMap::new();
+        for v in 0..n {
+            let (l, p) = (labels[v], piece[v]);
+            if largest[&l] == p || size[&p] as f64 >= min_piece * cluster_size[&l] as f64 {
+                continue;
+            }
+            let e = votes.entry(p).or_default();
+            for &u in topo.neighbors(v) {
+                if labels[u] != l {
+                    match e.iter_mut().find(|c| c.0 == labels[u]) {
+                        Some(c) => c.1 += 1,
+                        None => e.push((labels[u], 1)),
+                    }
+                }
+            }
+        }
+        let target: HashMap<usize, usize> = votes
+            .into_iter()
+            .filter_map(|(p, c)| c.into_iter().max_by_key(|c| (c.1, usize::MAX - c.0)).map(|c| (p, c.0)))
+            .collect();
+        if target.is_empty() {
+            break;
+        }
+        for v in 0..n {
+            if let Some(&t) = target.get(&piece[v]) {
+                labels[v] = t;
+            }
         }
     }
 }
@@ -679,6 +765,36 @@ mod tests {
         assert!(bad.validate().unwrap_err().to_string().contains("-2"));
         let bad = SegmentationConfig { max_regions: 1, ..Default::default() };
         assert!(bad.validate().is_err());
+    }
+
+    #[test]
+    fn fragment_merging_removes_small_islands_only() {
+        // 12 × 12-vertex grid: left half cluster 0, right half cluster 1, a 2 × 2-cell island of
+        // cluster 0 inside the right half, and a large second piece of cluster 1 on the left.
+        let g = crate::mesh::primitives::grid(11, 11, 1.0);
+        let topo = Topology::new(g.n_vertices(), &g.faces);
+        let at = |x: usize, y: usize| y * 12 + x;
+        let mut labels: Vec<usize> = (0..144).map(|v| usize::from(v % 12 >= 6)).collect();
+        for y in 4..7 {
+            for x in 8..11 {
+                labels[at(x, y)] = 0;
+            }
+        }
+        assert!(!all_compact(&labels, 2, &g.faces));
+        let mut merged = labels.clone();
+        merge_fragments(&mut merged, &g.faces, &topo, 0.3);
+        assert!(all_compact(&merged, 2, &g.faces), "island not merged");
+        assert!((0..144).filter(|&v| labels[v] != merged[v]).all(|v| labels[v] == 0 && v % 12 >= 8));
+        // A piece above the fraction stays (and the cluster stays non-compact).
+        let mut big: Vec<usize> = (0..144).map(|v| usize::from(v % 12 >= 6)).collect();
+        for y in 0..12 {
+            for x in 9..12 {
+                big[at(x, y)] = 0;
+            }
+        }
+        let before = big.clone();
+        merge_fragments(&mut big, &g.faces, &topo, 0.3);
+        assert_eq!(big, before);
     }
 
     #[test]

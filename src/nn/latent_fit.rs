@@ -24,6 +24,9 @@ use super::kernels::{
 use super::neighbors::NeighborIndex;
 use crate::error::{Error, Result};
 
+/// Callback of [`DecoderVjp::decode_vjp`]: decoded features (N × 9) → M cotangents (N × 9 each).
+pub type Cotangents<'c> = &'c mut dyn FnMut(&[f64]) -> Result<Vec<Vec<f64>>>;
+
 /// Decoder forward pass plus vector–Jacobian products for one code at a time. Build once per
 /// model ([`DecoderVjp::new`] copies the parameters), then call per evaluation.
 #[derive(Debug, Clone)]
@@ -102,13 +105,7 @@ impl DecoderVjp {
     /// features x̂, N × 9) and returns (x̂, [J(z)ᵀ u_m for every m], K numbers each).
     ///
     /// `m` is the number of cotangents `cotangents` will return (it sizes the batch).
-    #[allow(clippy::type_complexity)]
-    pub fn decode_vjp(
-        &self,
-        z: &[f64],
-        m: usize,
-        cotangents: &mut dyn FnMut(&[f64]) -> Result<Vec<Vec<f64>>>,
-    ) -> Result<(Vec<f64>, Vec<Vec<f64>>)> {
+    pub fn decode_vjp(&self, z: &[f64], m: usize, cotangents: Cotangents<'_>) -> Result<(Vec<f64>, Vec<Vec<f64>>)> {
         self.check_code(z)?;
         let (n, k) = (self.weights.n, self.weights.k);
         let l = self.weights.layers.len();

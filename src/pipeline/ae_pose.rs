@@ -147,7 +147,9 @@ impl<'a> AePoser<'a> {
             return Err(Error::Invalid("autoencoder posing: no constrained vertex given".into()));
         }
         if let Some(&v) = vertices.iter().find(|&&v| v >= n) {
-            return Err(Error::Invalid(format!("autoencoder posing: constrained vertex {v} out of range ({n} vertices)")));
+            return Err(Error::Invalid(format!(
+                "autoencoder posing: constrained vertex {v} out of range ({n} vertices)"
+            )));
         }
         let acap: &Acap = artifact.representation.acap().ok_or_else(|| {
             Error::Invalid(format!(
@@ -260,7 +262,10 @@ impl<'a> AePoser<'a> {
         let nv = self.vertices.len();
         let k = self.decoder.n_components();
         if targets.len() != nv {
-            return Err(Error::Invalid(format!("autoencoder posing: {} targets for {nv} constrained vertices", targets.len())));
+            return Err(Error::Invalid(format!(
+                "autoencoder posing: {} targets for {nv} constrained vertices",
+                targets.len()
+            )));
         }
         if let Some(i) = targets.iter().position(|t| t.iter().any(|x| !x.is_finite())) {
             return Err(Error::Invalid(format!("autoencoder posing: target {i} is not finite ({:?})", targets[i])));

@@ -24,14 +24,13 @@ use crate::methods::posing::{LinearPoser, PoseConfig, RegionPoser, energy_share}
 use crate::representation::RepresentationKind;
 
 /// A loaded model of any kind that can be posed.
-#[allow(clippy::large_enum_variant)]
 pub enum PoseModel {
     /// `pca` or `splocs`.
-    Linear(LinearArtifact),
+    Linear(Box<LinearArtifact>),
     /// `region-pca`.
-    Region(RegionArtifact),
+    Region(Box<RegionArtifact>),
     /// `autoencoder`.
-    Autoencoder(AeArtifact),
+    Autoencoder(Box<AeArtifact>),
 }
 
 /// Hyperparameters of posing: γ, β for the linear and region models, the autoencoder's
@@ -60,9 +59,9 @@ impl PoseModel {
         let v: serde_json::Value = artifact::read_json(&json)?;
         let method = v.get("method").and_then(|m| m.as_str()).unwrap_or("");
         match method {
-            "pca" | "splocs" => Ok(PoseModel::Linear(LinearArtifact::load(dir)?)),
-            "region-pca" => Ok(PoseModel::Region(RegionArtifact::load(dir)?)),
-            "autoencoder" => Ok(PoseModel::Autoencoder(AeArtifact::load(dir)?)),
+            "pca" | "splocs" => Ok(PoseModel::Linear(Box::new(LinearArtifact::load(dir)?))),
+            "region-pca" => Ok(PoseModel::Region(Box::new(RegionArtifact::load(dir)?))),
+            "autoencoder" => Ok(PoseModel::Autoencoder(Box::new(AeArtifact::load(dir)?))),
             other => Err(Error::Invalid(format!("{}: method `{other}` cannot be posed", json.display()))),
         }
     }
@@ -89,7 +88,9 @@ impl PoseModel {
     /// What the start weights are when no mesh is given.
     pub fn default_start_description(&self) -> &'static str {
         match self {
-            PoseModel::Linear(_) => "all weights 0 (the model's offset: the training mean for PCA, the rest shape for SPLOCS)",
+            PoseModel::Linear(_) => {
+                "all weights 0 (the model's offset: the training mean for PCA, the rest shape for SPLOCS)"
+            }
             PoseModel::Region(_) => "all coefficients 0 (the per-region training means)",
             PoseModel::Autoencoder(_) => "the code of the rest mesh",
         }
@@ -98,7 +99,11 @@ impl PoseModel {
     /// Start weights: the encoding of `from` (N positions, data units) or the default.
     pub fn start_weights(&self, from: Option<&[Vec3]>) -> Result<Vec<f64>> {
         let rest = self.rest();
-        let seq = |p: &[Vec3]| MeshSequence { faces: rest.faces.clone(), frames: vec![p.to_vec()], names: vec!["from".into()] };
+        let seq = |p: &[Vec3]| MeshSequence {
+            faces: rest.faces.clone(),
+            frames: vec![p.to_vec()],
+            names: vec!["from".into()],
+        };
         if let Some(p) = from
             && p.len() != rest.n_vertices()
         {
@@ -158,35 +163,27 @@ impl PoseModel {
         Ok(PoseResult { start, positions, weights })
     }
 
-    /// The vertices a drag of `v` should stay in, with a name: the region containing `v`
-    /// (region PCA, the first one when `v` is shared), the support of the component with the
+    /// The vertices a drag of `v` should stay in, with a name: the grown region(s) containing
+    /// `v` (region PCA; several when `v` is a shared boundary vertex), the support of the component with the
     /// largest magnitude at `v` (linear models: vertices above 10⁻³ of that component's largest
     /// magnitude), or `None` (autoencoder).
     pub fn locality_set(&self, v: usize) -> Option<(String, Vec<usize>)> {
         match self {
             PoseModel::Region(a) => {
-                let l = *a.labels.get(v)?;
-                let set: Vec<usize> = (0..a.labels.len()).filter(|&u| a.labels[u] == l).collect();
                 let grown = a.model.memberships();
-                let mut region: Vec<usize> = grown
-                    .iter()
-                    .enumerate()
-                    .filter(|(_, m)| m.iter().any(|&(r, _)| r == grown[v][0].0))
-                    .map(|(u, _)| u)
-                    .collect();
-                if region.is_empty() {
-                    region = set;
-                }
-                Some((format!("region {} ({} vertices)", grown[v][0].0, region.len()), region))
+                let mine: Vec<usize> = grown.get(v)?.iter().map(|&(r, _)| r).collect();
+                let set: Vec<usize> =
+                    (0..grown.len()).filter(|&u| grown[u].iter().any(|(r, _)| mine.contains(r))).collect();
+                let names: Vec<String> = mine.iter().map(|r| r.to_string()).collect();
+                Some((format!("region(s) {} ({} vertices)", names.join("+"), set.len()), set))
             }
             PoseModel::Linear(a) => {
                 let m = &a.model;
                 if m.width != 3 || v >= m.n_elements {
                     return None;
                 }
-                let k = (0..m.n_components).max_by(|&p, &q| {
-                    m.component_group_norms(p)[v].total_cmp(&m.component_group_norms(q)[v])
-                })?;
+                let k = (0..m.n_components)
+                    .max_by(|&p, &q| m.component_group_norms(p)[v].total_cmp(&m.component_group_norms(q)[v]))?;
                 let norms = m.component_group_norms(k);
                 let top = norms.iter().cloned().fold(0.0, f64::max);
                 let set: Vec<usize> = (0..m.n_elements).filter(|&u| norms[u] > 1e-3 * top).collect();
@@ -199,7 +196,12 @@ impl PoseModel {
 
 /// Model-space targets: data-unit `targets` through the unit box, minus the rest position when
 /// `rest` is given (displacement models).
-fn model_targets(vertices: &[usize], targets: &[Vec3], ub: crate::preprocess::UnitBox, rest: Option<&[Vec3]>) -> Vec<Vec3> {
+fn model_targets(
+    vertices: &[usize],
+    targets: &[Vec3],
+    ub: crate::preprocess::UnitBox,
+    rest: Option<&[Vec3]>,
+) -> Vec<Vec3> {
     vertices
         .iter()
         .zip(targets)

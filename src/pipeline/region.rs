@@ -146,6 +146,8 @@ fn seg_config(cfg: &Config) -> SegmentationConfig {
         regions: m.regions,
         max_regions: m.max_regions.unwrap_or(d.max_regions),
         seed: m.seed.unwrap_or(d.seed),
+        min_piece: m.min_piece.unwrap_or(d.min_piece),
+        keep_searching: m.keep_searching.unwrap_or(d.keep_searching),
         ..d
     }
 }
@@ -270,6 +272,8 @@ pub fn train(cfg: &Config, out: &Path, progress: &mut dyn Progress) -> Result<Tr
         Some(k) => tbl.insert("regions".into(), (k as i64).into()),
         None => tbl.insert("max_regions".into(), (sc.max_regions as i64).into()),
     };
+    tbl.insert("min_piece".into(), sc.min_piece.into());
+    tbl.insert("keep_searching".into(), sc.keep_searching.into());
     tbl.insert("beta".into(), rc.beta.into());
     tbl.insert("gamma".into(), gamma.into());
     tbl.insert("seed".into(), (sc.seed as i64).into());

@@ -1,0 +1,52 @@
+//! `meshdeco render`: a PNG picture of a mesh (software rasterizer, vertex colours of a PLY).
+
+use std::path::PathBuf;
+
+use anyhow::{Context, Result, bail};
+use clap::Args;
+use meshdeco::mesh::{self, render};
+
+#[derive(Debug, Args)]
+pub struct RenderArgs {
+    /// Mesh file (.obj, .ply, .off); an ASCII PLY's red/green/blue vertex colours are used.
+    pub mesh: PathBuf,
+    /// Output PNG, written atomically.
+    #[arg(long, short)]
+    pub out: PathBuf,
+    /// View direction: front (from +z), side (from +x), top (from +y).
+    #[arg(long, default_value = "front")]
+    pub view: String,
+    /// Image size WxH in pixels.
+    #[arg(long, default_value = "800x800")]
+    pub size: String,
+}
+
+pub fn run(a: RenderArgs) -> Result<()> {
+    let view =
+        render::View::parse(&a.view).with_context(|| format!("--view: `{}` is not one of front, side, top", a.view))?;
+    let (w, h) = a
+        .size
+        .split_once(['x', 'X'])
+        .and_then(|(w, h)| Some((w.trim().parse::<usize>().ok()?, h.trim().parse::<usize>().ok()?)))
+        .with_context(|| format!("--size: `{}` is not WxH (e.g. 800x600)", a.size))?;
+    let m = mesh::load_mesh(&a.mesh)?;
+    let is_ply = a.mesh.extension().and_then(|e| e.to_str()).is_some_and(|e| e.eq_ignore_ascii_case("ply"));
+    let colors = if is_ply { render::vertex_colors_from_ply(&a.mesh)? } else { None };
+    let opts = render::RenderOptions { width: w, height: h, view, ..Default::default() };
+    let rgb = render::render(&m, colors.as_deref(), &opts)?;
+    let img = image::RgbImage::from_raw(w as u32, h as u32, rgb).context("image buffer size")?;
+    let mut png = Vec::new();
+    img.write_to(&mut std::io::Cursor::new(&mut png), image::ImageOutputFormat::Png)
+        .with_context(|| format!("encoding {}", a.out.display()))?;
+    if !a.out.extension().is_some_and(|e| e.eq_ignore_ascii_case("png")) {
+        bail!("{}: output must be a .png file", a.out.display());
+    }
+    meshdeco::artifact::write_atomic(&a.out, &png)?;
+    println!(
+        "wrote {} ({w}×{h}, {} view, {})",
+        a.out.display(),
+        a.view,
+        if colors.is_some() { "vertex colours" } else { "grey" }
+    );
+    Ok(())
+}

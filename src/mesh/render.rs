@@ -1,0 +1,223 @@
+//! A small software rasterizer for pictures of meshes: orthographic view along a coordinate
+//! axis, z-buffer, Lambert shading (two-sided, smooth vertex normals) times per-vertex colours.
+//!
+//! Output is an RGB8 image, row-major from the top-left pixel. [`vertex_colors_from_ply`] reads
+//! the `red green blue` vertex properties of an ASCII PLY (e.g. `segmentation.ply`), which the
+//! mesh loader skips.
+
+use std::path::Path;
+
+use super::{TriMesh, Vec3};
+use crate::geometry::normals::{NormalWeighting, vertex_normals};
+use crate::{Error, Result};
+
+/// Viewing direction (orthographic; +y is up except for `Top`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum View {
+    /// Camera on +z looking towards −z; screen right = +x, up = +y.
+    Front,
+    /// Camera on +x looking towards −x; screen right = −z, up = +y.
+    Side,
+    /// Camera on +y looking down; screen right = +x, up = −z.
+    Top,
+}
+
+impl View {
+    /// Parses `front`, `side` or `top`.
+    pub fn parse(s: &str) -> Option<View> {
+        match s {
+            "front" => Some(View::Front),
+            "side" => Some(View::Side),
+            "top" => Some(View::Top),
+            _ => None,
+        }
+    }
+
+    /// (screen x, screen y, depth towards the camera) of a point.
+    fn project(self, p: Vec3) -> Vec3 {
+        match self {
+            View::Front => [p[0], p[1], p[2]],
+            View::Side => [-p[2], p[1], p[0]],
+            View::Top => [p[0], -p[2], p[1]],
+        }
+    }
+}
+
+/// Picture settings.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RenderOptions {
+    /// Image width in pixels (≥ 8).
+    pub width: usize,
+    /// Image height in pixels (≥ 8).
+    pub height: usize,
+    pub view: View,
+    /// Background colour.
+    pub background: [u8; 3],
+    /// Colour of vertices when none are given.
+    pub base_color: [u8; 3],
+}
+
+impl Default for RenderOptions {
+    fn default() -> Self {
+        RenderOptions { width: 800, height: 800, view: View::Front, background: [255; 3], base_color: [200; 3] }
+    }
+}
+
+/// Renders `mesh` with optional per-vertex `colors` (N). Returns `width × height × 3` bytes.
+/// Errors on bad sizes, bad face indices or non-finite positions.
+pub fn render(mesh: &TriMesh, colors: Option<&[[u8; 3]]>, opts: &RenderOptions) -> Result<Vec<u8>> {
+    let (w, h) = (opts.width, opts.height);
+    if !(8..=16384).contains(&w) || !(8..=16384).contains(&h) {
+        return Err(Error::Invalid(format!("render: image size {w}×{h} must be between 8 and 16384 per side")));
+    }
+    let n = mesh.n_vertices();
+    if let Some((f, face)) = mesh.first_bad_index() {
+        return Err(Error::Invalid(format!("render: face {f} {face:?} refers past {n} vertices")));
+    }
+    if let Some(i) = mesh.positions.iter().position(|p| p.iter().any(|x| !x.is_finite())) {
+        return Err(Error::Invalid(format!("render: vertex {i} is not finite")));
+    }
+    if let Some(c) = colors
+        && c.len() != n
+    {
+        return Err(Error::Invalid(format!("render: {} colours for {n} vertices", c.len())));
+    }
+    let mut img: Vec<u8> = (0..w * h).flat_map(|_| opts.background).collect();
+    if n == 0 || mesh.faces.is_empty() {
+        return Ok(img);
+    }
+    let q: Vec<Vec3> = mesh.positions.iter().map(|&p| opts.view.project(p)).collect();
+    let normals: Vec<Vec3> = vertex_normals(&mesh.positions, &mesh.faces, NormalWeighting::Area)
+        .into_iter()
+        .map(|nv| opts.view.project(nv))
+        .collect();
+    // Fit the projected bounding box into the image with a 5 % margin, square pixels.
+    let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+    for p in &q {
+        for k in 0..2 {
+            lo[k] = lo[k].min(p[k]);
+            hi[k] = hi[k].max(p[k]);
+        }
+    }
+    let span = [(hi[0] - lo[0]).max(1e-300), (hi[1] - lo[1]).max(1e-300)];
+    let s = (0.9 * w as f64 / span[0]).min(0.9 * h as f64 / span[1]);
+    let (cx, cy) = (0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]));
+    let px: Vec<[f64; 3]> =
+        q.iter().map(|p| [0.5 * w as f64 + s * (p[0] - cx), 0.5 * h as f64 - s * (p[1] - cy), p[2]]).collect();
+    // Light from the camera, a little up and to the left.
+    let light = {
+        let l: Vec3 = [-0.3, 0.4, 1.0];
+        let len = (l[0] * l[0] + l[1] * l[1] + l[2] * l[2]).sqrt();
+        [l[0] / len, l[1] / len, l[2] / len]
+    };
+    let mut depth = vec![f64::NEG_INFINITY; w * h];
+    let col = |v: usize| colors.map_or(opts.base_color, |c| c[v]);
+    for f in &mesh.faces {
+        let [a, b, c] = [px[f[0]], px[f[1]], px[f[2]]];
+        let area = (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]);
+        if area.abs() < 1e-12 {
+            continue;
+        }
+        let x0 = a[0].min(b[0]).min(c[0]).floor().max(0.0) as usize;
+        let x1 = (a[0].max(b[0]).max(c[0]).ceil() as usize).min(w - 1);
+        let y0 = a[1].min(b[1]).min(c[1]).floor().max(0.0) as usize;
+        let y1 = (a[1].max(b[1]).max(c[1]).ceil() as usize).min(h - 1);
+        for y in y0..=y1 {
+            for x in x0..=x1 {
+                let (sx, sy) = (x as f64 + 0.5, y as f64 + 0.5);
+                let l1 = ((b[0] - sx) * (c[1] - sy) - (b[1] - sy) * (c[0] - sx)) / area;
+                let l2 = ((c[0] - sx) * (a[1] - sy) - (c[1] - sy) * (a[0] - sx)) / area;
+                let l3 = 1.0 - l1 - l2;
+                if l1 < 0.0 || l2 < 0.0 || l3 < 0.0 {
+                    continue;
+                }
+                let z = l1 * a[2] + l2 * b[2] + l3 * c[2];
+                let i = y * w + x;
+                if z <= depth[i] {
+                    continue;
+                }
+                depth[i] = z;
+                let mut nrm = [0.0; 3];
+                for k in 0..3 {
+                    nrm[k] = l1 * normals[f[0]][k] + l2 * normals[f[1]][k] + l3 * normals[f[2]][k];
+                }
+                let len = (nrm[0] * nrm[0] + nrm[1] * nrm[1] + nrm[2] * nrm[2]).sqrt().max(1e-300);
+                let lambert = ((nrm[0] * light[0] + nrm[1] * light[1] + nrm[2] * light[2]) / len).abs();
+                let shade = 0.2 + 0.8 * lambert;
+                let (ca, cb, cc) = (col(f[0]), col(f[1]), col(f[2]));
+                for k in 0..3 {
+                    let v = l1 * ca[k] as f64 + l2 * cb[k] as f64 + l3 * cc[k] as f64;
+                    img[3 * i + k] = (v * shade).round().clamp(0.0, 255.0) as u8;
+                }
+            }
+        }
+    }
+    Ok(img)
+}
+
+/// The `red green blue` vertex properties of an ASCII PLY file (`None` when the file is binary
+/// or has no colour properties).
+pub fn vertex_colors_from_ply(path: &Path) -> Result<Option<Vec<[u8; 3]>>> {
+    let text = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let text = String::from_utf8_lossy(&text);
+    let mut lines = text.lines().enumerate();
+    let mut ascii = false;
+    let mut n = 0usize;
+    let mut in_vertex = false;
+    let mut props: Vec<String> = Vec::new();
+    for (no, line) in lines.by_ref() {
+        let t: Vec<&str> = line.split_whitespace().collect();
+        match t.as_slice() {
+            ["format", f, ..] => ascii = *f == "ascii",
+            ["element", "vertex", c] => {
+                n = c.parse().map_err(|_| Error::parse(path, Some(no + 1), format!("bad vertex count `{c}`")))?;
+                in_vertex = true;
+            }
+            ["element", ..] => in_vertex = false,
+            ["property", "list", ..] => {}
+            ["property", _, name] if in_vertex => props.push(name.to_string()),
+            ["end_header"] => break,
+            _ => {}
+        }
+    }
+    let idx = |name: &str| props.iter().position(|p| p == name);
+    let (Some(r), Some(g), Some(b)) = (idx("red"), idx("green"), idx("blue")) else { return Ok(None) };
+    if !ascii {
+        return Ok(None);
+    }
+    let mut out = Vec::with_capacity(n);
+    for (no, line) in lines.take(n) {
+        let t: Vec<&str> = line.split_whitespace().collect();
+        let get = |k: usize| -> Result<u8> {
+            t.get(k)
+                .and_then(|s| s.parse::<u8>().ok())
+                .ok_or_else(|| Error::parse(path, Some(no + 1), format!("bad colour value in `{line}`")))
+        };
+        out.push([get(r)?, get(g)?, get(b)?]);
+    }
+    if out.len() != n {
+        return Err(Error::Invalid(format!("{}: {} vertex lines, header says {n}", path.display(), out.len())));
+    }
+    Ok(Some(out))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::mesh::primitives::icosphere;
+
+    #[test]
+    fn sphere_covers_the_centre_and_leaves_corners_background() {
+        let m = icosphere(2);
+        let opts = RenderOptions { width: 64, height: 48, ..Default::default() };
+        let img = render(&m, None, &opts).unwrap();
+        assert_eq!(img.len(), 64 * 48 * 3);
+        let px = |x: usize, y: usize| &img[3 * (y * 64 + x)..3 * (y * 64 + x) + 3];
+        assert_eq!(px(0, 0), &[255, 255, 255]);
+        assert_ne!(px(32, 24), &[255, 255, 255]);
+        // Facing the light: the centre is brighter than the rim.
+        assert!(px(30, 22)[0] > px(32 + 20, 24)[0]);
+        assert!(render(&m, Some(&[[0; 3]; 3]), &opts).is_err());
+        assert!(render(&m, None, &RenderOptions { width: 2, ..opts }).is_err());
+    }
+}
