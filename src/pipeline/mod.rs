@@ -4,6 +4,7 @@
 
 pub mod autoencoder;
 pub mod geodesic_support;
+pub mod ae_fit;
 pub mod ae_pose;
 pub mod linear;
 pub mod pose;
