@@ -7,48 +7,8 @@
 //! 0 to disable), e.g. `../shared/data/face-poses 1-7 0.7 0 0.7 16`.
 
 use meshdeco::config::Config;
-use meshdeco::methods::segmentation::{SegmentationConfig, all_compact, segment};
+use meshdeco::methods::segmentation::{SegmentationConfig, all_compact, cluster_pieces, segment};
 use meshdeco::representation::{Representation, RepresentationKind, RepresentationOptions};
-
-fn pieces(labels: &[usize], c: usize, faces: &[[usize; 3]]) -> (Vec<usize>, usize) {
-    let n = labels.len();
-    let mut parent: Vec<usize> = (0..n).collect();
-    fn find(p: &mut [usize], mut x: usize) -> usize {
-        while p[x] != x {
-            p[x] = p[p[x]];
-            x = p[x];
-        }
-        x
-    }
-    let mut covered = vec![false; n];
-    for f in faces {
-        if f.iter().all(|&v| labels[v] == c) {
-            for &v in f {
-                covered[v] = true;
-            }
-            let a = find(&mut parent, f[0]);
-            for &v in &f[1..] {
-                let b = find(&mut parent, v);
-                parent[b] = a;
-            }
-        }
-    }
-    let mut sizes = std::collections::HashMap::new();
-    let mut uncovered = 0;
-    for v in 0..n {
-        if labels[v] != c {
-            continue;
-        }
-        if !covered[v] {
-            uncovered += 1;
-            continue;
-        }
-        *sizes.entry(find(&mut parent, v)).or_insert(0usize) += 1;
-    }
-    let mut s: Vec<usize> = sizes.into_values().collect();
-    s.sort_unstable_by(|a, b| b.cmp(a));
-    (s, uncovered)
-}
 
 fn main() -> anyhow::Result<()> {
     let a: Vec<String> = std::env::args().collect();
@@ -90,7 +50,7 @@ fn main() -> anyhow::Result<()> {
         let ok = all_compact(&seg.labels, m, &prep.rest.faces);
         let mut bad = Vec::new();
         for c in 0..m {
-            let (p, u) = pieces(&seg.labels, c, &prep.rest.faces);
+            let (p, u) = cluster_pieces(&seg.labels, c, &prep.rest.faces);
             if p.len() != 1 || u > 0 {
                 bad.push(format!("c{c}: pieces {:?} uncovered {u}", &p[..p.len().min(5)]));
             }

@@ -275,16 +275,19 @@ fn params(t: &Trainer) -> Vec<f32> {
     v
 }
 
-#[test]
-fn resume_reproduces_the_uninterrupted_run() {
+/// The planted 9 × 8 grid problem: neighbour index, hop distances, training data.
+fn planted_problem() -> (NeighborIndex, HopDistances, TrainingData) {
     let (_, faces, feats, _) = planted(9, 8);
-    let n = 72;
-    let nb = NeighborIndex::from_faces(n, &faces).unwrap();
+    let nb = NeighborIndex::from_faces(72, &faces).unwrap();
     let dist = HopDistances::new(&nb);
-    let data = TrainingData::from_features(&feats).unwrap();
-    // Mini-batches so that the generator state matters too.
-    let cfg = AutoencoderConfig {
-        components: 10, // two row blocks of C, two Adam instances for them
+    (nb, dist, TrainingData::from_features(&feats).unwrap())
+}
+
+/// Mini-batches so that the generator state matters too; K = 10 makes two row blocks of C (two
+/// Adam instances for them).
+fn resume_config() -> AutoencoderConfig {
+    AutoencoderConfig {
+        components: 10,
         layers: 2,
         iterations: 40,
         batch_size: Some(6),
@@ -292,7 +295,13 @@ fn resume_reproduces_the_uninterrupted_run() {
         learning_rate: 5e-3,
         seed: 9,
         ..Default::default()
-    };
+    }
+}
+
+#[test]
+fn resume_reproduces_the_uninterrupted_run() {
+    let (nb, dist, data) = planted_problem();
+    let cfg = resume_config();
     let mut full = Trainer::new(cfg.clone(), &data, &nb, &dist).unwrap();
     full.run(&RunOptions::default(), |_| {}).unwrap();
     let expected = params(&full);
@@ -380,20 +389,8 @@ fn nan_never_reaches_a_checkpoint() {
 #[test]
 fn graph_engine_follows_the_hand_engine() {
     use meshdeco::nn::config::{ComputeDevice, Engine};
-    let (_, faces, feats, _) = planted(9, 8);
-    let n = 72;
-    let nb = NeighborIndex::from_faces(n, &faces).unwrap();
-    let dist = HopDistances::new(&nb);
-    let data = TrainingData::from_features(&feats).unwrap();
-    let cfg = AutoencoderConfig {
-        components: 10,
-        layers: 2,
-        iterations: 5,
-        batch_size: Some(6),
-        learning_rate: 5e-3,
-        seed: 3,
-        ..Default::default()
-    };
+    let (nb, dist, data) = planted_problem();
+    let cfg = AutoencoderConfig { iterations: 5, seed: 3, ..resume_config() };
     let mut hand = Trainer::new(cfg.clone(), &data, &nb, &dist).unwrap();
     let graph_cfg = AutoencoderConfig { engine: Engine::Graph, ..cfg.clone() };
     let mut graph = Trainer::new(graph_cfg.clone(), &data, &nb, &dist).unwrap();

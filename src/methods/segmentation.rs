@@ -616,6 +616,14 @@ pub fn all_compact(labels: &[usize], m: usize, faces: &[[usize; 3]]) -> bool {
 /// True when the vertices labelled `c` are all covered by triangles lying wholly inside the
 /// cluster and those triangles form one vertex-connected set. An empty cluster is not compact.
 pub fn is_compact(labels: &[usize], c: usize, faces: &[[usize; 3]]) -> bool {
+    let (pieces, uncovered) = cluster_pieces(labels, c, faces);
+    uncovered == 0 && pieces.len() == 1
+}
+
+/// The compactness test's view of cluster `c`: the vertex counts of the vertex-connected pieces
+/// formed by the triangles lying wholly inside the cluster (largest first), and the number of
+/// the cluster's vertices in no such triangle.
+pub fn cluster_pieces(labels: &[usize], c: usize, faces: &[[usize; 3]]) -> (Vec<usize>, usize) {
     let n = labels.len();
     let mut parent: Vec<usize> = (0..n).collect();
     fn find(p: &mut [usize], mut x: usize) -> usize {
@@ -638,21 +646,21 @@ pub fn is_compact(labels: &[usize], c: usize, faces: &[[usize; 3]]) -> bool {
             }
         }
     }
-    let mut root = None;
+    let mut sizes = std::collections::HashMap::new();
+    let mut uncovered = 0;
     for v in 0..n {
-        if labels[v] == c {
-            if !covered[v] {
-                return false;
-            }
-            let rv = find(&mut parent, v);
-            match root {
-                None => root = Some(rv),
-                Some(r) if r != rv => return false,
-                _ => {}
-            }
+        if labels[v] != c {
+            continue;
         }
+        if !covered[v] {
+            uncovered += 1;
+            continue;
+        }
+        *sizes.entry(find(&mut parent, v)).or_insert(0usize) += 1;
     }
-    root.is_some()
+    let mut pieces: Vec<usize> = sizes.into_values().collect();
+    pieces.sort_unstable_by(|a, b| b.cmp(a));
+    (pieces, uncovered)
 }
 
 /// Grows every region by the adjacent vertices of higher-numbered regions (module docs).

@@ -137,6 +137,15 @@ fn adam(cfg: &AutoencoderConfig) -> ModuleOptimizer {
         .init()
 }
 
+/// The error of a step whose loss is not finite (nothing is updated or written).
+fn non_finite_loss(iteration: usize, terms: &LossTerms) -> Error {
+    Error::Numerical(format!(
+        "the loss is not finite at iteration {iteration} (reconstruction {}, sparsity {}, hinge {}); \
+         training stopped and no checkpoint was written for it",
+        terms.reconstruction, terms.sparsity, terms.hinge
+    ))
+}
+
 /// Seed of the mini-batch stream (distinct from the initialisation stream of the same seed).
 fn batch_rng(seed: u64) -> Rng {
     Rng::new(seed ^ 0xB47C_4000_0000_0001)
@@ -316,14 +325,7 @@ impl<'a> Trainer<'a> {
         );
         let t3 = Instant::now();
         if !terms.is_finite() {
-            return Err(Error::Numerical(format!(
-                "the loss is not finite at iteration {} (reconstruction {}, sparsity {}, hinge {}); \
-                 training stopped and no checkpoint was written for it",
-                self.iteration + 1,
-                terms.reconstruction,
-                terms.sparsity,
-                terms.hinge
-            )));
+            return Err(non_finite_loss(self.iteration + 1, &terms));
         }
         if let Some(p) = self.grads.first_non_finite() {
             return Err(Error::Numerical(format!(
@@ -360,14 +362,7 @@ impl<'a> Trainer<'a> {
         let (loss, terms) = reference_loss(&module, x, nb, &self.maps, &self.config);
         if !terms.is_finite() {
             self.module = Some(module);
-            return Err(Error::Numerical(format!(
-                "the loss is not finite at iteration {} (reconstruction {}, sparsity {}, hinge {}); \
-                 training stopped and no checkpoint was written for it",
-                self.iteration + 1,
-                terms.reconstruction,
-                terms.sparsity,
-                terms.hinge
-            )));
+            return Err(non_finite_loss(self.iteration + 1, &terms));
         }
         let mut grads = GradientsParams::from_grads(loss.backward(), &module);
         let AutoencoderModule { layers, components } = module;
