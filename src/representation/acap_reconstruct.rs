@@ -183,14 +183,7 @@ impl PinnedSystem {
             if rhs.iter().any(|v| !v.is_finite()) {
                 return Err(Error::Numerical("reconstruction adjoint: non-finite gradient".into()));
             }
-            let llt = LltRef::new(symbolic, &self.values);
-            let mut mem = MemBuffer::new(symbolic.solve_in_place_scratch::<f64>(3, Par::Seq));
-            llt.solve_in_place_with_conj(
-                Conj::No,
-                MatMut::from_column_major_slice_mut(&mut rhs[..3 * m], m, 3),
-                Par::Seq,
-                MemStack::new(&mut mem),
-            );
+            solve3(symbolic, &self.values, &mut rhs[..3 * m], m);
         }
         Ok(rhs)
     }
@@ -206,14 +199,7 @@ impl PinnedSystem {
             if rhs.iter().any(|v| !v.is_finite()) {
                 return Err(Error::Numerical("reconstruction: non-finite right-hand side (bad features?)".into()));
             }
-            let llt = LltRef::new(symbolic, &self.values);
-            let mut mem = MemBuffer::new(symbolic.solve_in_place_scratch::<f64>(3, Par::Seq));
-            llt.solve_in_place_with_conj(
-                Conj::No,
-                MatMut::from_column_major_slice_mut(&mut rhs[..3 * m], m, 3),
-                Par::Seq,
-                MemStack::new(&mut mem),
-            );
+            solve3(symbolic, &self.values, &mut rhs[..3 * m], m);
             for (v, pv) in p.iter_mut().enumerate() {
                 let r = self.reduced[v];
                 if r != usize::MAX {
@@ -355,6 +341,19 @@ pub(crate) fn edge_term_adjoint(
 /// One-shot helper: factorise and solve once (see [`AcapReconstruction`]).
 pub fn reconstruct(rest: &[Vec3], edges: &[[usize; 2]], weights: &[f64], transforms: &[Mat3]) -> Result<Vec<Vec3>> {
     AcapReconstruction::new(rest, edges, weights)?.solve(transforms)
+}
+
+/// Solves the factorised system for three right-hand sides stored column-major in `rhs`
+/// (`3 × m`, overwritten with the solution).
+fn solve3(symbolic: &SymbolicCholesky<usize>, values: &[f64], rhs: &mut [f64], m: usize) {
+    let llt = LltRef::new(symbolic, values);
+    let mut mem = MemBuffer::new(symbolic.solve_in_place_scratch::<f64>(3, Par::Seq));
+    llt.solve_in_place_with_conj(
+        Conj::No,
+        MatMut::from_column_major_slice_mut(rhs, m, 3),
+        Par::Seq,
+        MemStack::new(&mut mem),
+    );
 }
 
 #[cfg(test)]
