@@ -19,6 +19,9 @@ use crate::mesh::{MeshSequence, Vec3};
 /// Code/translation alternations per shape.
 const TRANSLATION_ROUNDS: usize = 2;
 
+/// Codes (one K-vector per frame) and reconstructions (N positions per frame, data units).
+pub type FittedFrames = (Vec<Vec<f64>>, Vec<Vec<Vec3>>);
+
 /// Default γ of the fit (dimensionless pull towards the encoder's code).
 pub const DEFAULT_FIT_GAMMA: f64 = 1e-3;
 
@@ -82,7 +85,7 @@ impl<'a> AeFitEncoder<'a> {
     }
 
     /// Codes and reconstructions of every frame: the encoder's code, then [`Self::fit`].
-    pub fn fit_frames(&self, frames: &MeshSequence) -> Result<(Vec<Vec<f64>>, Vec<Vec<Vec3>>)> {
+    pub fn fit_frames(&self, frames: &MeshSequence) -> Result<FittedFrames> {
         let start = self.artifact.encode_frames(frames)?;
         let mut codes = Vec::with_capacity(frames.n_frames());
         let mut shapes = Vec::with_capacity(frames.n_frames());
