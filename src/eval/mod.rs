@@ -157,6 +157,14 @@ struct DatasetData {
 }
 
 impl DatasetData {
+    /// The data set in `slot`, loaded on first use.
+    fn cached<'s>(slot: &'s mut Option<DatasetData>, d: &EvalDataset) -> Result<&'s DatasetData> {
+        if slot.is_none() {
+            *slot = Some(DatasetData::load(d)?);
+        }
+        Ok(slot.as_ref().expect("loaded above"))
+    }
+
     fn load(d: &EvalDataset) -> Result<Self> {
         let prep = preprocess::prepare(&d.data)?;
         let truth = |idx: &[usize]| -> Vec<Vec<Vec3>> {
@@ -424,10 +432,7 @@ pub fn run(
         if stopped(opts) {
             return Err(interrupted());
         }
-        if data[cell.dataset].is_none() {
-            data[cell.dataset] = Some(DatasetData::load(d)?);
-        }
-        let ds = data[cell.dataset].as_ref().expect("loaded above");
+        let ds = DatasetData::cached(&mut data[cell.dataset], d)?;
         let metrics = train_cell(cell, &dir, opts, inner)
             .map_err(|e| if stopped(opts) { interrupted() } else { Error::Invalid(format!("cell {label}: {e}")) })?;
         let r = measure(cell, cfg, &dir, ds, &metrics)?;
@@ -472,10 +477,7 @@ pub fn run(
                     if stopped(opts) {
                         return Err(interrupted());
                     }
-                    if data[cell.dataset].is_none() {
-                        data[cell.dataset] = Some(DatasetData::load(d)?);
-                    }
-                    let ds = data[cell.dataset].as_ref().expect("loaded above");
+                    let ds = DatasetData::cached(&mut data[cell.dataset], d)?;
                     let rows = match Trained::load(cell.config.kind, &dir)? {
                         Trained::Linear(a) => {
                             erms_curve(PointModel::Linear(&a), &ds.test, &cp.counts, cp.trials, cp.gamma, cp.seed)?
