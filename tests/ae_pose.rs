@@ -42,7 +42,8 @@ fn acap_decode_adjoint_matches_forward() {
     }
 }
 
-fn tiny_ae() -> (AeArtifact, PathBuf) {
+/// A tiny autoencoder trained into its own directory (`tag` keeps parallel tests apart).
+fn tiny_ae(tag: &str) -> (AeArtifact, PathBuf) {
     let cfg = Config::from_toml(
         r#"
 name = "bumps-ae"
@@ -59,7 +60,7 @@ seed = 1
 "#,
     )
     .unwrap();
-    let out = std::env::temp_dir().join(format!("meshdeco-test-ae-pose-{}", std::process::id()));
+    let out = std::env::temp_dir().join(format!("meshdeco-test-ae-pose-{tag}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&out);
     autoencoder::train(&cfg, &out, false, None, &mut Silent).unwrap();
     (AeArtifact::load(&out).unwrap(), out)
@@ -67,7 +68,7 @@ seed = 1
 
 #[test]
 fn autoencoder_drag_reduces_error_and_jacobian_matches_finite_differences() {
-    let (a, out) = tiny_ae();
+    let (a, out) = tiny_ae("drag");
     let rest = a.rest_in_data_units();
     let z0 = a
         .encode_frames(&meshdeco::mesh::MeshSequence {
@@ -144,7 +145,7 @@ fn autoencoder_drag_reduces_error_and_jacobian_matches_finite_differences() {
 fn fitted_codes_beat_the_encoder() {
     use meshdeco::metrics::erms::{Alignment, erms};
     use meshdeco::pipeline::ae_fit::AeFitEncoder;
-    let (a, out) = tiny_ae();
+    let (a, out) = tiny_ae("fit");
     let frames = meshdeco::preprocess::load_frames("synthetic:bumps").unwrap();
     let seq = frames.select(&[0, 3, 7]);
     let enc = a.encode_frames(&seq).unwrap();
