@@ -21,7 +21,7 @@
 //! | key | kinds | default | meaning |
 //! |---|---|---|---|
 //! | `components` | all | 50 | number of components K (region-pca: total budget) |
-//! | `representation` | splocs, pca, region-pca | `displacement` | `displacement` \| `triangle-gradient` (pca also `acap`) |
+//! | `representation` | splocs, pca, region-pca | `displacement` | `displacement` \| `triangle-gradient` (pca and splocs also `acap`) |
 //! | `sparsity` | splocs | 2.0 | λ, weight of the group-sparsity term |
 //! | `support` | splocs, autoencoder | [0.1, 0.7] / [0.2, 0.4] | [d_min, d_max] of the support maps (normalised geodesic distance) |
 //! | `weights` | splocs | `nonnegative` | `nonnegative` (Eq. 4) \| `signed` (Eq. 3) |
@@ -32,13 +32,14 @@
 //! | `fixed_centers` | splocs | [] | painted vertex sets fixing the first components' centres (lists of vertex indices, or file paths) |
 //! | `geodesic_m` | splocs, autoencoder, region-pca | 10 / 1 / – | heat-method time factor m (t = m·h²) |
 //! | `iterations` | autoencoder | 2000 | training iterations |
-//! | `learning_rate` | autoencoder | 1e-3 | Adam step size |
+//! | `learning_rate` | autoencoder | 1e-3 | Adam step size (of the first step) |
+//! | `learning_rate_final` | autoencoder | none (constant rate) | step size of the last step, reached by a cosine decay from `learning_rate` |
 //! | `batch_size` | autoencoder | full batch | shapes per step |
 //! | `layers` | autoencoder | 1 | convolution layers L |
 //! | `lambda1`, `lambda2` | autoencoder | 0.5, 0.5 | weights of the sparsity and max-weight terms |
 //! | `theta` | autoencoder | 5.0 | hinge threshold of the max-weight term |
 //! | `checkpoint_every` | autoencoder | 200 | iterations between checkpoints |
-//! | `scaling` | autoencoder | `per-dimension` | feature scaling: `per-dimension` \| `grouped` (the reference code) |
+//! | `scaling` | autoencoder | `per-dimension` | feature scaling to [−0.95, 0.95]: `per-dimension` (the paper) \| `grouped` (the reference code: one range for the 3 rotation dims, one for the 6 stretch dims) \| `global` (one range for all 9, so rotation and stretch errors weigh alike) |
 //! | `engine` | autoencoder | `hand` | `hand` (hand-written CPU step, fast) \| `graph` (Burn autodiff graph on `device`) |
 //! | `device` | autoencoder | `cpu` | `cpu` \| `wgpu` (needs `engine = "graph"` and a build with `--features wgpu`) |
 //! | `consistency` | autoencoder, pca | `global` | ACAP rotation consistency: `bfs` \| `global` |
@@ -217,6 +218,7 @@ pub struct RawMethod {
     pub geodesic_m: Option<f64>,
     pub iterations: Option<usize>,
     pub learning_rate: Option<f64>,
+    pub learning_rate_final: Option<f64>,
     pub batch_size: Option<usize>,
     pub layers: Option<usize>,
     pub lambda1: Option<f64>,
@@ -300,6 +302,7 @@ fn allowed_keys(kind: MethodKind) -> &'static [&'static str] {
             "seed",
             "fixed_centers",
             "geodesic_m",
+            "consistency",
         ],
         MethodKind::RegionPca => &[
             "components",
@@ -323,6 +326,7 @@ fn allowed_keys(kind: MethodKind) -> &'static [&'static str] {
             "geodesic_m",
             "iterations",
             "learning_rate",
+            "learning_rate_final",
             "batch_size",
             "layers",
             "lambda1",
@@ -467,7 +471,7 @@ fn check_method_values(kind: MethodKind, m: &RawMethod) -> Result<()> {
     at_least_one("method.components", m.components)?;
     if let Some(r) = &m.representation {
         let ok = match kind {
-            MethodKind::Pca => ["displacement", "triangle-gradient", "acap"].contains(&r.as_str()),
+            MethodKind::Pca | MethodKind::Splocs => ["displacement", "triangle-gradient", "acap"].contains(&r.as_str()),
             _ => ["displacement", "triangle-gradient"].contains(&r.as_str()),
         };
         if !ok {
@@ -501,6 +505,7 @@ fn check_method_values(kind: MethodKind, m: &RawMethod) -> Result<()> {
     positive("method.geodesic_m", m.geodesic_m)?;
     at_least_one("method.iterations", m.iterations)?;
     positive("method.learning_rate", m.learning_rate)?;
+    positive("method.learning_rate_final", m.learning_rate_final)?;
     at_least_one("method.batch_size", m.batch_size)?;
     at_least_one("method.layers", m.layers)?;
     non_negative("method.lambda1", m.lambda1)?;
@@ -510,8 +515,9 @@ fn check_method_values(kind: MethodKind, m: &RawMethod) -> Result<()> {
     if let Some(s) = &m.scaling
         && s != "per-dimension"
         && s != "grouped"
+        && s != "global"
     {
-        return Err(Error::config("method.scaling", format!("`{s}`: expected per-dimension or grouped")));
+        return Err(Error::config("method.scaling", format!("`{s}`: expected per-dimension, grouped or global")));
     }
     if let Some(s) = &m.engine
         && crate::nn::config::Engine::parse(s).is_none()

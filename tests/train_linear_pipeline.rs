@@ -93,3 +93,66 @@ components = 3
     }
     std::fs::remove_dir_all(&out).unwrap();
 }
+
+#[test]
+fn splocs_on_acap_features_keeps_the_rest_shape_as_offset_and_finds_the_bumps() {
+    let cfg = Config::from_toml(
+        r#"
+name = "splocs-acap"
+[data]
+path = "synthetic:bumps"
+train = "1-20"
+test = "rest"
+[method]
+kind = "splocs"
+representation = "acap"
+components = 3
+weights = "signed"
+max_iterations = 20
+"#,
+    )
+    .unwrap();
+    let out = out_dir("splocs-acap-bumps");
+    let o = linear::train(&cfg, &out, &mut Silent).unwrap();
+    assert_eq!(o.metrics.representation, "acap");
+    let a = LinearArtifact::load(&out).unwrap();
+    // SPLOCS models deformations of the rest shape: the offset is the rest shape's own ACAP
+    // features, logR = 0 and S = I at every vertex.
+    let identity = [0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 1.0, 0.0, 1.0];
+    for (i, v) in a.model.offset.iter().enumerate() {
+        assert!((v - identity[i % 9]).abs() < 1e-9, "offset[{i}] = {v}");
+    }
+    // Zero weights decode to the rest shape.
+    let rest = a.synthesize(&[0.0; 3]).unwrap();
+    let truth = synthetic::load("synthetic:bumps").unwrap();
+    let e = meshdeco::representation::roundtrip::erms(
+        &[truth.frames[0].clone()],
+        &[rest],
+        meshdeco::representation::roundtrip::Alignment::Centroid,
+    )
+    .unwrap();
+    assert!(e < 1e-6, "rest shape from zero weights: Erms {e}");
+    // Each planted bump holds most of one component's energy (feature magnitude per vertex;
+    // rotations spill a little past the bump's rim, so overlap is measured by energy).
+    let regions = synthetic::planted_regions("synthetic:bumps").unwrap();
+    let mut owners = HashSet::new();
+    for r in &regions {
+        let planted: HashSet<usize> = r.vertices.iter().copied().collect();
+        let (best, share) = (0..3)
+            .map(|k| {
+                let m = vertex_magnitudes(&a.model, k, Element::Vertex, &a.rest);
+                let total: f64 = m.iter().map(|v| v * v).sum();
+                let inside: f64 = planted.iter().map(|&i| m[i] * m[i]).sum();
+                (k, inside / total)
+            })
+            .fold((0, 0.0), |a, b| if b.1 > a.1 { b } else { a });
+        eprintln!("{}: component {best} has {share:.3} of its energy inside", r.name);
+        assert!(share >= 0.8, "{}: best in-region energy share {share:.3} < 0.8", r.name);
+        owners.insert(best);
+    }
+    assert_eq!(owners.len(), regions.len(), "one component per bump");
+    // Bumps are not linear in ACAP features, but three local components still generalise.
+    let test = o.metrics.test_erms.unwrap();
+    assert!(test.is_finite() && test < 5.0, "test Erms {test}");
+    std::fs::remove_dir_all(&out).unwrap();
+}

@@ -16,8 +16,12 @@ pub struct AutoencoderConfig {
     pub layers: usize,
     /// Standard deviation of the normal initialisation of the convolution weights and of C.
     pub init_std: f64,
-    /// Adam learning rate.
+    /// Adam learning rate (of the first step).
     pub learning_rate: f64,
+    /// Learning rate of the last step: `None` keeps `learning_rate` throughout (the paper);
+    /// otherwise the rate follows a cosine from `learning_rate` at step 1 down to this value at
+    /// step `iterations` (a function of the step number only, so `--resume` is unaffected).
+    pub learning_rate_final: Option<f64>,
     /// Adam β1.
     pub beta1: f64,
     /// Adam β2.
@@ -101,6 +105,7 @@ impl Default for AutoencoderConfig {
             layers: 1,
             init_std: 0.02,
             learning_rate: 1e-3,
+            learning_rate_final: None,
             beta1: 0.9,
             beta2: 0.999,
             epsilon: 1e-8,
@@ -115,6 +120,20 @@ impl Default for AutoencoderConfig {
             seed: 0,
             engine: Engine::Hand,
             device: ComputeDevice::Cpu,
+        }
+    }
+}
+
+impl AutoencoderConfig {
+    /// Adam step size of 0-based step `t` (see [`AutoencoderConfig::learning_rate_final`]).
+    pub fn learning_rate_at(&self, t: usize) -> f64 {
+        match self.learning_rate_final {
+            None => self.learning_rate,
+            Some(last) => {
+                let span = self.iterations.saturating_sub(1).max(1) as f64;
+                let u = (t as f64 / span).min(1.0);
+                last + (self.learning_rate - last) * 0.5 * (1.0 + (std::f64::consts::PI * u).cos())
+            }
         }
     }
 }
@@ -148,6 +167,15 @@ impl AutoencoderConfig {
         };
         pos("init_std", self.init_std)?;
         pos("learning_rate", self.learning_rate)?;
+        if let Some(f) = self.learning_rate_final {
+            pos("learning_rate_final", f)?;
+            if f > self.learning_rate {
+                return Err(bad(
+                    "learning_rate_final",
+                    format!("learning_rate_final ({f}) must not exceed learning_rate ({})", self.learning_rate),
+                ));
+            }
+        }
         pos("epsilon", self.epsilon)?;
         for (k, v) in [("beta1", self.beta1), ("beta2", self.beta2)] {
             if !(v.is_finite() && (0.0..1.0).contains(&v)) {
@@ -220,6 +248,28 @@ impl AutoencoderConfig {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn cosine_schedule_runs_from_first_to_final_rate() {
+        let constant = AutoencoderConfig { learning_rate: 3e-3, ..Default::default() };
+        assert_eq!(constant.learning_rate_at(0), 3e-3);
+        assert_eq!(constant.learning_rate_at(1999), 3e-3);
+        let c = AutoencoderConfig {
+            learning_rate: 1e-2,
+            learning_rate_final: Some(1e-4),
+            iterations: 101,
+            ..Default::default()
+        };
+        assert!((c.learning_rate_at(0) - 1e-2).abs() < 1e-15);
+        assert!((c.learning_rate_at(100) - 1e-4).abs() < 1e-15);
+        assert!((c.learning_rate_at(50) - 0.5 * (1e-2 + 1e-4)).abs() < 1e-12);
+        for t in 0..100 {
+            assert!(c.learning_rate_at(t + 1) <= c.learning_rate_at(t), "not decreasing at {t}");
+        }
+        let bad = AutoencoderConfig { learning_rate: 1e-3, learning_rate_final: Some(1e-2), ..Default::default() };
+        let e = bad.validate().unwrap_err().to_string();
+        assert!(e.contains("learning_rate_final (0.01) must not exceed learning_rate (0.001)"), "{e}");
+    }
 
     #[test]
     fn validation_names_key_and_value() {

@@ -366,7 +366,7 @@ impl<'a> Trainer<'a> {
         }
         let mut grads = GradientsParams::from_grads(loss.backward(), &module);
         let AutoencoderModule { layers, components } = module;
-        let lr = self.config.learning_rate;
+        let lr = self.config.learning_rate_at(self.iteration);
         let mut blocks = Vec::with_capacity(components.len());
         for (p, o) in components.into_iter().zip(self.block_optimizers.iter_mut()) {
             match grads.remove::<2>(p.id) {
@@ -387,7 +387,7 @@ impl<'a> Trainer<'a> {
     /// every row block of `C` are separate modules for separate optimizers, stepped in parallel.
     fn apply_gradients(&mut self) {
         let dev = self.device.clone().inner();
-        let lr = self.config.learning_rate;
+        let lr = self.config.learning_rate_at(self.iteration);
         let AutoencoderModule { layers, components } = self.module.take().expect("module present between steps");
         let mut gp = GradientsParams::new();
         let t9x9 = |a: &[[f64; 9]; 9]| -> Tensor<2> {

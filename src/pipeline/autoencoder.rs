@@ -100,6 +100,7 @@ pub fn autoencoder_config(cfg: &Config) -> Result<AutoencoderConfig> {
         components: m.components.unwrap_or(d.components),
         layers: m.layers.unwrap_or(d.layers),
         learning_rate: m.learning_rate.unwrap_or(d.learning_rate),
+        learning_rate_final: m.learning_rate_final,
         iterations: m.iterations.unwrap_or(d.iterations),
         batch_size: m.batch_size,
         lambda1: m.lambda1.unwrap_or(d.lambda1),
@@ -262,6 +263,7 @@ pub fn train(
     let ae_cfg = autoencoder_config(cfg)?;
     let scaling_mode = match cfg.method.scaling.as_deref() {
         Some("grouped") => ScalingMode::reference_grouped(),
+        Some("global") => ScalingMode::Grouped { groups: vec![(0..9).collect()] },
         _ => ScalingMode::PerDimension,
     };
     let consistency_name = cfg.method.consistency.clone().unwrap_or_else(|| "global".into());

@@ -237,7 +237,24 @@ pub fn train(cfg: &Config, out: &Path, progress: &mut dyn Progress) -> Result<Tr
     progress.stage("representation", 0);
     let t_rep = Instant::now();
     let representation = Representation::new(kind, &prep.rest, options)?;
-    let x = representation.encode(&train_seq)?;
+    let mut x = representation.encode(&train_seq)?;
+    // SPLOCS models deformations from the rest shape (offset zero): subtract the rest shape's
+    // own features (zero for displacements and triangle gradients; logR = 0, S = I for ACAP)
+    // and keep them as the model's offset.
+    let rest_row = if cfg.kind == MethodKind::Splocs {
+        let rest_seq = MeshSequence {
+            faces: prep.rest.faces.clone(),
+            frames: vec![prep.rest.positions.clone()],
+            names: Vec::new(),
+        };
+        let r = representation.encode(&rest_seq)?.data;
+        for row in x.data.chunks_exact_mut(r.len()) {
+            row.iter_mut().zip(&r).for_each(|(v, o)| *v -= o);
+        }
+        Some(r)
+    } else {
+        None
+    };
     let representation_seconds = t_rep.elapsed().as_secs_f64();
     let data = DataMatrix::from_features(&x)?;
 
@@ -286,7 +303,13 @@ pub fn train(cfg: &Config, out: &Path, progress: &mut dyn Progress) -> Result<Tr
             objective = fit.objective_history.last().copied();
             converged = Some(fit.converged);
             locality = fit.locality.clone();
-            model = fit.model;
+            model = {
+                let mut m = fit.model;
+                if let Some(r) = rest_row {
+                    m.offset = r;
+                }
+                m
+            };
         }
         _ => unreachable!("checked above"),
     }
