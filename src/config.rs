@@ -38,6 +38,7 @@
 //! | `layers` | autoencoder | 1 | convolution layers L |
 //! | `lambda1`, `lambda2` | autoencoder | 0.5, 0.5 | weights of the sparsity and max-weight terms |
 //! | `theta` | autoencoder | 5.0 | hinge threshold of the max-weight term |
+//! | `fit_test` | autoencoder | true | also report `test_erms_fitted`: test Erms with codes fitted to every vertex (starting from the encoder's code; `meshdeco encode --fit`) |
 //! | `checkpoint_every` | autoencoder | 200 | iterations between checkpoints |
 //! | `scaling` | autoencoder | `per-dimension` | feature scaling to [−0.95, 0.95]: `per-dimension` (the paper) \| `grouped` (the reference code: one range for the 3 rotation dims, one for the 6 stretch dims) \| `global` (one range for all 9, so rotation and stretch errors weigh alike) |
 //! | `engine` | autoencoder | `hand` | `hand` (hand-written CPU step, fast) \| `graph` (Burn autodiff graph on `device`) |
@@ -229,6 +230,8 @@ pub struct RawMethod {
     pub consistency: Option<String>,
     pub engine: Option<String>,
     pub device: Option<String>,
+    /// autoencoder: also measure the test Erms with codes fitted to every vertex.
+    pub fit_test: Option<bool>,
     pub lambda: Option<f64>,
     pub r: Option<f64>,
     pub threshold: Option<f64>,
@@ -337,6 +340,7 @@ fn allowed_keys(kind: MethodKind) -> &'static [&'static str] {
             "consistency",
             "engine",
             "device",
+            "fit_test",
         ],
     }
 }

@@ -168,3 +168,34 @@ fn fitted_codes_beat_the_encoder() {
     assert!(AeFitEncoder::new(&a, 0, 1e-3).is_err());
     let _ = std::fs::remove_dir_all(&out);
 }
+
+/// `metrics.json` of an autoencoder with a test split carries both test numbers; fitting starts
+/// from the encoder's code and only takes steps that lower the centroid-aligned error, so the
+/// fitted number is never above the encoder's. `fit_test = false` leaves it out.
+#[test]
+fn training_reports_fitted_test_erms() {
+    let toml = |fit: &str| {
+        format!(
+            "name = \"bumps-ae-split\"\n[data]\npath = \"synthetic:bumps\"\ntrain = \"1-20\"\ntest = \"rest\"\n\
+             [method]\nkind = \"autoencoder\"\ncomponents = 6\niterations = 150\nlearning_rate = 0.005\n\
+             scaling = \"global\"\nlearning_rate_final = 1e-4\nseed = 1\n{fit}"
+        )
+    };
+    let out = std::env::temp_dir().join(format!("meshdeco-ae-fit-test-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&out);
+    let cfg = Config::from_toml(&toml("")).unwrap();
+    let o = autoencoder::train(&cfg, &out, false, None, &mut Silent).unwrap();
+    let (forward, fitted) = (o.metrics.test_erms.unwrap(), o.metrics.test_erms_fitted.unwrap());
+    eprintln!("test Erms: encoder {forward:.4}, fitted {fitted:.4}");
+    assert!(fitted.is_finite() && fitted <= forward, "fitted {fitted} > encoder {forward}");
+    let json = std::fs::read_to_string(out.join("metrics.json")).unwrap();
+    assert!(json.contains("\"test_erms_fitted\""), "{json}");
+    let resolved = std::fs::read_to_string(out.join("config.toml")).unwrap();
+    assert!(resolved.contains("scaling = \"global\"") && resolved.contains("learning_rate_final"), "{resolved}");
+    let cfg = Config::from_toml(&toml("fit_test = false")).unwrap();
+    let o = autoencoder::train(&cfg, &out, false, None, &mut Silent).unwrap();
+    assert!(o.metrics.test_erms.is_some() && o.metrics.test_erms_fitted.is_none());
+    let json = std::fs::read_to_string(out.join("metrics.json")).unwrap();
+    assert!(!json.contains("test_erms_fitted"), "{json}");
+    let _ = std::fs::remove_dir_all(&out);
+}

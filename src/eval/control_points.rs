@@ -17,11 +17,11 @@
 //! against the test shape with Erms (no alignment: displacement models keep translation).
 //!
 //! Autoencoder: the latent code is optimised to meet the points
-//! ([`crate::pipeline::ae_pose::AePoser`], Gauss–Newton, the same γ, start code = the training
-//! reference shape's code). Its ACAP decoding fixes the centroid, so a global translation t is
-//! fitted alongside (alternating: code for the targets shifted by −t, then t = mean residual
-//! at the control points; [`AE_TRANSLATION_ROUNDS`] rounds, warm-started), and the result is
-//! the decoded shape moved by t — measured, like the linear models, without further alignment.
+//! ([`crate::pipeline::ae_fit::AeFitEncoder`], Levenberg–Marquardt, the same γ, start code = the
+//! training reference shape's code, [`AE_FIT_ITERATIONS`] iterations at most). Its ACAP decoding
+//! fixes the centroid, so the best global translation (control points' mean residual) is
+//! applied in closed form, and the result is the decoded shape moved by it — measured, like the
+//! linear models, without further alignment.
 //!
 //! SPLOCS on triangle gradients (nonlinear Poisson decoding of rotations) is not fitted here.
 
@@ -33,7 +33,7 @@ use crate::geometry::graph_distance::EdgeGraph;
 use crate::mesh::Vec3;
 use crate::methods::posing::{LinearPoser, PoseConfig, RegionPoser};
 use crate::metrics::erms::{Alignment, erms};
-use crate::pipeline::ae_pose::{AePoseConfig, AePoser};
+use crate::pipeline::ae_fit::AeFitEncoder;
 use crate::pipeline::autoencoder::AeArtifact;
 use crate::pipeline::linear::LinearArtifact;
 use crate::pipeline::region::RegionArtifact;
@@ -50,8 +50,9 @@ pub enum PointModel<'a> {
     Ae(&'a AeArtifact),
 }
 
-/// Alternation rounds of code and translation in the autoencoder's control-point fit.
-pub const AE_TRANSLATION_ROUNDS: usize = 2;
+/// Levenberg–Marquardt iterations of the autoencoder's control-point fit (it starts from the
+/// reference shape's code, farther from the target than an encoder's code).
+pub const AE_FIT_ITERATIONS: usize = 30;
 
 impl<'a> PointModel<'a> {
     fn reborrow(&self) -> PointModel<'a> {
@@ -101,7 +102,7 @@ pub struct ControlPointFit<'a> {
     vertices: Vec<usize>,
     linear: Option<LinearPoser<'a>>,
     region: Option<RegionPoser<'a>>,
-    ae: Option<AePoser<'a>>,
+    ae: Option<AeFitEncoder<'a>>,
 }
 
 impl<'a> ControlPointFit<'a> {
@@ -124,7 +125,8 @@ impl<'a> ControlPointFit<'a> {
                 region = Some(RegionPoser::new(&a.model, vertices, &PoseConfig { gamma, beta: a.header.beta })?);
             }
             PointModel::Ae(a) => {
-                ae = Some(AePoser::new(a, vertices, &AePoseConfig { gamma, ..Default::default() })?);
+                ae =
+                    Some(AeFitEncoder::with_vertices(a, vertices.to_vec(), gamma)?.with_iterations(AE_FIT_ITERATIONS)?);
             }
         }
         Ok(ControlPointFit { model, vertices: vertices.to_vec(), linear, region, ae })
@@ -137,22 +139,8 @@ impl<'a> ControlPointFit<'a> {
         if shape.len() != rest.len() {
             return Err(Error::Invalid(format!("shape has {} vertices, the model {}", shape.len(), rest.len())));
         }
-        if let (PointModel::Ae(a), Some(poser)) = (&self.model, &self.ae) {
-            let targets: Vec<Vec3> = self.vertices.iter().map(|&v| shape[v]).collect();
-            let mut z = a.reference_code().to_vec();
-            let mut t = [0.0; 3];
-            let mut positions = Vec::new();
-            for _ in 0..AE_TRANSLATION_ROUNDS {
-                let shifted: Vec<Vec3> = targets.iter().map(|p| [p[0] - t[0], p[1] - t[1], p[2] - t[2]]).collect();
-                let (z_new, pos) = poser.solve(&shifted, &z)?;
-                z = z_new;
-                let m = self.vertices.len() as f64;
-                t = std::array::from_fn(|k| {
-                    self.vertices.iter().zip(&targets).map(|(&v, p)| p[k] - pos[v][k]).sum::<f64>() / m
-                });
-                positions = pos;
-            }
-            return Ok(positions.into_iter().map(|p| [p[0] + t[0], p[1] + t[1], p[2] + t[2]]).collect());
+        if let (PointModel::Ae(a), Some(fit)) = (&self.model, &self.ae) {
+            return Ok(fit.fit(shape, a.reference_code())?.1);
         }
         let targets: Vec<Vec3> = self
             .vertices

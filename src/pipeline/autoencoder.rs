@@ -20,6 +20,7 @@ use std::time::Instant;
 use serde::{Deserialize, Serialize};
 
 use super::Progress;
+use super::ae_fit::{AeFitEncoder, DEFAULT_FIT_GAMMA};
 use super::geodesic_support::GeodesicSupport;
 use super::linear::{TrainOutcome, rest_from_arrays, rest_to_arrays};
 use super::metrics_file::{Metrics, median};
@@ -370,13 +371,26 @@ pub fn train(
     };
     let train_rec = art.decode_codes(&art.train_codes)?;
     let train_erms = erms(&truth(&prep.train), &train_rec, Alignment::Centroid)?;
-    let test_erms = if prep.test.is_empty() {
-        None
+    let (test_erms, test_erms_fitted) = if prep.test.is_empty() {
+        (None, None)
     } else {
         let test = MeshSequence { faces: prep.sequence.faces.clone(), frames: truth(&prep.test), names: Vec::new() };
         let codes = art.encode_frames(&test)?;
         let rec = art.decode_codes(&codes)?;
-        Some(erms(&test.frames, &rec, Alignment::Centroid)?)
+        let forward = erms(&test.frames, &rec, Alignment::Centroid)?;
+        let fitted = if cfg.method.fit_test.unwrap_or(true) {
+            progress.stage("fitting test codes", test.n_frames() as u64);
+            let fitter = AeFitEncoder::new(&art, usize::MAX, DEFAULT_FIT_GAMMA)?;
+            let mut rec = Vec::with_capacity(test.n_frames());
+            for (i, (shape, z0)) in test.frames.iter().zip(&codes).enumerate() {
+                rec.push(fitter.fit(shape, z0)?.1);
+                progress.step(i as u64 + 1, "");
+            }
+            Some(erms(&test.frames, &rec, Alignment::Centroid)?)
+        } else {
+            None
+        };
+        (Some(forward), fitted)
     };
     let locality = component_locality_of(&art, &distances, [ae_cfg.d_min, ae_cfg.d_max]);
     let shares: Vec<f64> = locality.iter().map(|l| l.energy_share).collect();
@@ -387,6 +401,7 @@ pub fn train(
         components: ae_cfg.components,
         train_erms,
         test_erms,
+        test_erms_fitted,
         erms_alignment: Alignment::Centroid.to_string(),
         train_seconds,
         representation_seconds,
@@ -411,10 +426,10 @@ pub fn train(
     method_table.insert("support".into(), toml::Value::try_from(support).map_err(|e| Error::Invalid(e.to_string()))?);
     method_table.insert("kind".into(), "autoencoder".into());
     method_table.insert("consistency".into(), consistency_name.into());
-    method_table.insert(
-        "scaling".into(),
-        (if cfg.method.scaling.as_deref() == Some("grouped") { "grouped" } else { "per-dimension" }).into(),
-    );
+    method_table.insert("scaling".into(), cfg.method.scaling.as_deref().unwrap_or("per-dimension").into());
+    if let Some(f) = cfg.method.fit_test {
+        method_table.insert("fit_test".into(), f.into());
+    }
     method_table.insert("geodesic_m".into(), cfg.method.geodesic_m.unwrap_or(AE_GEODESIC_M).into());
     artifact::write_atomic(&out.join("config.toml"), resolved_toml(&cfg.name, &cfg.data, method_table).as_bytes())?;
     art.model.save(out)?;

@@ -15,8 +15,14 @@ pub struct Metrics {
     pub components: usize,
     /// Erms (1000 · RMS vertex error, data units) over the training frames.
     pub train_erms: f64,
-    /// Erms over the test frames (`null` without a test split).
+    /// Erms over the test frames (`null` without a test split). Linear models encode a test
+    /// frame by least-squares weights; the autoencoder by its encoder's forward pass.
     pub test_erms: Option<f64>,
+    /// Autoencoder only: Erms over the test frames with codes fitted to every vertex
+    /// ([`crate::pipeline::ae_fit::AeFitEncoder`], started from the encoder's code), the
+    /// nonlinear counterpart of the linear models' least-squares weights. Absent otherwise.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub test_erms_fitted: Option<f64>,
     /// How results were aligned to the ground truth before measuring: `none` or `centroid`
     /// (representations that drop translation are centroid-aligned).
     pub erms_alignment: String,

@@ -246,6 +246,7 @@ pub fn train(cfg: &Config, out: &Path, progress: &mut dyn Progress) -> Result<Tr
         components: artifact.model.n_components(),
         train_erms,
         test_erms,
+        test_erms_fitted: None,
         erms_alignment: Alignment::None.to_string(),
         train_seconds,
         representation_seconds,
