@@ -43,7 +43,7 @@
 //! | `scaling` | autoencoder | `per-dimension` | feature scaling to [−0.95, 0.95]: `per-dimension` (the paper) \| `grouped` (the reference code: one range for the 3 rotation dims, one for the 6 stretch dims) \| `global` (one range for all 9, so rotation and stretch errors weigh alike) |
 //! | `engine` | autoencoder | `hand` | `hand` (hand-written CPU step, fast) \| `graph` (Burn autodiff graph on `device`) |
 //! | `device` | autoencoder | `cpu` | `cpu` \| `wgpu` (needs `engine = "graph"` and a build with `--features wgpu`) |
-//! | `consistency` | autoencoder, pca | `global` | ACAP rotation consistency: `bfs` \| `global` |
+//! | `consistency` | autoencoder, pca, splocs | `global` | ACAP rotation consistency: `bfs` \| `global` |
 //! | `lambda`, `r`, `threshold`, `regions`, `max_regions`, `beta`, `gamma` | region-pca | see region-pca docs | segmentation and coupling |
 //! | `min_piece`, `keep_searching` | region-pca | 0, false | fragment merging and search past the first non-compact k (`SegmentationConfig`) |
 

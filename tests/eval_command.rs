@@ -59,7 +59,10 @@ fn read(p: &Path) -> String {
 
 /// Rows of results.csv without the seconds column (wall time differs between fresh runs).
 fn without_seconds(csv: &str) -> Vec<String> {
-    csv.lines().map(|l| l.rsplit_once(',').map(|(a, _)| a.to_string()).unwrap_or_default()).collect()
+    let col = RESULTS_HEADER.split(',').position(|c| c == "seconds").unwrap();
+    csv.lines()
+        .map(|l| l.split(',').enumerate().filter(|(i, _)| *i != col).map(|(_, f)| f).collect::<Vec<_>>().join(","))
+        .collect()
 }
 
 /// Same rows, same text fields, numbers equal to a relative 1e-9.
@@ -98,6 +101,13 @@ fn sweep_table_reuse_reproducibility_and_retraining() {
         }
         let regions: f64 = f[11].parse().unwrap();
         assert!(regions >= 1.0, "{l}");
+        // Fitted-code test Erms: the autoencoder only, never above its encoder's.
+        if f[1] == "ae" {
+            let fitted: f64 = f[13].parse().unwrap_or_else(|_| panic!("fitted column of `{l}`"));
+            assert!(fitted.is_finite() && fitted <= f[5].parse::<f64>().unwrap(), "{l}");
+        } else {
+            assert!(f[13].is_empty(), "{l}");
+        }
     }
     let want: Vec<(String, String)> = [("pca", "2"), ("pca", "4"), ("splocs", "3"), ("ae", "3")]
         .iter()

@@ -25,8 +25,8 @@ pub struct EncodeArgs {
     pub frames: Option<String>,
     /// Autoencoder only: refine each encoder code by fitting the decoded shape to this many
     /// vertices (farthest-point spread; a number ≥ the vertex count uses every vertex) with
-    /// Gauss–Newton through the decoder, plus a global translation. Slower (5–8 s per SCAPE
-    /// shape at 200 on 2 cores), much closer on unseen shapes.
+    /// Levenberg–Marquardt through the decoder, plus a global translation. About 0.25 s per
+    /// SCAPE shape on 2 cores whatever the count; much closer on unseen shapes.
     #[arg(long, value_name = "POINTS")]
     pub fit: Option<usize>,
     /// With --fit: dimensionless pull towards the encoder's code.

@@ -100,6 +100,10 @@ pub struct CellResult {
     pub support_regions: Option<f64>,
     /// Fit time of training, seconds.
     pub seconds: f64,
+    /// Autoencoder only: test Erms with codes fitted to every vertex (`metrics.json`'s
+    /// `test_erms_fitted`; `fit_test = false` leaves it out).
+    #[serde(default)]
+    pub test_erms_fitted: Option<f64>,
     pub train_frames: usize,
     pub test_frames: usize,
 }
@@ -332,6 +336,7 @@ fn measure(cell: &Cell, cfg: &EvalConfig, dir: &Path, ds: &DatasetData, metrics:
         support_size: median(&sizes),
         support_regions: median(&regions),
         seconds: metrics.train_seconds,
+        test_erms_fitted: metrics.test_erms_fitted.map(|x| check_finite("fitted test Erms", &name, x)).transpose()?,
         train_frames: ds.train.len(),
         test_frames: ds.test.len(),
     })

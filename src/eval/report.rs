@@ -12,7 +12,7 @@ use crate::artifact::write_atomic;
 use crate::error::Result;
 
 /// Header of `results.csv`.
-pub const RESULTS_HEADER: &str = "dataset,method,representation,K,train_erms,test_erms,alignment,sted_spatial,sted_temporal,in_support_share,support_size,support_regions,seconds";
+pub const RESULTS_HEADER: &str = "dataset,method,representation,K,train_erms,test_erms,alignment,sted_spatial,sted_temporal,in_support_share,support_size,support_regions,seconds,test_erms_fitted";
 
 /// Header of `control_points.csv`.
 pub const CONTROL_POINTS_HEADER: &str = "dataset,method,K,n,erms_mean,erms_min,erms_max,trials";
@@ -27,7 +27,7 @@ pub fn results_csv(results: &[CellResult]) -> String {
     for r in results {
         let _ = writeln!(
             s,
-            "{},{},{},{},{},{},{},{},{},{},{},{},{}",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
             r.dataset,
             r.method,
             r.representation,
@@ -40,7 +40,8 @@ pub fn results_csv(results: &[CellResult]) -> String {
             opt(r.in_support_share),
             opt(r.support_size),
             opt(r.support_regions),
-            r.seconds
+            r.seconds,
+            opt(r.test_erms_fitted)
         );
     }
     s
@@ -103,18 +104,19 @@ pub fn write_all(cfg: &EvalConfig, out: &Path, results: &[CellResult], cp: &[Con
             if d.ordered { ", ordered sequence" } else { ", unordered shapes" }
         );
         md.push_str(
-            "| method | representation | K | train Erms | test Erms | alignment | STED s | STED t | in-support share | support size | regions | seconds |\n\
-             |---|---|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|\n",
+            "| method | representation | K | train Erms | test Erms | test Erms, fitted codes | alignment | STED s | STED t | in-support share | support size | regions | seconds |\n\
+             |---|---|---:|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|\n",
         );
         for r in &rows {
             let _ = writeln!(
                 md,
-                "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
+                "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
                 r.method,
                 r.representation,
                 r.k,
                 f(r.train_erms, 3),
                 f(r.test_erms, 3),
+                fo(r.test_erms_fitted, 3),
                 r.alignment,
                 f(r.sted_spatial, 4),
                 fo(r.sted_temporal, 4),
