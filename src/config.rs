@@ -33,6 +33,7 @@
 //! | `geodesic_m` | splocs, autoencoder, region-pca | 10 / 1 / – | heat-method time factor m (t = m·h²) |
 //! | `iterations` | autoencoder | 2000 | training iterations |
 //! | `learning_rate` | autoencoder | 1e-3 | Adam step size (of the first step) |
+//! | `beta1`, `beta2` | autoencoder | 0.9, 0.999 | Adam's moment decay rates, each in [0, 1) |
 //! | `learning_rate_final` | autoencoder | none (constant rate) | step size of the last step, reached by a cosine decay from `learning_rate` |
 //! | `batch_size` | autoencoder | full batch | shapes per step |
 //! | `layers` | autoencoder | 1 | convolution layers L |
@@ -220,6 +221,8 @@ pub struct RawMethod {
     pub iterations: Option<usize>,
     pub learning_rate: Option<f64>,
     pub learning_rate_final: Option<f64>,
+    pub beta1: Option<f64>,
+    pub beta2: Option<f64>,
     pub batch_size: Option<usize>,
     pub layers: Option<usize>,
     pub lambda1: Option<f64>,
@@ -330,6 +333,8 @@ fn allowed_keys(kind: MethodKind) -> &'static [&'static str] {
             "iterations",
             "learning_rate",
             "learning_rate_final",
+            "beta1",
+            "beta2",
             "batch_size",
             "layers",
             "lambda1",
@@ -510,6 +515,13 @@ fn check_method_values(kind: MethodKind, m: &RawMethod) -> Result<()> {
     at_least_one("method.iterations", m.iterations)?;
     positive("method.learning_rate", m.learning_rate)?;
     positive("method.learning_rate_final", m.learning_rate_final)?;
+    for (key, v) in [("method.beta1", m.beta1), ("method.beta2", m.beta2)] {
+        if let Some(b) = v
+            && !(b.is_finite() && (0.0..1.0).contains(&b))
+        {
+            return Err(Error::config(key, format!("{b} must be in [0, 1)")));
+        }
+    }
     at_least_one("method.batch_size", m.batch_size)?;
     at_least_one("method.layers", m.layers)?;
     non_negative("method.lambda1", m.lambda1)?;
@@ -639,6 +651,17 @@ admm = { rho = 10, iterations = 10 }
             let e = Config::from_toml(&format!("{base}{line}\n")).unwrap_err().to_string();
             assert!(e.contains(key), "{e}");
         }
+        for (line, key, value) in [
+            ("beta2 = 1.0", "method.beta2", "1 must be in [0, 1)"),
+            ("beta1 = -0.1", "method.beta1", "-0.1 must be in [0, 1)"),
+            ("scaling = \"minmax\"", "method.scaling", "`minmax`"),
+            ("learning_rate_final = 0", "method.learning_rate_final", "0"),
+        ] {
+            let e = Config::from_toml(&format!("{base}{line}\n")).unwrap_err().to_string();
+            assert!(e.contains(key) && e.contains(value), "{e}");
+        }
+        let ok = Config::from_toml(&format!("{base}beta2 = 0.99\nscaling = \"global\"\n")).unwrap();
+        assert_eq!((ok.method.beta2, ok.method.scaling.as_deref()), (Some(0.99), Some("global")));
         let pca = "[data]\npath = \"synthetic:tube\"\n[method]\nkind = \"pca\"\nengine = \"graph\"\n";
         assert!(Config::from_toml(pca).unwrap_err().to_string().contains("engine"));
     }

@@ -102,6 +102,8 @@ pub fn autoencoder_config(cfg: &Config) -> Result<AutoencoderConfig> {
         layers: m.layers.unwrap_or(d.layers),
         learning_rate: m.learning_rate.unwrap_or(d.learning_rate),
         learning_rate_final: m.learning_rate_final,
+        beta1: m.beta1.unwrap_or(d.beta1),
+        beta2: m.beta2.unwrap_or(d.beta2),
         iterations: m.iterations.unwrap_or(d.iterations),
         batch_size: m.batch_size,
         lambda1: m.lambda1.unwrap_or(d.lambda1),
@@ -417,7 +419,7 @@ pub fn train(
 
     progress.stage("writing", 0);
     let mut method_table = toml::Table::try_from(&ae_cfg).map_err(|e| Error::Invalid(e.to_string()))?;
-    for k in ["init_std", "beta1", "beta2", "epsilon"] {
+    for k in ["init_std", "epsilon"] {
         method_table.remove(k);
     }
     let support = [ae_cfg.d_min, ae_cfg.d_max];
