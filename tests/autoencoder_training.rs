@@ -293,6 +293,9 @@ fn resume_config() -> AutoencoderConfig {
         batch_size: Some(6),
         checkpoint_every: 7,
         learning_rate: 5e-3,
+        // A decaying step size and a non-default β2: resume must reproduce both.
+        learning_rate_final: Some(5e-4),
+        beta2: 0.99,
         seed: 9,
         ..Default::default()
     }
