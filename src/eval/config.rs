@@ -443,6 +443,8 @@ counts = [10, 5]
             (GOOD.replace("name = \"t\"", "name = \"t\"\nsweeep = 1"), "sweeep"),
             (GOOD.replace("label = \"ae\"", "label = \"pca\""), "method.pca.label"),
             (GOOD.replace("train = \"every:2\"", "train = \"9-3\""), "dataset.tube.train"),
+            (GOOD.replace("kind = \"pca\"", "kind = \"pca\"\nlayers = 2"), "method.pca.layers"),
+            (GOOD.replace("name = \"t\"", "name = \"t\"\nmethods = 1"), "methods"),
         ];
         for (text, needle) in cases {
             let e = EvalConfig::from_toml(&text).unwrap_err().to_string();

@@ -34,6 +34,9 @@ use crate::mesh::{MeshSequence, Vec3};
 /// Codes (one K-vector per frame) and reconstructions (N positions per frame, data units).
 pub type FittedFrames = (Vec<Vec<f64>>, Vec<Vec<Vec3>>);
 
+/// Decoded shapes (N positions each) and their centred fitted vertices (3·M numbers each).
+type Decoded = (Vec<Vec<Vec3>>, Vec<Vec<f64>>);
+
 /// Default γ of the fit (dimensionless pull towards the encoder's code).
 pub const DEFAULT_FIT_GAMMA: f64 = 1e-3;
 
@@ -102,10 +105,12 @@ impl<'a> AeFitEncoder<'a> {
         &self.vertices
     }
 
-    /// Fitted vertices of each decoded shape, centred on their mean (3·M numbers per code).
-    fn centred(&self, codes: &[Vec<f64>]) -> Result<Vec<Vec<f64>>> {
+    /// Decoded shapes (N positions each, data units) and their fitted vertices centred on
+    /// their mean (3·M numbers per code).
+    fn decode(&self, codes: &[Vec<f64>]) -> Result<Decoded> {
         let shapes = self.artifact.decode_codes(codes)?;
-        Ok(shapes.iter().map(|s| centre(&self.vertices, s)).collect())
+        let centred = shapes.iter().map(|s| centre(&self.vertices, s)).collect();
+        Ok((shapes, centred))
     }
 
     /// Code and reconstruction (N positions, data units) of one shape (N positions, data units),
@@ -125,6 +130,8 @@ impl<'a> AeFitEncoder<'a> {
         let target = centre(&self.vertices, shape);
         let m = target.len();
         let mut z = z0.to_vec();
+        // The decoded shape of the current code (kept, so the result needs no extra decode).
+        let mut decoded = Vec::new();
         let mut lambda = None;
         let mut mu = 1e-3;
         let objective = |p: &[f64], z: &[f64], lambda: f64| -> f64 {
@@ -139,7 +146,8 @@ impl<'a> AeFitEncoder<'a> {
                 zj[j] += FD_STEP;
                 batch.push(zj);
             }
-            let p = self.centred(&batch)?;
+            let (mut shapes, p) = self.decode(&batch)?;
+            decoded = shapes.swap_remove(0);
             let jac = DMatrix::from_fn(m, k, |i, j| (p[j + 1][i] - p[0][i]) / FD_STEP);
             let jtj = jac.transpose() * &jac;
             let lam = *lambda.get_or_insert_with(|| self.gamma * jtj.trace() / k as f64);
@@ -159,17 +167,19 @@ impl<'a> AeFitEncoder<'a> {
                 };
                 let step = chol.solve(&g);
                 let zn: Vec<f64> = z.iter().zip(step.iter()).map(|(a, b)| a + b).collect();
-                let en = objective(&self.centred(std::slice::from_ref(&zn))?[0], &zn, lam);
+                let (mut trial, pn) = self.decode(std::slice::from_ref(&zn))?;
+                let en = objective(&pn[0], &zn, lam);
                 if en.is_finite() && en < e0 {
-                    improved = Some((zn, en));
+                    improved = Some((zn, trial.swap_remove(0), en));
                     mu = (mu * 0.3).max(1e-9);
                     break;
                 }
                 mu *= 10.0;
             }
             match improved {
-                Some((zn, en)) => {
+                Some((zn, shape_n, en)) => {
                     z = zn;
+                    decoded = shape_n;
                     if e0 - en <= TOLERANCE * e0 {
                         break;
                     }
@@ -177,7 +187,6 @@ impl<'a> AeFitEncoder<'a> {
                 None => break,
             }
         }
-        let decoded = self.artifact.decode_codes(std::slice::from_ref(&z))?.remove(0);
         let mean =
             |s: &[Vec3], c: usize| self.vertices.iter().map(|&v| s[v][c]).sum::<f64>() / self.vertices.len() as f64;
         let t: [f64; 3] = std::array::from_fn(|c| mean(shape, c) - mean(&decoded, c));
@@ -191,12 +200,27 @@ impl<'a> AeFitEncoder<'a> {
     /// Codes and reconstructions of every frame: the encoder's code, then [`Self::fit`].
     pub fn fit_frames(&self, frames: &MeshSequence) -> Result<FittedFrames> {
         let start = self.artifact.encode_frames(frames)?;
+        self.fit_from(frames, &start, |_| {})
+    }
+
+    /// [`Self::fit`] of every frame from the given start codes (one per frame); `done(i)` is
+    /// called after frame i.
+    pub fn fit_from(
+        &self,
+        frames: &MeshSequence,
+        start: &[Vec<f64>],
+        mut done: impl FnMut(usize),
+    ) -> Result<FittedFrames> {
+        if start.len() != frames.n_frames() {
+            return Err(Error::Invalid(format!("{} start codes for {} frames", start.len(), frames.n_frames())));
+        }
         let mut codes = Vec::with_capacity(frames.n_frames());
         let mut shapes = Vec::with_capacity(frames.n_frames());
-        for (shape, z0) in frames.frames.iter().zip(&start) {
+        for (i, (shape, z0)) in frames.frames.iter().zip(start).enumerate() {
             let (z, p) = self.fit(shape, z0)?;
             codes.push(z);
             shapes.push(p);
+            done(i);
         }
         Ok((codes, shapes))
     }

@@ -383,11 +383,7 @@ pub fn train(
         let fitted = if cfg.method.fit_test.unwrap_or(true) {
             progress.stage("fitting test codes", test.n_frames() as u64);
             let fitter = AeFitEncoder::new(&art, usize::MAX, DEFAULT_FIT_GAMMA)?;
-            let mut rec = Vec::with_capacity(test.n_frames());
-            for (i, (shape, z0)) in test.frames.iter().zip(&codes).enumerate() {
-                rec.push(fitter.fit(shape, z0)?.1);
-                progress.step(i as u64 + 1, "");
-            }
+            let (_, rec) = fitter.fit_from(&test, &codes, |i| progress.step(i as u64 + 1, ""))?;
             Some(erms(&test.frames, &rec, Alignment::Centroid)?)
         } else {
             None
