@@ -66,7 +66,7 @@ fn bench(c: &mut Criterion) {
 /// Skips, saying why, when `../shared/data/scape` is absent.
 fn bench_ae(c: &mut Criterion) {
     use meshdeco::pipeline::ae_pose::{AePoseConfig, AePoser};
-    use meshdeco::pipeline::autoencoder::{self, AeArtifact};
+    use meshdeco::pipeline::autoencoder::AeArtifact;
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/scape");
     if !dir.exists() {
         eprintln!("skipping pose_solve_autoencoder_scape: {} absent", dir.display());
@@ -84,7 +84,7 @@ fn bench_ae(c: &mut Criterion) {
             eprintln!(
                 "training a 30-iteration SCAPE autoencoder for the posing benchmark (set MESHDECO_AE_MODEL to skip)"
             );
-            autoencoder::train(&cfg, &out, false, None, &mut meshdeco::pipeline::Silent).unwrap();
+            meshdeco::pipeline::train(&cfg, &out, &meshdeco::pipeline::TrainOptions::default(), &mut meshdeco::pipeline::Silent).unwrap();
             out
         }
     };

@@ -25,7 +25,8 @@ use meshdeco::config::Config;
 use meshdeco::mesh::{TriMesh, Vec3, dist};
 use meshdeco::metrics::{EdgeDistortionMeter, StedParams};
 use meshdeco::pipeline::Silent;
-use meshdeco::pipeline::linear::{LinearArtifact, train};
+use meshdeco::pipeline::linear::LinearArtifact;
+use meshdeco::pipeline::{TrainOptions, train};
 
 /// Summary over all ±1 poses of one model.
 struct Summary {
@@ -65,7 +66,7 @@ fn measure(config: &Path, out_root: &Path) -> Result<Summary> {
     let cfg = Config::from_toml(&text)?;
     let out = out_root.join(&cfg.name);
     let t = Instant::now();
-    let outcome = train(&cfg, &out, &mut Silent)?;
+    let outcome = train(&cfg, &out, &TrainOptions::default(), &mut Silent)?;
     println!(
         "{}: trained {} ({}) in {:.2} s wall, {} iterations, train Erms {:.3} ({})",
         cfg.name,

@@ -15,8 +15,10 @@
 //! components = 50
 //! ```
 //!
-//! Method keys (all optional; each applies only to the kinds listed — a key given for another
-//! kind is an error):
+//! The `[method]` table is typed ([`MethodConfig`], `src/config/method.rs`): one struct per
+//! kind with its defaults, parsed with `deny_unknown_fields` and validated once. Method keys
+//! (all optional; each applies only to the kinds listed — a key given for another kind is an
+//! error):
 //!
 //! | key | kinds | default | meaning |
 //! |---|---|---|---|
@@ -30,7 +32,7 @@
 //! | `tolerance` | splocs | 1e-6 | convergence: mean relative objective change over the last 5 iterations |
 //! | `seed` | all | 0 | random seed |
 //! | `fixed_centers` | splocs | [] | painted vertex sets fixing the first components' centres (lists of vertex indices, or file paths) |
-//! | `geodesic_m` | splocs, autoencoder, region-pca | 10 / 1 / – | heat-method time factor m (t = m·h²) |
+//! | `geodesic_m` | splocs, autoencoder | 10 / 1 | heat-method time factor m (t = m·h²) |
 //! | `iterations` | autoencoder | 2000 | training iterations |
 //! | `learning_rate` | autoencoder | 1e-3 | Adam step size (of the first step) |
 //! | `beta1`, `beta2` | autoencoder | 0.9, 0.999 | Adam's moment decay rates, each in [0, 1) |
@@ -53,6 +55,12 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
+
+mod method;
+pub use method::{
+    AE_GEODESIC_M, AutoencoderMethod, ConsistencyName, FixedCenter, MethodConfig, MethodKind, MethodSettings,
+    PcaMethod, RegionPcaMethod, SPLOCS_GEODESIC_M, ScalingName, SplocsMethod,
+};
 
 /// Which frames belong to a split, as 0-based indices (after natural sort).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -180,7 +188,7 @@ pub struct DataConfig {
 struct RawConfig {
     name: Option<String>,
     data: RawData,
-    method: RawMethod,
+    method: toml::Table,
 }
 
 #[derive(Debug, Clone, Deserialize, Serialize)]
@@ -194,160 +202,17 @@ struct RawData {
     unit_box: Option<bool>,
 }
 
-/// ADMM settings of SPLOCS.
-#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
-#[serde(deny_unknown_fields)]
-pub struct AdmmSettings {
-    pub rho: f64,
-    pub iterations: usize,
-}
-
-/// Every `[method]` key; which ones apply depends on `kind` (checked in validation).
-#[derive(Debug, Clone, Default, PartialEq, Deserialize, Serialize)]
-#[serde(deny_unknown_fields)]
-pub struct RawMethod {
-    pub kind: String,
-    pub components: Option<usize>,
-    pub representation: Option<String>,
-    pub sparsity: Option<f64>,
-    pub support: Option<[f64; 2]>,
-    pub weights: Option<String>,
-    pub max_iterations: Option<usize>,
-    pub admm: Option<AdmmSettings>,
-    pub tolerance: Option<f64>,
-    pub seed: Option<u64>,
-    pub fixed_centers: Option<Vec<FixedCenter>>,
-    pub geodesic_m: Option<f64>,
-    pub iterations: Option<usize>,
-    pub learning_rate: Option<f64>,
-    pub learning_rate_final: Option<f64>,
-    pub beta1: Option<f64>,
-    pub beta2: Option<f64>,
-    pub batch_size: Option<usize>,
-    pub layers: Option<usize>,
-    pub lambda1: Option<f64>,
-    pub lambda2: Option<f64>,
-    pub theta: Option<f64>,
-    pub checkpoint_every: Option<usize>,
-    pub scaling: Option<String>,
-    pub consistency: Option<String>,
-    pub engine: Option<String>,
-    pub device: Option<String>,
-    /// autoencoder: also measure the test Erms with codes fitted to every vertex.
-    pub fit_test: Option<bool>,
-    pub lambda: Option<f64>,
-    pub r: Option<f64>,
-    pub threshold: Option<f64>,
-    pub regions: Option<usize>,
-    pub max_regions: Option<usize>,
-    pub beta: Option<f64>,
-    pub gamma: Option<f64>,
-    /// region-pca: fragment merging fraction in [0, 1) (see `SegmentationConfig::min_piece`).
-    pub min_piece: Option<f64>,
-    /// region-pca: try every k up to `max_regions` and keep the largest compact one.
-    pub keep_searching: Option<bool>,
-}
-
-/// A painted vertex set: inline indices or a file of whitespace/comma-separated indices.
-#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
-#[serde(untagged)]
-pub enum FixedCenter {
-    Vertices(Vec<usize>),
-    File(PathBuf),
-}
-
-/// Method kinds.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum MethodKind {
-    Pca,
-    Splocs,
-    RegionPca,
-    Autoencoder,
-}
-
-impl MethodKind {
-    /// Name as written in configs.
-    pub fn name(self) -> &'static str {
-        match self {
-            MethodKind::Pca => "pca",
-            MethodKind::Splocs => "splocs",
-            MethodKind::RegionPca => "region-pca",
-            MethodKind::Autoencoder => "autoencoder",
-        }
-    }
-}
-
 /// A validated experiment configuration.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Config {
     /// Experiment name (artefact directory name).
     pub name: String,
     pub data: DataConfig,
-    pub kind: MethodKind,
-    /// The validated `[method]` table; method modules read their keys from here with defaults.
-    pub method: RawMethod,
+    /// The validated `[method]` table, typed by its `kind`.
+    pub method: MethodConfig,
     /// The file it came from (relative data paths are resolved against the working directory,
     /// as a user types them; `rest = <file>` likewise).
     pub source: Option<PathBuf>,
-}
-
-/// Keys that each kind accepts (besides `kind`).
-fn allowed_keys(kind: MethodKind) -> &'static [&'static str] {
-    match kind {
-        MethodKind::Pca => &["components", "representation", "seed", "consistency"],
-        MethodKind::Splocs => &[
-            "components",
-            "representation",
-            "sparsity",
-            "support",
-            "weights",
-            "max_iterations",
-            "admm",
-            "tolerance",
-            "seed",
-            "fixed_centers",
-            "geodesic_m",
-            "consistency",
-        ],
-        MethodKind::RegionPca => &[
-            "components",
-            "representation",
-            "seed",
-            "lambda",
-            "r",
-            "threshold",
-            "regions",
-            "max_regions",
-            "beta",
-            "gamma",
-            "geodesic_m",
-            "min_piece",
-            "keep_searching",
-        ],
-        MethodKind::Autoencoder => &[
-            "components",
-            "support",
-            "seed",
-            "geodesic_m",
-            "iterations",
-            "learning_rate",
-            "learning_rate_final",
-            "beta1",
-            "beta2",
-            "batch_size",
-            "layers",
-            "lambda1",
-            "lambda2",
-            "theta",
-            "checkpoint_every",
-            "scaling",
-            "consistency",
-            "engine",
-            "device",
-            "fit_test",
-        ],
-    }
 }
 
 impl Config {
@@ -412,167 +277,19 @@ impl Config {
         };
         let data = DataConfig { path: d.path, train, test, rest, align, unit_box: d.unit_box.unwrap_or(false) };
 
-        let m = raw.method;
-        let kind = match m.kind.as_str() {
-            "pca" => MethodKind::Pca,
-            "splocs" => MethodKind::Splocs,
-            "region-pca" => MethodKind::RegionPca,
-            "autoencoder" => MethodKind::Autoencoder,
-            other => {
-                return Err(Error::config(
-                    "method.kind",
-                    format!("`{other}`: expected autoencoder, splocs, pca or region-pca"),
-                ));
-            }
-        };
-        // Keys given for another kind.
-        let given = toml::Value::try_from(&m).map_err(|e| Error::Invalid(e.to_string()))?;
-        if let toml::Value::Table(t) = given {
-            for k in t.keys() {
-                if k != "kind" && !allowed_keys(kind).contains(&k.as_str()) {
-                    return Err(Error::config(
-                        format!("method.{k}"),
-                        format!(
-                            "does not apply to kind = \"{}\" (it accepts: {})",
-                            kind.name(),
-                            allowed_keys(kind).join(", ")
-                        ),
-                    ));
-                }
-            }
-        }
-        check_method_values(kind, &m)?;
-        Ok(Config { name, data, kind, method: m, source: None })
+        let method = MethodConfig::from_table(&raw.method)?;
+        Ok(Config { name, data, method, source: None })
+    }
+
+    /// The method kind.
+    pub fn kind(&self) -> MethodKind {
+        self.method.kind()
     }
 
     /// The artefact directory: `--out` if given, else `checkpoints/<name>`.
     pub fn output_dir(&self, out: Option<&Path>) -> PathBuf {
         out.map(Path::to_path_buf).unwrap_or_else(|| PathBuf::from("checkpoints").join(&self.name))
     }
-}
-
-fn positive(key: &str, v: Option<f64>) -> Result<()> {
-    if let Some(x) = v
-        && !(x.is_finite() && x > 0.0)
-    {
-        return Err(Error::config(key, format!("{x} must be a positive number")));
-    }
-    Ok(())
-}
-
-fn non_negative(key: &str, v: Option<f64>) -> Result<()> {
-    if let Some(x) = v
-        && !(x.is_finite() && x >= 0.0)
-    {
-        return Err(Error::config(key, format!("{x} must be a non-negative number")));
-    }
-    Ok(())
-}
-
-fn at_least_one(key: &str, v: Option<usize>) -> Result<()> {
-    if v == Some(0) {
-        return Err(Error::config(key, "0 must be at least 1"));
-    }
-    Ok(())
-}
-
-fn check_method_values(kind: MethodKind, m: &RawMethod) -> Result<()> {
-    at_least_one("method.components", m.components)?;
-    if let Some(r) = &m.representation {
-        let ok = match kind {
-            MethodKind::Pca | MethodKind::Splocs => ["displacement", "triangle-gradient", "acap"].contains(&r.as_str()),
-            _ => ["displacement", "triangle-gradient"].contains(&r.as_str()),
-        };
-        if !ok {
-            return Err(Error::config(
-                "method.representation",
-                format!("`{r}` is not available for kind = \"{}\"", kind.name()),
-            ));
-        }
-    }
-    non_negative("method.sparsity", m.sparsity)?;
-    if let Some([lo, hi]) = m.support {
-        if !(lo.is_finite() && hi.is_finite() && lo >= 0.0) {
-            return Err(Error::config("method.support", format!("[{lo}, {hi}] must be finite and non-negative")));
-        }
-        if lo >= hi {
-            return Err(Error::config("method.support", format!("d_min ({lo}) must be below d_max ({hi})")));
-        }
-    }
-    if let Some(w) = &m.weights
-        && w != "nonnegative"
-        && w != "signed"
-    {
-        return Err(Error::config("method.weights", format!("`{w}`: expected nonnegative or signed")));
-    }
-    at_least_one("method.max_iterations", m.max_iterations)?;
-    if let Some(a) = m.admm {
-        positive("method.admm.rho", Some(a.rho))?;
-        at_least_one("method.admm.iterations", Some(a.iterations))?;
-    }
-    non_negative("method.tolerance", m.tolerance)?;
-    positive("method.geodesic_m", m.geodesic_m)?;
-    at_least_one("method.iterations", m.iterations)?;
-    positive("method.learning_rate", m.learning_rate)?;
-    positive("method.learning_rate_final", m.learning_rate_final)?;
-    for (key, v) in [("method.beta1", m.beta1), ("method.beta2", m.beta2)] {
-        if let Some(b) = v
-            && !(b.is_finite() && (0.0..1.0).contains(&b))
-        {
-            return Err(Error::config(key, format!("{b} must be in [0, 1)")));
-        }
-    }
-    at_least_one("method.batch_size", m.batch_size)?;
-    at_least_one("method.layers", m.layers)?;
-    non_negative("method.lambda1", m.lambda1)?;
-    non_negative("method.lambda2", m.lambda2)?;
-    non_negative("method.theta", m.theta)?;
-    at_least_one("method.checkpoint_every", m.checkpoint_every)?;
-    if let Some(s) = &m.scaling
-        && s != "per-dimension"
-        && s != "grouped"
-        && s != "global"
-    {
-        return Err(Error::config("method.scaling", format!("`{s}`: expected per-dimension, grouped or global")));
-    }
-    if let Some(s) = &m.engine
-        && crate::nn::config::Engine::parse(s).is_none()
-    {
-        return Err(Error::config("method.engine", format!("`{s}`: expected hand or graph")));
-    }
-    if let Some(s) = &m.device
-        && crate::nn::config::ComputeDevice::parse(s).is_none()
-    {
-        return Err(Error::config("method.device", format!("`{s}`: expected cpu or wgpu")));
-    }
-    if let Some(s) = &m.consistency
-        && s != "bfs"
-        && s != "global"
-    {
-        return Err(Error::config("method.consistency", format!("`{s}`: expected bfs or global")));
-    }
-    if let Some(l) = m.lambda
-        && !(0.0..=1.0).contains(&l)
-    {
-        return Err(Error::config("method.lambda", format!("{l} must lie in [0, 1]")));
-    }
-    positive("method.r", m.r)?;
-    if let Some(t) = m.threshold
-        && !(-1.0..=1.0).contains(&t)
-    {
-        return Err(Error::config("method.threshold", format!("{t} must lie in [-1, 1] (a correlation)")));
-    }
-    at_least_one("method.regions", m.regions)?;
-    at_least_one("method.max_regions", m.max_regions)?;
-    non_negative("method.beta", m.beta)?;
-    non_negative("method.gamma", m.gamma)?;
-    if m.regions.is_some() && m.max_regions.is_some() {
-        return Err(Error::config(
-            "method.regions",
-            "give either regions (fixed) or max_regions (automatic), not both",
-        ));
-    }
-    Ok(())
 }
 
 #[cfg(test)]
@@ -595,8 +312,8 @@ admm = { rho = 10, iterations = 10 }
     #[test]
     fn parses_a_valid_config() {
         let c = Config::from_toml(GOOD).unwrap();
-        assert_eq!(c.kind, MethodKind::Splocs);
-        assert_eq!(c.method.components, Some(5));
+        assert_eq!(c.kind(), MethodKind::Splocs);
+        assert_eq!(c.method.components(), 5);
         assert_eq!(c.data.train, FrameSelection::Ranges(vec![(1, 36)]));
         let train = c.data.train.resolve("data.train", 60, None).unwrap();
         assert_eq!(train, (0..36).collect::<Vec<_>>());
@@ -646,7 +363,8 @@ admm = { rho = 10, iterations = 10 }
     fn engine_and_device_are_checked() {
         let base = "[data]\npath = \"synthetic:tube\"\n[method]\nkind = \"autoencoder\"\n";
         let ok = Config::from_toml(&format!("{base}engine = \"graph\"\ndevice = \"cpu\"\n")).unwrap();
-        assert_eq!(ok.method.engine.as_deref(), Some("graph"));
+        let MethodConfig::Autoencoder(m) = &ok.method else { panic!("kind") };
+        assert_eq!(m.engine, crate::nn::config::Engine::Graph);
         for (line, key) in [("engine = \"fast\"", "method.engine"), ("device = \"tpu\"", "method.device")] {
             let e = Config::from_toml(&format!("{base}{line}\n")).unwrap_err().to_string();
             assert!(e.contains(key), "{e}");
@@ -661,7 +379,8 @@ admm = { rho = 10, iterations = 10 }
             assert!(e.contains(key) && e.contains(value), "{e}");
         }
         let ok = Config::from_toml(&format!("{base}beta2 = 0.99\nscaling = \"global\"\n")).unwrap();
-        assert_eq!((ok.method.beta2, ok.method.scaling.as_deref()), (Some(0.99), Some("global")));
+        let MethodConfig::Autoencoder(m) = &ok.method else { panic!("kind") };
+        assert_eq!((m.beta2, m.scaling), (0.99, ScalingName::Global));
         let pca = "[data]\npath = \"synthetic:tube\"\n[method]\nkind = \"pca\"\nengine = \"graph\"\n";
         assert!(Config::from_toml(pca).unwrap_err().to_string().contains("engine"));
     }
@@ -751,6 +470,6 @@ mod display_tests {
         let text = resolved_toml(&c.name, &c.data, m);
         let back = Config::from_toml(&text).unwrap();
         assert_eq!(back.data, c.data);
-        assert_eq!(back.method.components, Some(5));
+        assert_eq!(back.method.components(), 5);
     }
 }

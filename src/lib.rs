@@ -13,6 +13,7 @@ pub mod config;
 pub mod error;
 pub mod geometry;
 pub mod mesh;
+pub mod model;
 pub mod methods;
 pub mod nn;
 pub mod pipeline;

@@ -43,6 +43,10 @@ impl UnitBox {
     pub fn invert(&self, p: Vec3) -> Vec3 {
         [0, 1, 2].map(|k| p[k] / self.scale + self.offset[k])
     }
+    /// A mesh in model space mapped back to data units (same faces).
+    pub fn invert_mesh(&self, m: &TriMesh) -> TriMesh {
+        TriMesh::new(m.positions.iter().map(|p| self.invert(*p)).collect(), m.faces.clone())
+    }
 }
 
 /// Data ready for a method: all frames preprocessed, the rest mesh, the split and the scaling.

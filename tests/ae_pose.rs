@@ -8,7 +8,7 @@ use meshdeco::mesh::primitives::{grid, icosphere};
 use meshdeco::mesh::{TriMesh, Vec3};
 use meshdeco::pipeline::Silent;
 use meshdeco::pipeline::ae_pose::{AePoseConfig, AePoser};
-use meshdeco::pipeline::autoencoder::{self, AeArtifact};
+use meshdeco::pipeline::autoencoder::AeArtifact;
 use meshdeco::representation::acap::{Acap, AcapDecoder, AcapOptions};
 use meshdeco::rng::Rng;
 
@@ -62,7 +62,7 @@ seed = 1
     .unwrap();
     let out = std::env::temp_dir().join(format!("meshdeco-test-ae-pose-{tag}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&out);
-    autoencoder::train(&cfg, &out, false, None, &mut Silent).unwrap();
+    meshdeco::pipeline::train(&cfg, &out, &meshdeco::pipeline::TrainOptions::default(), &mut Silent).unwrap();
     (AeArtifact::load(&out).unwrap(), out)
 }
 
@@ -184,7 +184,7 @@ fn training_reports_fitted_test_erms() {
     let out = std::env::temp_dir().join(format!("meshdeco-ae-fit-test-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&out);
     let cfg = Config::from_toml(&toml("")).unwrap();
-    let o = autoencoder::train(&cfg, &out, false, None, &mut Silent).unwrap();
+    let o = meshdeco::pipeline::train(&cfg, &out, &meshdeco::pipeline::TrainOptions::default(), &mut Silent).unwrap();
     let (forward, fitted) = (o.metrics.test_erms.unwrap(), o.metrics.test_erms_fitted.unwrap());
     eprintln!("test Erms: encoder {forward:.4}, fitted {fitted:.4}");
     assert!(fitted.is_finite() && fitted <= forward, "fitted {fitted} > encoder {forward}");
@@ -193,7 +193,7 @@ fn training_reports_fitted_test_erms() {
     let resolved = std::fs::read_to_string(out.join("config.toml")).unwrap();
     assert!(resolved.contains("scaling = \"global\"") && resolved.contains("learning_rate_final"), "{resolved}");
     let cfg = Config::from_toml(&toml("fit_test = false")).unwrap();
-    let o = autoencoder::train(&cfg, &out, false, None, &mut Silent).unwrap();
+    let o = meshdeco::pipeline::train(&cfg, &out, &meshdeco::pipeline::TrainOptions::default(), &mut Silent).unwrap();
     assert!(o.metrics.test_erms.is_some() && o.metrics.test_erms_fitted.is_none());
     let json = std::fs::read_to_string(out.join("metrics.json")).unwrap();
     assert!(!json.contains("test_erms_fitted"), "{json}");

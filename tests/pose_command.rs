@@ -8,8 +8,9 @@ use std::process::{Command, Output};
 
 use meshdeco::config::Config;
 use meshdeco::mesh::{self, Vec3};
-use meshdeco::pipeline::pose::{PoseModel, PoseOptions, ball, displacement_share};
-use meshdeco::pipeline::{Silent, linear, region};
+use meshdeco::model::{PoseOptions, load_model};
+use meshdeco::pipeline::Silent;
+use meshdeco::pipeline::pose::{ball, displacement_share};
 use meshdeco::synthetic;
 
 fn meshdeco(args: &[&str], cwd: &Path) -> Output {
@@ -29,11 +30,7 @@ fn train(d: &Path, name: &str, method: &str) -> PathBuf {
     ))
     .unwrap();
     let out = d.join(name);
-    if cfg.kind == meshdeco::config::MethodKind::RegionPca {
-        region::train(&cfg, &out, &mut Silent).unwrap();
-    } else {
-        linear::train(&cfg, &out, &mut Silent).unwrap();
-    }
+    meshdeco::pipeline::train(&cfg, &out, &meshdeco::pipeline::TrainOptions::default(), &mut Silent).unwrap();
     out
 }
 
@@ -74,9 +71,9 @@ fn pose_command_lands_and_reports_locality() {
     let (v, planted) = bump(b);
     let mut shares = Vec::new();
     for (name, dir) in &models {
-        let model = PoseModel::load(dir).unwrap();
+        let model = load_model(dir).unwrap();
         let w0 = model.start_weights(None).unwrap();
-        let start = model.synthesize(&w0).unwrap();
+        let start = model.decode(std::slice::from_ref(&w0)).unwrap().remove(0);
         // Drag outward (radially in x, y) by 0.03 (the bumps are up to 0.06 high).
         let p = start[v];
         let l = (p[0] * p[0] + p[1] * p[1]).sqrt();
@@ -121,7 +118,7 @@ fn pose_command_lands_and_reports_locality() {
 fn bad_constraint_files_fail_with_reasons() {
     let d = tmp("bad");
     let model = train(&d, "pca", "kind = \"pca\"\ncomponents = 3");
-    let n = PoseModel::load(&model).unwrap().rest().n_vertices();
+    let n = load_model(&model).unwrap().rest().n_vertices();
     let cases = [
         ("{\"3\": [0, 0", "bad.json: line 1".to_string()),
         (&*format!("{{\"{n}\": [0, 0, 0]}}"), format!("vertex {n} out of range (the model has {n} vertices")),

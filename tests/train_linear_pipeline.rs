@@ -7,7 +7,7 @@ use std::path::PathBuf;
 
 use meshdeco::config::Config;
 use meshdeco::pipeline::Silent;
-use meshdeco::pipeline::linear::{self, LinearArtifact, vertex_magnitudes};
+use meshdeco::pipeline::linear::{LinearArtifact, vertex_magnitudes};
 use meshdeco::representation::Element;
 use meshdeco::synthetic;
 
@@ -36,7 +36,7 @@ max_iterations = 20
     )
     .unwrap();
     let out = out_dir("splocs-bumps");
-    let o = linear::train(&cfg, &out, &mut Silent).unwrap();
+    let o = meshdeco::pipeline::train(&cfg, &out, &meshdeco::pipeline::TrainOptions::default(), &mut Silent).unwrap();
     let a = LinearArtifact::load(&out).unwrap();
     assert_eq!(a.model.n_components, 3);
     let regions = synthetic::planted_regions("synthetic:bumps").unwrap();
@@ -60,7 +60,7 @@ max_iterations = 20
         assert!(out.join(f).exists(), "{f} missing");
     }
     let again = Config::from_file(&out.join("config.toml")).unwrap();
-    assert_eq!(again.method.components, Some(3));
+    assert_eq!(again.method.components(), 3);
     std::fs::remove_dir_all(&out).unwrap();
 }
 
@@ -80,7 +80,7 @@ components = 3
     )
     .unwrap();
     let out = out_dir("pca-bumps");
-    let o = linear::train(&cfg, &out, &mut Silent).unwrap();
+    let o = meshdeco::pipeline::train(&cfg, &out, &meshdeco::pipeline::TrainOptions::default(), &mut Silent).unwrap();
     // Bump amplitudes are 3 independent scalars but the bumps are nonlinear in the radial
     // push only through the profile, which is linear in amplitude: rank 3 exactly.
     assert!(o.metrics.train_erms < 1e-6, "train {}", o.metrics.train_erms);
@@ -113,7 +113,7 @@ max_iterations = 20
     )
     .unwrap();
     let out = out_dir("splocs-acap-bumps");
-    let o = linear::train(&cfg, &out, &mut Silent).unwrap();
+    let o = meshdeco::pipeline::train(&cfg, &out, &meshdeco::pipeline::TrainOptions::default(), &mut Silent).unwrap();
     assert_eq!(o.metrics.representation, "acap");
     let a = LinearArtifact::load(&out).unwrap();
     // SPLOCS models deformations of the rest shape: the offset is the rest shape's own ACAP

@@ -5,13 +5,12 @@
 use std::path::{Path, PathBuf};
 
 use meshdeco::mesh::MeshSequence;
-use meshdeco::pipeline::linear;
 use meshdeco::synthetic;
 
 use meshdeco::config::Config;
 use meshdeco::methods::posing::{PoseConfig, RegionPoser, energy_share};
 use meshdeco::pipeline::Silent;
-use meshdeco::pipeline::region::{self, RegionArtifact};
+use meshdeco::pipeline::region::RegionArtifact;
 
 fn out_dir(tag: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("meshdeco-test-{tag}-{}", std::process::id()));
@@ -36,7 +35,7 @@ max_regions = 8
     )
     .unwrap();
     let out = out_dir("region-bumps");
-    let o = region::train(&cfg, &out, &mut Silent).unwrap();
+    let o = meshdeco::pipeline::train(&cfg, &out, &meshdeco::pipeline::TrainOptions::default(), &mut Silent).unwrap();
     for f in ["config.toml", "model.json", "model.bin", "metrics.json", "segmentation.ply"] {
         assert!(out.join(f).exists(), "{f} missing");
     }
@@ -95,10 +94,10 @@ fn face_poses_region_vs_holistic() {
     let t = std::time::Instant::now();
     let out_r = out_dir("face-region");
     let r =
-        region::train(&Config::from_toml(&toml("region-pca", "regions = 6")).unwrap(), &out_r, &mut Silent).unwrap();
+        meshdeco::pipeline::train(&Config::from_toml(&toml("region-pca", "regions = 6")).unwrap(), &out_r, &meshdeco::pipeline::TrainOptions::default(), &mut Silent).unwrap();
     let secs = t.elapsed().as_secs_f64();
     let out_p = out_dir("face-pca");
-    let h = linear::train(&Config::from_toml(&toml("pca", "")).unwrap(), &out_p, &mut Silent).unwrap();
+    let h = meshdeco::pipeline::train(&Config::from_toml(&toml("pca", "")).unwrap(), &out_p, &meshdeco::pipeline::TrainOptions::default(), &mut Silent).unwrap();
     eprintln!(
         "face-poses K = {k}: region PCA (6 regions) train Erms {:.3}, test Erms {:.3} ({secs:.1} s); holistic PCA train Erms {:.3}, test Erms {:.3}",
         r.metrics.train_erms,
@@ -110,7 +109,7 @@ fn face_poses_region_vs_holistic() {
     // Automatic segmentation (k grown until a cluster is not compact), 6 components per region.
     let out_a = out_dir("face-region-auto");
     let cfg = toml("region-pca", "max_regions = 16").replace(&format!("components = {k}"), "components = 96");
-    let auto = region::train(&Config::from_toml(&cfg).unwrap(), &out_a, &mut Silent).unwrap();
+    let auto = meshdeco::pipeline::train(&Config::from_toml(&cfg).unwrap(), &out_a, &meshdeco::pipeline::TrainOptions::default(), &mut Silent).unwrap();
     let a = RegionArtifact::load(&out_a).unwrap();
     eprintln!(
         "face-poses automatic segmentation: {} regions, {} components, train Erms {:.3}, test Erms {:.3}",

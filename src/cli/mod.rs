@@ -1,8 +1,6 @@
 //! Command-line definitions (clap) and dispatch. Each command lives in its own file and turns
 //! its arguments into library calls.
 
-use std::path::PathBuf;
-
 use anyhow::Result;
 use clap::{Parser, Subcommand};
 
@@ -26,9 +24,9 @@ pub struct Cli {
 
 #[derive(Debug, Subcommand)]
 pub enum Command {
-    /// Export each component's extreme shape and heat map (autoencoder: ranked extremes).
+    /// Export each component's shapes and heat map, ranked, with components.csv (any model).
     Components(apply::ComponentsArgs),
-    /// Latent interpolation between two shapes (autoencoder).
+    /// Interpolation between two shapes in a model's weights (the autoencoder: latent codes).
     Interpolate(apply::InterpolateArgs),
     /// Fit a trained model's weights to new meshes; writes reconstructions, weights and Erms.
     Encode(apply::EncodeArgs),
@@ -69,10 +67,4 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Pose(a) => pose::run(a),
         Command::Render(a) => render::run(a),
     }
-}
-
-/// Default artefact directory for a config name.
-#[allow(dead_code)]
-pub fn default_out(name: &str) -> PathBuf {
-    PathBuf::from("checkpoints").join(name)
 }

@@ -8,10 +8,9 @@ use anyhow::{Context, Result, bail};
 use clap::Args;
 use meshdeco::mesh::{self, TriMesh, Vec3};
 use meshdeco::methods::posing::PoseConfig;
+use meshdeco::model::{PoseOptions, check_connectivity, load_model};
 use meshdeco::pipeline::ae_pose::AePoseConfig;
-use meshdeco::pipeline::pose::{PoseModel, PoseOptions, ball, displacement_share};
-
-use super::apply::write_mesh;
+use meshdeco::pipeline::pose::{ball, displacement_share};
 
 #[derive(Debug, Args)]
 #[command(after_help = "CONSTRAINTS FILE: a JSON object mapping 0-based vertex indices (as strings) to target \
@@ -91,21 +90,24 @@ pub fn read_constraints(path: &Path, n_vertices: usize) -> Result<Vec<(usize, Ve
 }
 
 pub fn run(a: PoseArgs) -> Result<()> {
-    let model = PoseModel::load(&a.model).with_context(|| format!("loading model {}", a.model.display()))?;
+    let model = load_model(&a.model).with_context(|| format!("loading model {}", a.model.display()))?;
     let rest = model.rest();
     let n = rest.n_vertices();
     let cons = read_constraints(&a.constraints, n)?;
     let from = match &a.from {
         Some(p) => {
             let m = mesh::load_mesh(p)?;
-            if m.faces != rest.faces {
-                bail!("{}: connectivity differs from the model's rest mesh", p.display());
-            }
+            let seq = meshdeco::mesh::MeshSequence {
+                faces: m.faces.clone(),
+                frames: vec![m.positions.clone()],
+                names: vec![p.display().to_string()],
+            };
+            check_connectivity(model.as_ref(), &seq, &p.display().to_string())?;
             println!("start: encoding of {}", p.display());
             Some(m.positions)
         }
         None => {
-            println!("start: {}", model.default_start_description());
+            println!("start: {}", model.start_description());
             None
         }
     };
@@ -119,7 +121,7 @@ pub fn run(a: PoseArgs) -> Result<()> {
     let t0 = Instant::now();
     let res = model.pose(&vertices, &targets, &w0, &opts)?;
     let secs = t0.elapsed().as_secs_f64();
-    println!("{} model, {} constraint(s), solved in {:.1} ms", model.method(), cons.len(), 1e3 * secs);
+    println!("{} model, {} constraint(s), solved in {:.1} ms", model.kind().name(), cons.len(), 1e3 * secs);
     let (lo, hi) = rest.bounding_box();
     let diag = mesh::dist(lo, hi);
     for (&v, t) in vertices.iter().zip(&targets) {
@@ -150,7 +152,7 @@ pub fn run(a: PoseArgs) -> Result<()> {
             Some(("displacement", &moved)),
         )?;
     } else {
-        write_mesh(&a.out, &TriMesh::new(res.positions, rest.faces.clone()))?;
+        mesh::write_mesh(&a.out, &TriMesh::new(res.positions, rest.faces.clone()))?;
     }
     println!("wrote {}", a.out.display());
     Ok(())

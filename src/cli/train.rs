@@ -4,10 +4,11 @@ use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Context, Result};
 use clap::Args;
 use meshdeco::config::{Config, MethodKind};
-use meshdeco::pipeline::{autoencoder, linear, region};
+use meshdeco::pipeline::metrics_file::Metrics;
+use meshdeco::pipeline::{TrainOptions, train};
 
 use super::progress::Bars;
 
@@ -27,46 +28,29 @@ pub struct TrainArgs {
 pub fn run(a: TrainArgs) -> Result<()> {
     let cfg = Config::from_file(&a.config).with_context(|| format!("reading config {}", a.config.display()))?;
     let out = cfg.output_dir(a.out.as_deref());
-    match cfg.kind {
-        MethodKind::Pca | MethodKind::Splocs | MethodKind::RegionPca => {
-            if a.resume {
-                bail!("--resume applies to the autoencoder only; {} trains in one go", cfg.kind.name());
+    let mut options = TrainOptions { resume: a.resume, stop: None };
+    if cfg.kind() == MethodKind::Autoencoder {
+        let stop = Arc::new(AtomicBool::new(false));
+        let flag = stop.clone();
+        // Ctrl-C: finish the current step, write a checkpoint, exit non-zero with a hint.
+        ctrlc::set_handler(move || {
+            if flag.swap(true, Ordering::SeqCst) {
+                std::process::exit(130);
             }
-            let mut bars = Bars::new();
-            let o = if cfg.kind == MethodKind::RegionPca {
-                region::train(&cfg, &out, &mut bars)
-            } else {
-                linear::train(&cfg, &out, &mut bars)
-            }
-            .with_context(|| format!("training {} ({})", cfg.name, a.config.display()))?;
-            print_summary(&cfg.name, &o.metrics);
-            println!("artefacts in {}", o.out_dir.display());
-            Ok(())
-        }
-        MethodKind::Autoencoder => {
-            let stop = Arc::new(AtomicBool::new(false));
-            let flag = stop.clone();
-            // Ctrl-C: finish the current step, write a checkpoint, exit non-zero with a hint.
-            ctrlc::set_handler(move || {
-                if flag.swap(true, Ordering::SeqCst) {
-                    std::process::exit(130);
-                }
-                eprintln!(
-                    "\ninterrupt: stopping after this step and writing a checkpoint (Ctrl-C again to quit at once)"
-                );
-            })
-            .context("installing the Ctrl-C handler")?;
-            let mut bars = Bars::new();
-            let o = autoencoder::train(&cfg, &out, a.resume, Some(stop), &mut bars)
-                .with_context(|| format!("training {} ({})", cfg.name, a.config.display()))?;
-            print_summary(&cfg.name, &o.metrics);
-            println!("artefacts in {}", o.out_dir.display());
-            Ok(())
-        }
+            eprintln!("\ninterrupt: stopping after this step and writing a checkpoint (Ctrl-C again to quit at once)");
+        })
+        .context("installing the Ctrl-C handler")?;
+        options.stop = Some(stop);
     }
+    let mut bars = Bars::new();
+    let o = train(&cfg, &out, &options, &mut bars)
+        .with_context(|| format!("training {} ({})", cfg.name, a.config.display()))?;
+    print_summary(&cfg.name, &o.metrics);
+    println!("artefacts in {}", o.out_dir.display());
+    Ok(())
 }
 
-fn print_summary(name: &str, m: &meshdeco::pipeline::metrics_file::Metrics) {
+fn print_summary(name: &str, m: &Metrics) {
     println!(
         "{} ({}, {}, K = {}): train Erms {:.4}{} [alignment: {}], fit {:.3} s, representation {:.3} s, {} iterations{}",
         name,

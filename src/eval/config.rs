@@ -28,7 +28,7 @@
 
 use std::path::Path;
 
-use crate::config::{Config, DataConfig, MethodKind};
+use crate::config::{Config, DataConfig, MethodConfig, MethodKind};
 use crate::error::{Error, Result};
 
 /// One dataset of the evaluation.
@@ -51,6 +51,8 @@ pub struct EvalMethod {
     pub label: String,
     /// Method kind.
     pub kind: MethodKind,
+    /// The method's typed config (with the first K of its list, or 1).
+    pub method: MethodConfig,
     /// Own K list (opt-out of the sweep), if given.
     pub components: Option<Vec<usize>>,
     /// The method table as written (without `label` and `components`).
@@ -208,7 +210,7 @@ impl EvalConfig {
                         }
                     };
                     let mut probe = toml::Table::new();
-                    probe.insert("kind".into(), "pca".into());
+                    probe.insert("kind".into(), MethodKind::Pca.name().into());
                     let c = Config::from_toml(&train_config_text("probe", &t, &probe))
                         .map_err(|e| rekey(e, "data", &prefix))?;
                     if c.data.test.is_none() {
@@ -243,7 +245,7 @@ impl EvalConfig {
                     let data = &datasets[0].table;
                     let c = Config::from_toml(&train_config_text("probe", data, &probe))
                         .map_err(|e| rekey(e, "method", &prefix))?;
-                    methods.push(EvalMethod { label, kind: c.kind, components, table: t });
+                    methods.push(EvalMethod { label, kind: c.kind(), method: c.method, components, table: t });
                 }
             }
             Some(_) => return Err(Error::config("method", "must be an array of tables ([[method]])")),
@@ -420,8 +422,9 @@ counts = [10, 5]
         let cells = c.cells().unwrap();
         let ks: Vec<(usize, usize)> = cells.iter().map(|c| (c.method, c.k)).collect();
         assert_eq!(ks, vec![(0, 2), (0, 4), (0, 6), (1, 4)]);
-        assert_eq!(cells[3].config.kind, MethodKind::Autoencoder);
-        assert_eq!(cells[3].config.method.iterations, Some(10));
+        assert_eq!(cells[3].config.kind(), MethodKind::Autoencoder);
+        let MethodConfig::Autoencoder(m) = &cells[3].config.method else { panic!("kind") };
+        assert_eq!(m.iterations, 10);
         let cp = c.control_points.clone().unwrap();
         assert_eq!((cp.counts, cp.trials, cp.gamma, cp.seed), (vec![5, 10], 5, 1e-3, 0));
         // The cell text is deterministic and differs between cells.

@@ -31,138 +31,13 @@ use crate::error::{Error, Result};
 use crate::geometry::farthest_point_sampling::FarthestPointSampler;
 use crate::geometry::graph_distance::EdgeGraph;
 use crate::mesh::Vec3;
-use crate::methods::posing::{LinearPoser, PoseConfig, RegionPoser};
 use crate::metrics::erms::{Alignment, erms};
-use crate::pipeline::ae_fit::AeFitEncoder;
-use crate::pipeline::autoencoder::AeArtifact;
-use crate::pipeline::linear::LinearArtifact;
-use crate::pipeline::region::RegionArtifact;
-use crate::representation::RepresentationKind;
+use crate::model::Model;
 use crate::rng::Rng;
-
-/// A model that control points can drive (displacement-based linear models).
-pub enum PointModel<'a> {
-    /// PCA or SPLOCS on vertex displacements.
-    Linear(&'a LinearArtifact),
-    /// Region-based PCA.
-    Region(&'a RegionArtifact),
-    /// The autoencoder (latent-code optimisation).
-    Ae(&'a AeArtifact),
-}
 
 /// Levenberg–Marquardt iterations of the autoencoder's control-point fit (it starts from the
 /// reference shape's code, farther from the target than an encoder's code).
 pub const AE_FIT_ITERATIONS: usize = 30;
-
-impl<'a> PointModel<'a> {
-    fn reborrow(&self) -> PointModel<'a> {
-        match *self {
-            PointModel::Linear(a) => PointModel::Linear(a),
-            PointModel::Region(a) => PointModel::Region(a),
-            PointModel::Ae(a) => PointModel::Ae(a),
-        }
-    }
-}
-
-impl PointModel<'_> {
-    /// Rest positions in the model's space.
-    fn rest(&self) -> &[Vec3] {
-        match self {
-            PointModel::Linear(a) => &a.rest.positions,
-            PointModel::Region(a) => &a.rest.positions,
-            PointModel::Ae(a) => &a.rest.positions,
-        }
-    }
-
-    fn faces(&self) -> &[[usize; 3]] {
-        match self {
-            PointModel::Linear(a) => &a.rest.faces,
-            PointModel::Region(a) => &a.rest.faces,
-            PointModel::Ae(a) => &a.rest.faces,
-        }
-    }
-
-    fn to_model(&self, p: Vec3) -> Vec3 {
-        match self {
-            PointModel::Linear(a) => a.header.unit_box.apply(p),
-            PointModel::Region(a) => a.header.unit_box.apply(p),
-            PointModel::Ae(a) => a.header.unit_box.apply(p),
-        }
-    }
-}
-
-/// Whether a linear artefact can be fitted to control points (displacement representation).
-pub fn linear_supported(a: &LinearArtifact) -> bool {
-    a.representation.kind() == RepresentationKind::Displacement
-}
-
-/// A control-point fitter for one model and one control set: factorises once, fits many shapes.
-pub struct ControlPointFit<'a> {
-    model: PointModel<'a>,
-    vertices: Vec<usize>,
-    linear: Option<LinearPoser<'a>>,
-    region: Option<RegionPoser<'a>>,
-    ae: Option<AeFitEncoder<'a>>,
-}
-
-impl<'a> ControlPointFit<'a> {
-    /// Prepares the fit of `model` to the control `vertices` with Tikhonov weight `gamma`.
-    /// Errors for a model that is not displacement-based, an empty or out-of-range vertex set,
-    /// or a negative γ.
-    pub fn new(model: PointModel<'a>, vertices: &[usize], gamma: f64) -> Result<Self> {
-        let (mut linear, mut region, mut ae) = (None, None, None);
-        match &model {
-            PointModel::Linear(a) => {
-                if !linear_supported(a) {
-                    return Err(Error::Invalid(format!(
-                        "control points need a displacement model, not `{}`",
-                        a.header.representation
-                    )));
-                }
-                linear = Some(LinearPoser::new(&a.model, vertices, &PoseConfig { gamma, beta: 0.0 })?);
-            }
-            PointModel::Region(a) => {
-                region = Some(RegionPoser::new(&a.model, vertices, &PoseConfig { gamma, beta: a.header.beta })?);
-            }
-            PointModel::Ae(a) => {
-                ae =
-                    Some(AeFitEncoder::with_vertices(a, vertices.to_vec(), gamma)?.with_iterations(AE_FIT_ITERATIONS)?);
-            }
-        }
-        Ok(ControlPointFit { model, vertices: vertices.to_vec(), linear, region, ae })
-    }
-
-    /// Reconstructs one shape (data units) from its positions at the control vertices only:
-    /// `shape` holds all N positions (data units) of which only the control vertices are read.
-    pub fn reconstruct(&self, shape: &[Vec3]) -> Result<Vec<Vec3>> {
-        let rest = self.model.rest();
-        if shape.len() != rest.len() {
-            return Err(Error::Invalid(format!("shape has {} vertices, the model {}", shape.len(), rest.len())));
-        }
-        if let (PointModel::Ae(a), Some(fit)) = (&self.model, &self.ae) {
-            return Ok(fit.fit(shape, a.reference_code())?.1);
-        }
-        let targets: Vec<Vec3> = self
-            .vertices
-            .iter()
-            .map(|&v| {
-                let p = self.model.to_model(shape[v]);
-                [p[0] - rest[v][0], p[1] - rest[v][1], p[2] - rest[v][2]]
-            })
-            .collect();
-        match (&self.model, &self.linear, &self.region) {
-            (PointModel::Linear(a), Some(poser), _) => {
-                let w = poser.solve(&targets, &vec![0.0; a.model.n_components])?;
-                a.synthesize(&w)
-            }
-            (PointModel::Region(a), _, Some(poser)) => {
-                let z = poser.solve(&targets, &vec![0.0; a.model.n_components()])?;
-                Ok(a.decode_rows(&a.model.reconstruct(&z)?)?.remove(0))
-            }
-            _ => Err(Error::Invalid("control-point fit: model and solver do not match".into())),
-        }
-    }
-}
 
 /// Mean, minimum and maximum Erms over trials for one number of control points.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -187,23 +62,35 @@ pub fn start_vertices(n_vertices: usize, trials: usize, seed: u64) -> Vec<usize>
 /// then for every n in `counts` the fit of every `test` shape (data units) from its first n
 /// points. Counts above the vertex count are skipped.
 pub fn erms_curve(
-    model: PointModel<'_>,
+    model: &dyn Model,
     test: &[Vec<Vec3>],
     counts: &[usize],
     trials: usize,
     gamma: f64,
     seed: u64,
 ) -> Result<Vec<ControlPointErms>> {
-    let nv = model.rest().len();
+    let rest = model.rest();
+    let nv = rest.n_vertices();
+    if let Some(s) = test.iter().find(|s| s.len() != nv) {
+        return Err(Error::Invalid(format!("shape has {} vertices, the model {nv}", s.len())));
+    }
     let counts: Vec<usize> = counts.iter().copied().filter(|&n| n <= nv).collect();
     let Some(&max_n) = counts.iter().max() else { return Ok(Vec::new()) };
-    let graph = EdgeGraph::new(model.rest(), model.faces());
+    // Distances are edge-path lengths on the rest mesh in the model's own space (unit box or
+    // data units): the same sampling either way, as the unit box is a uniform scaling.
+    let graph = EdgeGraph::new(&rest.positions, &rest.faces);
     let sampler = FarthestPointSampler::new(&graph);
     let mut per_n: Vec<Vec<f64>> = vec![Vec::new(); counts.len()];
     for start in start_vertices(nv, trials, seed) {
         let points = sampler.sample(max_n, start)?;
         for (i, &n) in counts.iter().enumerate() {
-            let fit = ControlPointFit::new(model.reborrow(), &points[..n], gamma)?;
+            let fit = model.point_fit(&points[..n], gamma)?.ok_or_else(|| {
+                Error::Invalid(format!(
+                    "control points: a `{}` model on `{}` cannot be fitted to points",
+                    model.kind().name(),
+                    model.representation().name()
+                ))
+            })?;
             let rec = test.iter().map(|s| fit.reconstruct(s)).collect::<Result<Vec<_>>>()?;
             per_n[i].push(erms(test, &rec, Alignment::None)?);
         }
@@ -227,9 +114,9 @@ mod tests {
     use crate::mesh::TriMesh;
     use crate::mesh::primitives::icosphere;
     use crate::methods::{LinearModel, WeightConstraint};
-    use crate::pipeline::linear::LinearHeader;
+    use crate::pipeline::linear::{LinearArtifact, LinearHeader};
     use crate::preprocess::UnitBox;
-    use crate::representation::{Representation, RepresentationOptions};
+    use crate::representation::{Representation, RepresentationKind, RepresentationOptions};
 
     /// A 3-component displacement model on an icosphere: smooth global fields.
     fn model(constraint: WeightConstraint, unit_box: UnitBox) -> LinearArtifact {
@@ -281,12 +168,12 @@ mod tests {
             let rest = a.rest.positions.clone();
             let pts = farthest_point_sampling_on(&rest, &a.rest.faces, 6);
             // γ = 0: plain (constrained) least squares on 18 equations for 3 unknowns.
-            let fit = ControlPointFit::new(PointModel::Linear(&a), &pts, 0.0).unwrap();
+            let fit = a.point_fit(&pts, 0.0).unwrap().unwrap();
             let rec = fit.reconstruct(&truth).unwrap();
             let e = erms(std::slice::from_ref(&truth), &[rec], Alignment::None).unwrap();
             assert!(e < 1e-6, "{constraint:?}: Erms {e}");
             // A small regulariser moves the answer only slightly.
-            let fit = ControlPointFit::new(PointModel::Linear(&a), &pts, 1e-3).unwrap();
+            let fit = a.point_fit(&pts, 1e-3).unwrap().unwrap();
             let e = erms(std::slice::from_ref(&truth), &[fit.reconstruct(&truth).unwrap()], Alignment::None).unwrap();
             assert!(e > 0.0 && e < 5.0, "{constraint:?}: regularised Erms {e}");
         }
@@ -298,11 +185,11 @@ mod tests {
         // A shape needing a negative first weight cannot be met exactly by w ≥ 0.
         let truth = a.synthesize(&[-0.8, 0.5, 0.5]).unwrap();
         let pts = farthest_point_sampling_on(&a.rest.positions, &a.rest.faces, 10);
-        let rec = ControlPointFit::new(PointModel::Linear(&a), &pts, 0.0).unwrap().reconstruct(&truth).unwrap();
+        let rec = a.point_fit(&pts, 0.0).unwrap().unwrap().reconstruct(&truth).unwrap();
         let e = erms(std::slice::from_ref(&truth), &[rec], Alignment::None).unwrap();
         assert!(e > 1.0, "Erms {e}");
         let b = model(WeightConstraint::Unconstrained, UnitBox::identity());
-        let rec = ControlPointFit::new(PointModel::Linear(&b), &pts, 0.0).unwrap().reconstruct(&truth).unwrap();
+        let rec = b.point_fit(&pts, 0.0).unwrap().unwrap().reconstruct(&truth).unwrap();
         assert!(erms(&[truth], &[rec], Alignment::None).unwrap() < 1e-6);
     }
 
@@ -311,11 +198,11 @@ mod tests {
         let a = model(WeightConstraint::Unconstrained, UnitBox::identity());
         let test: Vec<Vec<Vec3>> =
             [[0.1, 0.2, 0.3], [1.0, -1.0, 0.5]].iter().map(|w| a.synthesize(w).unwrap()).collect();
-        let c1 = erms_curve(PointModel::Linear(&a), &test, &[2, 5, 10_000], 3, 0.0, 4).unwrap();
+        let c1 = erms_curve(&a, &test, &[2, 5, 10_000], 3, 0.0, 4).unwrap();
         assert_eq!(c1.iter().map(|c| c.n).collect::<Vec<_>>(), vec![2, 5]);
         assert!(c1.iter().all(|c| c.erms_max < 1e-6 && c.trials == 3));
-        assert_eq!(c1, erms_curve(PointModel::Linear(&a), &test, &[2, 5], 3, 0.0, 4).unwrap());
-        assert!(ControlPointFit::new(PointModel::Linear(&a), &[], 0.0).is_err());
+        assert_eq!(c1, erms_curve(&a, &test, &[2, 5], 3, 0.0, 4).unwrap());
+        assert!(a.point_fit(&[], 0.0).is_err());
     }
 
     fn farthest_point_sampling_on(p: &[Vec3], f: &[[usize; 3]], n: usize) -> Vec<usize> {

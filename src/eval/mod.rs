@@ -44,19 +44,19 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use serde::{Deserialize, Serialize};
 
 pub use config::{Cell, ControlPointsConfig, EvalConfig, EvalDataset, EvalMethod};
-use control_points::{ControlPointErms, PointModel, erms_curve};
+use control_points::{ControlPointErms, erms_curve};
 
 use crate::artifact;
 use crate::config::MethodKind;
 use crate::error::{Error, Result};
-use crate::mesh::{MeshSequence, Vec3};
-use crate::metrics::erms::{Alignment, erms};
+use crate::mesh::Vec3;
+use crate::metrics::erms::Alignment;
 use crate::metrics::locality::{SUPPORT_THRESHOLD, support_regions};
 use crate::metrics::sted::{FrameOrder, Sted, StedParams};
-use crate::pipeline::autoencoder::{self, AeArtifact, CHECKPOINT_FILE};
-use crate::pipeline::linear::{self, LinearArtifact};
-use crate::pipeline::metrics_file::{Metrics, median};
-use crate::pipeline::region::{self, RegionArtifact};
+use crate::model::load_model;
+use crate::pipeline::autoencoder::CHECKPOINT_FILE;
+use crate::pipeline::metrics_file::median;
+use crate::pipeline::train::{TrainOptions, TrainOutcome, frames_in_data_units, train_prepared};
 use crate::pipeline::{Progress, Silent};
 use crate::preprocess::{self, Prepared};
 
@@ -152,10 +152,10 @@ pub fn cell_dir(out: &Path, dataset: &str, method: &str, k: usize) -> PathBuf {
     out.join("cells").join(dataset).join(method).join(format!("K{k}"))
 }
 
-/// The preprocessed data of one dataset, in data units.
+/// The preprocessed data of one dataset (loaded once per evaluation), its test frames in data
+/// units and the STED operator of its mesh.
 struct DatasetData {
     prep: Prepared,
-    train: Vec<Vec<Vec3>>,
     test: Vec<Vec<Vec3>>,
     sted: Sted,
 }
@@ -171,110 +171,9 @@ impl DatasetData {
 
     fn load(d: &EvalDataset) -> Result<Self> {
         let prep = preprocess::prepare(&d.data)?;
-        let truth = |idx: &[usize]| -> Vec<Vec<Vec3>> {
-            idx.iter().map(|&f| prep.sequence.frames[f].iter().map(|p| prep.unit_box.invert(*p)).collect()).collect()
-        };
-        let (train, test) = (truth(&prep.train), truth(&prep.test));
+        let test = frames_in_data_units(&prep, &prep.test);
         let sted = Sted::new(prep.rest.n_vertices(), &prep.rest.faces, StedParams::default())?;
-        Ok(DatasetData { prep, train, test, sted })
-    }
-
-    fn test_sequence(&self) -> MeshSequence {
-        MeshSequence { faces: self.prep.sequence.faces.clone(), frames: self.test.clone(), names: Vec::new() }
-    }
-}
-
-/// A trained model of any kind, loaded from its artefact directory.
-enum Trained {
-    Linear(LinearArtifact),
-    Region(RegionArtifact),
-    Ae(Box<AeArtifact>),
-}
-
-impl Trained {
-    fn load(kind: MethodKind, dir: &Path) -> Result<Self> {
-        Ok(match kind {
-            MethodKind::Pca | MethodKind::Splocs => Trained::Linear(LinearArtifact::load(dir)?),
-            MethodKind::RegionPca => Trained::Region(RegionArtifact::load(dir)?),
-            MethodKind::Autoencoder => Trained::Ae(Box::new(AeArtifact::load(dir)?)),
-        })
-    }
-
-    fn representation(&self) -> String {
-        match self {
-            Trained::Linear(a) => a.header.representation.clone(),
-            Trained::Region(a) => a.header.representation.clone(),
-            Trained::Ae(a) => a.header.representation.clone(),
-        }
-    }
-
-    fn alignment(&self) -> Alignment {
-        match self {
-            Trained::Linear(a) => a.alignment(),
-            Trained::Region(_) => Alignment::None,
-            Trained::Ae(_) => Alignment::Centroid,
-        }
-    }
-
-    /// Reconstruction of the training frames from the stored weights / codes (region PCA:
-    /// re-encoded).
-    fn train_reconstruction(&self, ds: &DatasetData) -> Result<Vec<Vec<Vec3>>> {
-        match self {
-            Trained::Linear(a) => a.decode_rows(&a.model.reconstruct()?),
-            Trained::Region(a) => a.reconstruct_frames(&MeshSequence {
-                faces: ds.prep.sequence.faces.clone(),
-                frames: ds.train.clone(),
-                names: Vec::new(),
-            }),
-            Trained::Ae(a) => a.decode_codes(&a.train_codes),
-        }
-    }
-
-    /// Encode + reconstruct frames given in data units.
-    fn reconstruct(&self, seq: &MeshSequence) -> Result<Vec<Vec<Vec3>>> {
-        match self {
-            Trained::Linear(a) => {
-                let w = a.encode_frames(seq)?;
-                a.decode_rows(&a.model.reconstruct_weights(&w, seq.n_frames())?)
-            }
-            Trained::Region(a) => a.reconstruct_frames(seq),
-            Trained::Ae(a) => a.decode_codes(&a.encode_frames(seq)?),
-        }
-    }
-
-    /// Per component: group norms per element, and the element adjacency.
-    fn component_norms(&self) -> (Vec<Vec<f64>>, &[Vec<usize>]) {
-        match self {
-            Trained::Linear(a) => (
-                (0..a.model.n_components).map(|k| a.model.component_group_norms(k)).collect(),
-                a.representation.element_adjacency(),
-            ),
-            Trained::Region(a) => {
-                let n = a.model.n_vertices;
-                let mut out = Vec::new();
-                for r in &a.model.regions {
-                    for p in 0..r.n_components {
-                        let mut norms = vec![0.0; n];
-                        for (l, &v) in r.vertices.iter().enumerate() {
-                            norms[v] = (0..3).map(|c| r.at(p, l, c).powi(2)).sum::<f64>().sqrt();
-                        }
-                        out.push(norms);
-                    }
-                }
-                (out, a.representation.element_adjacency())
-            }
-            Trained::Ae(a) => {
-                let c = a.model.components_matrix();
-                let n = a.rest.n_vertices();
-                let norms = c
-                    .chunks_exact((9 * n).max(1))
-                    .map(|row| {
-                        row.chunks_exact(9).map(|g| g.iter().map(|&x| (x as f64).powi(2)).sum::<f64>().sqrt()).collect()
-                    })
-                    .collect();
-                (norms, a.representation.element_adjacency())
-            }
-        }
+        Ok(DatasetData { prep, test, sted })
     }
 }
 
@@ -294,16 +193,20 @@ fn check_finite(what: &str, cell: &str, x: f64) -> Result<f64> {
     if x.is_finite() { Ok(x) } else { Err(Error::Numerical(format!("{cell}: {what} is not finite ({x})"))) }
 }
 
-/// Measures a trained cell on its dataset.
-fn measure(cell: &Cell, cfg: &EvalConfig, dir: &Path, ds: &DatasetData, metrics: &Metrics) -> Result<CellResult> {
+/// Measures a trained cell on its dataset: Erms and locality as training measured them (the
+/// same numbers as `metrics.json`), STED of the training's test reconstruction, support sizes
+/// and regions of the model's components.
+fn measure(cell: &Cell, cfg: &EvalConfig, ds: &DatasetData, trained: &TrainOutcome) -> Result<CellResult> {
     let d = &cfg.datasets[cell.dataset];
     let m = &cfg.methods[cell.method];
     let name = format!("{}/{}/K{}", d.name, m.label, cell.k);
-    let model = Trained::load(cell.config.kind, dir)?;
+    let metrics = &trained.metrics;
+    let model = trained.model.as_ref();
     let alignment = model.alignment();
-    let train_erms = erms(&ds.train, &model.train_reconstruction(ds)?, alignment)?;
-    let mut test_rec = model.reconstruct(&ds.test_sequence())?;
-    let test_erms = erms(&ds.test, &test_rec, alignment)?;
+    let test_erms = metrics
+        .test_erms
+        .ok_or_else(|| Error::Invalid(format!("{name}: training measured no test split")))?;
+    let mut test_rec = trained.test_reconstruction.clone();
     if alignment == Alignment::Centroid {
         // The same alignment for STED (its temporal part sees per-frame translations).
         for (r, t) in test_rec.iter_mut().zip(&ds.test) {
@@ -312,7 +215,7 @@ fn measure(cell: &Cell, cfg: &EvalConfig, dir: &Path, ds: &DatasetData, metrics:
     }
     let order = if d.ordered { FrameOrder::Sequence } else { FrameOrder::Unordered };
     let sted = ds.sted.evaluate(&ds.test, &test_rec, order)?;
-    let (norms, adjacency) = model.component_norms();
+    let (norms, adjacency) = model.element_norms();
     let mut sizes = Vec::new();
     let mut regions = Vec::new();
     for n in &norms {
@@ -324,10 +227,10 @@ fn measure(cell: &Cell, cfg: &EvalConfig, dir: &Path, ds: &DatasetData, metrics:
         config_text: cell.config_text.clone(),
         dataset: d.name.clone(),
         method: m.label.clone(),
-        kind: cell.config.kind.name().to_string(),
-        representation: model.representation(),
+        kind: cell.config.kind().name().to_string(),
+        representation: model.representation().name().to_string(),
         k: cell.k,
-        train_erms: check_finite("train Erms", &name, train_erms)?,
+        train_erms: check_finite("train Erms", &name, metrics.train_erms)?,
         test_erms: check_finite("test Erms", &name, test_erms)?,
         alignment: alignment.to_string(),
         sted_spatial: check_finite("STED", &name, sted.spatial)?,
@@ -337,7 +240,7 @@ fn measure(cell: &Cell, cfg: &EvalConfig, dir: &Path, ds: &DatasetData, metrics:
         support_regions: median(&regions),
         seconds: metrics.train_seconds,
         test_erms_fitted: metrics.test_erms_fitted.map(|x| check_finite("fitted test Erms", &name, x)).transpose()?,
-        train_frames: ds.train.len(),
+        train_frames: ds.prep.train.len(),
         test_frames: ds.test.len(),
     })
 }
@@ -358,8 +261,15 @@ fn interrupted() -> Error {
     Error::Invalid("interrupted: finished cells are kept; rerun the same command to continue".into())
 }
 
-/// Trains a cell into `dir` (resuming an interrupted autoencoder with the same config).
-fn train_cell(cell: &Cell, dir: &Path, opts: &EvalOptions, inner: &mut dyn Progress) -> Result<Metrics> {
+/// Trains a cell into `dir` on its prepared data (resuming an interrupted autoencoder with the
+/// same config).
+fn train_cell(
+    cell: &Cell,
+    prep: &Prepared,
+    dir: &Path,
+    opts: &EvalOptions,
+    inner: &mut dyn Progress,
+) -> Result<TrainOutcome> {
     let pending = dir.join(PENDING_FILE);
     let same_pending = std::fs::read_to_string(&pending).is_ok_and(|t| t == cell.config_text);
     // A stale result must never survive a retrain.
@@ -370,19 +280,17 @@ fn train_cell(cell: &Cell, dir: &Path, opts: &EvalOptions, inner: &mut dyn Progr
     std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
     artifact::write_atomic(&pending, cell.config_text.as_bytes())?;
     let c = &cell.config;
-    let outcome = match c.kind {
-        MethodKind::Pca | MethodKind::Splocs => linear::train(c, dir, inner)?,
-        MethodKind::RegionPca => region::train(c, dir, inner)?,
-        MethodKind::Autoencoder => {
-            let resume = same_pending && dir.join(CHECKPOINT_FILE).is_file();
-            match autoencoder::train(c, dir, resume, opts.stop.clone(), inner) {
-                Ok(o) => o,
-                Err(_) if resume && !stopped(opts) => autoencoder::train(c, dir, false, opts.stop.clone(), inner)?,
-                Err(e) => return Err(e),
-            }
+    // Only the autoencoder writes checkpoints.
+    let resume = same_pending && dir.join(CHECKPOINT_FILE).is_file();
+    let fresh = TrainOptions { resume: false, stop: opts.stop.clone() };
+    if resume {
+        match train_prepared(c, prep, dir, &TrainOptions { resume: true, stop: opts.stop.clone() }, inner) {
+            Ok(o) => return Ok(o),
+            Err(e) if stopped(opts) => return Err(e),
+            Err(_) => {}
         }
-    };
-    Ok(outcome.metrics)
+    }
+    train_prepared(c, prep, dir, &fresh, inner)
 }
 
 /// Control-point key of a cell (its config text plus the control-point settings).
@@ -396,11 +304,7 @@ fn control_key(cell: &Cell, cp: &ControlPointsConfig) -> String {
 /// Whether a method can be driven by control points here (displacement-based linear models and
 /// the autoencoder).
 pub fn control_points_supported(m: &EvalMethod) -> bool {
-    let rep = m.table.get("representation").and_then(|v| v.as_str()).unwrap_or("displacement");
-    match m.kind {
-        MethodKind::Pca | MethodKind::Splocs | MethodKind::RegionPca => rep == "displacement",
-        MethodKind::Autoencoder => true,
-    }
+    m.method.settings().supports_control_points()
 }
 
 /// Runs the evaluation into `out` (see the module docs). `sweep` reports one step per cell,
@@ -438,9 +342,9 @@ pub fn run(
             return Err(interrupted());
         }
         let ds = DatasetData::cached(&mut data[cell.dataset], d)?;
-        let metrics = train_cell(cell, &dir, opts, inner)
+        let outcome = train_cell(cell, &ds.prep, &dir, opts, inner)
             .map_err(|e| if stopped(opts) { interrupted() } else { Error::Invalid(format!("cell {label}: {e}")) })?;
-        let r = measure(cell, cfg, &dir, ds, &metrics)?;
+        let r = measure(cell, cfg, ds, &outcome)?;
         artifact::write_json(&dir.join(CELL_FILE), &r)?;
         // Use the values as stored (JSON text round trip), so a first run and a rerun that
         // reuses the cell write identical tables.
@@ -483,22 +387,10 @@ pub fn run(
                         return Err(interrupted());
                     }
                     let ds = DatasetData::cached(&mut data[cell.dataset], d)?;
-                    let rows = match Trained::load(cell.config.kind, &dir)? {
-                        Trained::Linear(a) => {
-                            erms_curve(PointModel::Linear(&a), &ds.test, &cp.counts, cp.trials, cp.gamma, cp.seed)?
-                        }
-                        Trained::Region(a) => {
-                            erms_curve(PointModel::Region(&a), &ds.test, &cp.counts, cp.trials, cp.gamma, cp.seed)?
-                        }
-                        Trained::Ae(a) => erms_curve(
-                            PointModel::Ae(&a),
-                            &ds.test,
-                            &cp.counts,
-                            cp.autoencoder_trials,
-                            cp.gamma,
-                            cp.seed,
-                        )?,
-                    };
+                    let model = load_model(&dir)?;
+                    let trials =
+                        if cell.config.kind() == MethodKind::Autoencoder { cp.autoencoder_trials } else { cp.trials };
+                    let rows = erms_curve(model.as_ref(), &ds.test, &cp.counts, trials, cp.gamma, cp.seed)?;
                     if let Some(r) = rows.iter().find(|r| !r.erms_mean.is_finite()) {
                         return Err(Error::Numerical(format!(
                             "{}/{}: control-point Erms for n = {} is not finite",

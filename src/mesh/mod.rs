@@ -17,7 +17,7 @@ pub use inspect::{InspectReport, Warning, WarningKind, inspect, inspect_path};
 pub use load::{LoadedMesh, MeshFormat, load_mesh, read_mesh};
 pub use sequence::{LoadedSequence, load_sequence, read_sequence};
 pub use topology::Topology;
-pub use write::{colormap, colormap_range, write_obj, write_off, write_ply};
+pub use write::{colormap, colormap_range, write_mesh, write_obj, write_off, write_ply};
 
 /// One vertex position, `[x, y, z]`.
 pub type Vec3 = [f64; 3];

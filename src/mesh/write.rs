@@ -173,6 +173,20 @@ fn check_mesh(path: &Path, mesh: &TriMesh) -> Result<()> {
     Ok(())
 }
 
+/// Writes `mesh` in the format its extension names: `.obj`, `.ply` (no colours) or `.off`
+/// (case-insensitive); any other extension is an error naming the path.
+pub fn write_mesh(path: &Path, mesh: &TriMesh) -> Result<()> {
+    match path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).as_deref() {
+        Some("ply") => write_ply(path, mesh, None, None),
+        Some("off") => write_off(path, mesh),
+        Some("obj") => write_obj(path, mesh),
+        _ => Err(Error::Invalid(format!(
+            "{}: unknown output format (use .obj, .ply or .off)",
+            path.display()
+        ))),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::super::load::read_mesh;

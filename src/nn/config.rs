@@ -146,23 +146,23 @@ impl AutoencoderConfig {
     /// Checks every value; the error names the key and the bad value.
     pub fn validate(&self) -> Result<()> {
         if self.components == 0 {
-            return Err(bad("components", "must be at least 1 (got 0)".into()));
+            return Err(bad("components", "0 must be at least 1".into()));
         }
         if self.layers == 0 || self.layers > 16 {
-            return Err(bad("layers", format!("must be in 1..=16 (got {})", self.layers)));
+            return Err(bad("layers", format!("{} must be in 1..=16", self.layers)));
         }
         let pos = |key: &str, v: f64| -> Result<()> {
             if v.is_finite() && v > 0.0 {
                 Ok(())
             } else {
-                Err(bad(key, format!("must be a positive number (got {v})")))
+                Err(bad(key, format!("{v} must be a positive number")))
             }
         };
         let nonneg = |key: &str, v: f64| -> Result<()> {
             if v.is_finite() && v >= 0.0 {
                 Ok(())
             } else {
-                Err(bad(key, format!("must be a finite number ≥ 0 (got {v})")))
+                Err(bad(key, format!("{v} must be a finite number ≥ 0")))
             }
         };
         pos("init_std", self.init_std)?;
@@ -179,11 +179,11 @@ impl AutoencoderConfig {
         pos("epsilon", self.epsilon)?;
         for (k, v) in [("beta1", self.beta1), ("beta2", self.beta2)] {
             if !(v.is_finite() && (0.0..1.0).contains(&v)) {
-                return Err(bad(k, format!("must be in [0, 1) (got {v})")));
+                return Err(bad(k, format!("{v} must be in [0, 1)")));
             }
         }
         if self.batch_size == Some(0) {
-            return Err(bad("batch_size", "must be at least 1 (got 0)".into()));
+            return Err(bad("batch_size", "0 must be at least 1".into()));
         }
         nonneg("lambda1", self.lambda1)?;
         nonneg("lambda2", self.lambda2)?;

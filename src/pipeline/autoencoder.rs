@@ -13,35 +13,34 @@
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
-use std::sync::atomic::AtomicBool;
 use std::time::Instant;
 
 use serde::{Deserialize, Serialize};
 
-use super::Progress;
-use super::ae_fit::{AeFitEncoder, DEFAULT_FIT_GAMMA};
+use super::ae_fit::AeFitEncoder;
+use super::ae_pose::AePoser;
 use super::geodesic_support::GeodesicSupport;
-use super::linear::{TrainOutcome, rest_from_arrays, rest_to_arrays};
-use super::metrics_file::{Metrics, median};
+use super::linear::{rest_from_arrays, rest_to_arrays};
+use super::pose::{PoseOptions, PoseResult, single_frame};
 use crate::artifact::{self, ArrayStore};
-use crate::config::{Config, MethodKind, resolved_toml};
+use crate::config::{AutoencoderMethod, MethodConfig, MethodKind};
 use crate::error::{Error, Result};
+use crate::eval::control_points::AE_FIT_ITERATIONS;
 use crate::mesh::{self, MeshSequence, TriMesh, Vec3};
 use crate::methods::support_map::{ComponentLocality, SupportDistances, component_locality, support_ramp};
-use crate::nn::{Autoencoder, AutoencoderConfig, CenterDistances, NeighborIndex, RunOptions, Trainer, TrainingData};
-use crate::preprocess::{self, UnitBox};
+use crate::model::{Component, FitContext, FitStats, Fitted, Model, PointFit, RefineOptions, Refined};
+use crate::nn::{Autoencoder, CenterDistances, NeighborIndex, RunOptions, Trainer, TrainingData};
+use crate::preprocess::{Prepared, UnitBox};
 use crate::representation::acap::Consistency;
-use crate::representation::roundtrip::{Alignment, erms, frame_squared_error};
-use crate::representation::scaling::{FeatureScaling, ScalingMode};
+use crate::representation::roundtrip::Alignment;
+use crate::representation::scaling::FeatureScaling;
 use crate::representation::{Representation, RepresentationKind, RepresentationOptions};
 
 /// Checkpoint file name inside the artefact directory.
 pub const CHECKPOINT_FILE: &str = "checkpoint.bin";
 /// Per-iteration log file name.
 pub const LOG_FILE: &str = "training.jsonl";
-/// Default heat-method factor for the autoencoder's support maps (Crane et al.'s m = 1).
-pub const AE_GEODESIC_M: f64 = 1.0;
+pub use crate::config::AE_GEODESIC_M;
 
 /// Header of an autoencoder's `model.json`.
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -88,40 +87,8 @@ impl CenterDistances for GeodesicSupport {
     }
 }
 
-fn consistency_of(s: Option<&str>) -> Consistency {
-    if s == Some("bfs") { Consistency::Bfs } else { Consistency::Global }
-}
-
-/// The autoencoder hyperparameters from a validated config (defaults: the reference's).
-pub fn autoencoder_config(cfg: &Config) -> Result<AutoencoderConfig> {
-    let m = &cfg.method;
-    let d = AutoencoderConfig::default();
-    let [d_min, d_max] = m.support.unwrap_or([d.d_min, d.d_max]);
-    let c = AutoencoderConfig {
-        components: m.components.unwrap_or(d.components),
-        layers: m.layers.unwrap_or(d.layers),
-        learning_rate: m.learning_rate.unwrap_or(d.learning_rate),
-        learning_rate_final: m.learning_rate_final,
-        beta1: m.beta1.unwrap_or(d.beta1),
-        beta2: m.beta2.unwrap_or(d.beta2),
-        iterations: m.iterations.unwrap_or(d.iterations),
-        batch_size: m.batch_size,
-        lambda1: m.lambda1.unwrap_or(d.lambda1),
-        lambda2: m.lambda2.unwrap_or(d.lambda2),
-        theta: m.theta.unwrap_or(d.theta),
-        d_min,
-        d_max,
-        checkpoint_every: m.checkpoint_every.unwrap_or(d.checkpoint_every),
-        seed: m.seed.unwrap_or(d.seed),
-        engine: m.engine.as_deref().and_then(crate::nn::config::Engine::parse).unwrap_or(d.engine),
-        device: m.device.as_deref().and_then(crate::nn::config::ComputeDevice::parse).unwrap_or(d.device),
-        ..d
-    };
-    c.validate().map_err(|e| match e {
-        Error::Config { key, message } => Error::config(format!("method.{key}"), message),
-        other => other,
-    })?;
-    Ok(c)
+fn consistency_of(s: &str) -> Consistency {
+    if s == "bfs" { Consistency::Bfs } else { Consistency::Global }
 }
 
 /// A trained autoencoder with everything needed to go from meshes to codes and back.
@@ -142,7 +109,7 @@ impl AeArtifact {
         let (header, arrays): (AeHeader, ArrayStore) = artifact::load_model(&dir)?;
         let rest = rest_from_arrays(&arrays)?;
         let options =
-            RepresentationOptions { acap_consistency: consistency_of(Some(&header.consistency)), ..Default::default() };
+            RepresentationOptions { acap_consistency: consistency_of(&header.consistency), ..Default::default() };
         let representation = Representation::new(RepresentationKind::Acap, &rest, options)?;
         let neighbors = NeighborIndex::new(representation.element_adjacency())?;
         let model = Autoencoder::load(&dir, neighbors)?;
@@ -195,19 +162,14 @@ impl AeArtifact {
 
     /// Rest mesh in data units.
     pub fn rest_in_data_units(&self) -> TriMesh {
-        TriMesh::new(
-            self.rest.positions.iter().map(|p| self.header.unit_box.invert(*p)).collect(),
-            self.rest.faces.clone(),
-        )
+        self.header.unit_box.invert_mesh(&self.rest)
     }
 
-    /// Writes, per component in rank order, `<rank>_<dim>.obj` (the extreme shape) and
-    /// `<rank>_<dim>_change.ply` (rest mesh coloured by per-vertex feature change), plus
-    /// `components.csv` (dimension, rank, distance, z_extreme, centre vertex, support size).
-    pub fn write_components(&self, dir: &Path) -> Result<()> {
-        std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+    /// Per component in rank order: its summary, the extreme shape (data units) and the
+    /// per-vertex feature change from the reference shape (the heat map).
+    pub fn extremes(&self) -> Result<Vec<(ComponentSummary, Vec<Vec3>, Vec<f64>)>> {
         let zr = self.reference_code().to_vec();
-        let mut order: Vec<&ComponentSummary> = self.header.analysis.iter().collect();
+        let mut order: Vec<ComponentSummary> = self.header.analysis.clone();
         order.sort_by_key(|c| c.rank);
         let codes: Vec<Vec<f64>> = std::iter::once(zr.clone())
             .chain(order.iter().map(|c| {
@@ -217,23 +179,34 @@ impl AeArtifact {
             }))
             .collect();
         let feats = self.header.scaling.invert(&self.model.decode(&codes)?)?;
-        let meshes = self.decode_codes(&codes)?;
-        let rest = self.rest_in_data_units();
+        let mut meshes = self.decode_codes(&codes)?;
         let n = self.rest.n_vertices();
+        Ok(order
+            .into_iter()
+            .enumerate()
+            .map(|(j, c)| {
+                let change: Vec<f64> = (0..n)
+                    .map(|v| {
+                        let a = feats.element(j + 1, v);
+                        let b = feats.element(0, v);
+                        a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum::<f64>().sqrt()
+                    })
+                    .collect();
+                (c, std::mem::take(&mut meshes[j + 1]), change)
+            })
+            .collect())
+    }
+
+    /// Writes, per component in rank order, `<rank>_<dim>.obj` (the extreme shape) and
+    /// `<rank>_<dim>_change.ply` (rest mesh coloured by per-vertex feature change), plus
+    /// `components.csv` (dimension, rank, distance, z_extreme, centre vertex, support size).
+    pub fn write_components(&self, dir: &Path) -> Result<()> {
+        std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+        let rest = self.rest_in_data_units();
         let mut csv = String::from("dimension,rank,distance,z_extreme,center_vertex,support_size\n");
-        for (j, c) in order.iter().enumerate() {
-            let change: Vec<f64> = (0..n)
-                .map(|v| {
-                    let a = feats.element(j + 1, v);
-                    let b = feats.element(0, v);
-                    a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum::<f64>().sqrt()
-                })
-                .collect();
+        for (c, shape, change) in self.extremes()? {
             let stem = format!("{}_{}", c.rank, c.dim);
-            mesh::write_obj(
-                &dir.join(format!("{stem}.obj")),
-                &TriMesh::new(meshes[j + 1].clone(), self.rest.faces.clone()),
-            )?;
+            mesh::write_obj(&dir.join(format!("{stem}.obj")), &TriMesh::new(shape, self.rest.faces.clone()))?;
             mesh::write_ply(
                 &dir.join(format!("{stem}_change.ply")),
                 &rest,
@@ -247,54 +220,162 @@ impl AeArtifact {
         }
         artifact::write_atomic(&dir.join("components.csv"), csv.as_bytes())
     }
+
+    /// Saves every model file: `autoencoder.bpk` + `autoencoder.json` (the network) and
+    /// `model.json` + `model.bin` (header, rest mesh, training codes).
+    pub fn save(&self, dir: &Path) -> Result<()> {
+        self.model.save(dir)?;
+        let mut arrays = ArrayStore::new();
+        rest_to_arrays(&self.rest, &mut arrays)?;
+        arrays.insert(
+            "train_codes",
+            vec![self.train_codes.len(), self.header.components],
+            self.train_codes.iter().flatten().copied().collect(),
+        )?;
+        artifact::save_model(dir, &self.header, &arrays)
+    }
 }
 
-/// Trains the autoencoder as configured and writes the artefact directory `out`. With
-/// `resume`, continues from `out/checkpoint.bin` (same data and hyperparameters; only
-/// `iterations` and `checkpoint_every` may change). `stop` ends the run early after writing a
-/// checkpoint (Ctrl-C).
-pub fn train(
-    cfg: &Config,
-    out: &Path,
-    resume: bool,
-    stop: Option<Arc<AtomicBool>>,
-    progress: &mut dyn Progress,
-) -> Result<TrainOutcome> {
-    if cfg.kind != MethodKind::Autoencoder {
-        return Err(Error::Invalid(format!("autoencoder::train does not handle kind = \"{}\"", cfg.kind.name())));
+/// Control-point fit of the autoencoder: Levenberg–Marquardt on the code from the reference
+/// shape's code, at most [`AE_FIT_ITERATIONS`] iterations.
+struct AePointFit<'a> {
+    artifact: &'a AeArtifact,
+    fitter: AeFitEncoder<'a>,
+}
+
+impl PointFit for AePointFit<'_> {
+    fn reconstruct(&self, shape: &[Vec3]) -> Result<Vec<Vec3>> {
+        Ok(self.fitter.fit(shape, self.artifact.reference_code())?.1)
     }
-    let ae_cfg = autoencoder_config(cfg)?;
-    let scaling_mode = match cfg.method.scaling.as_deref() {
-        Some("grouped") => ScalingMode::reference_grouped(),
-        Some("global") => ScalingMode::Grouped { groups: vec![(0..9).collect()] },
-        _ => ScalingMode::PerDimension,
-    };
-    let consistency_name = cfg.method.consistency.clone().unwrap_or_else(|| "global".into());
+}
+
+impl Model for AeArtifact {
+    fn kind(&self) -> MethodKind {
+        MethodKind::Autoencoder
+    }
+    fn representation(&self) -> RepresentationKind {
+        RepresentationKind::Acap
+    }
+    fn rest(&self) -> TriMesh {
+        self.rest_in_data_units()
+    }
+    fn n_components(&self) -> usize {
+        self.header.components
+    }
+    fn components(&self) -> Result<Vec<Component>> {
+        let mut out: Vec<Component> = self
+            .extremes()?
+            .into_iter()
+            .map(|(c, _, magnitudes)| Component {
+                index: c.dim,
+                rank: c.rank,
+                name: format!("{}_{}", c.rank, c.dim),
+                center: c.center,
+                magnitudes,
+            })
+            .collect();
+        out.sort_by_key(|c| c.index);
+        Ok(out)
+    }
+    fn element_norms(&self) -> (Vec<Vec<f64>>, &[Vec<usize>]) {
+        let c = self.model.components_matrix();
+        let n = self.rest.n_vertices();
+        let norms = c
+            .chunks_exact((9 * n).max(1))
+            .map(|row| row.chunks_exact(9).map(|g| g.iter().map(|&x| (x as f64).powi(2)).sum::<f64>().sqrt()).collect())
+            .collect();
+        (norms, self.representation.element_adjacency())
+    }
+    fn alignment(&self) -> Alignment {
+        Alignment::Centroid
+    }
+    fn train_frames(&self) -> &[String] {
+        &self.header.train_frames
+    }
+    fn train_weights(&self) -> Option<Vec<Vec<f64>>> {
+        Some(self.train_codes.clone())
+    }
+    fn decode(&self, weights: &[Vec<f64>]) -> Result<Vec<Vec<Vec3>>> {
+        self.decode_codes(weights)
+    }
+    /// `z_i = Z_r,i + (Z_h,i − Z_r,i)·w_i` (other dimensions keep the reference code Z_r).
+    fn synthesis_weights(&self, dials: &[f64]) -> Result<Vec<f64>> {
+        crate::model::check_len("weights", dials.len(), self.header.components)?;
+        let pairs: Vec<(usize, f64)> =
+            dials.iter().enumerate().filter(|(_, w)| **w != 0.0).map(|(i, w)| (i, *w)).collect();
+        self.synthesis_code(&pairs)
+    }
+    fn encode(&self, frames: &MeshSequence) -> Result<Vec<Vec<f64>>> {
+        self.encode_frames(frames)
+    }
+    fn refine(
+        &self,
+        frames: &MeshSequence,
+        start: &[Vec<f64>],
+        options: &RefineOptions,
+        done: &mut dyn FnMut(usize),
+    ) -> Result<Option<Refined>> {
+        let fitter = AeFitEncoder::new(self, options.points, options.gamma)?;
+        Ok(Some(fitter.fit_from(frames, start, done)?))
+    }
+    fn start_weights(&self, from: Option<&[Vec3]>) -> Result<Vec<f64>> {
+        let rest = self.rest_in_data_units();
+        let p = from.unwrap_or(&rest.positions);
+        Ok(self.encode_frames(&single_frame(&rest, p)?)?.remove(0))
+    }
+    fn start_description(&self) -> &'static str {
+        "the code of the rest mesh"
+    }
+    fn pose(&self, vertices: &[usize], targets: &[Vec3], w0: &[f64], options: &PoseOptions) -> Result<PoseResult> {
+        let start = self.decode_codes(&[w0.to_vec()])?.remove(0);
+        let (weights, positions) = AePoser::new(self, vertices, &options.ae)?.solve(targets, w0)?;
+        Ok(PoseResult { start, positions, weights })
+    }
+    fn point_fit<'a>(&'a self, vertices: &[usize], gamma: f64) -> Result<Option<Box<dyn PointFit + 'a>>> {
+        let fitter =
+            AeFitEncoder::with_vertices(self, vertices.to_vec(), gamma)?.with_iterations(AE_FIT_ITERATIONS)?;
+        Ok(Some(Box::new(AePointFit { artifact: self, fitter })))
+    }
+    fn save(&self, dir: &Path) -> Result<()> {
+        AeArtifact::save(self, dir)
+    }
+    fn write_views(&self, dir: &Path) -> Result<()> {
+        self.write_components(&dir.join("components"))
+    }
+    fn write_components(&self, dir: &Path) -> Result<()> {
+        AeArtifact::write_components(self, dir)
+    }
+}
+
+/// Trains the autoencoder (`kind = "autoencoder"`) on prepared data. Writes its checkpoints
+/// (`checkpoint.bin`) and per-iteration log (`training.jsonl`) into `ctx.out` while it trains;
+/// with `ctx.resume`, continues from that checkpoint (same data and hyperparameters; only
+/// `iterations` and `checkpoint_every` may change). `ctx.stop` ends the run early after writing
+/// a checkpoint (Ctrl-C), which is reported as an error naming the checkpoint.
+pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> Result<Fitted> {
+    let ae_cfg = m.network_config();
+    let out = ctx.out;
     let checkpoint = out.join(CHECKPOINT_FILE);
-    if resume && !checkpoint.exists() {
+    if ctx.resume && !checkpoint.exists() {
         return Err(Error::Invalid(format!("--resume: no checkpoint at {}", checkpoint.display())));
     }
-
-    progress.stage("loading", 0);
-    let prep = preprocess::prepare(&cfg.data)?;
-    progress.stage("acap features", 0);
+    ctx.progress.stage("acap features", 0);
     let t_rep = Instant::now();
-    let options =
-        RepresentationOptions { acap_consistency: consistency_of(Some(&consistency_name)), ..Default::default() };
+    let options = RepresentationOptions { acap_consistency: m.consistency.to_acap(), ..Default::default() };
     let representation = Representation::new(RepresentationKind::Acap, &prep.rest, options)?;
     let train_seq = prep.train_sequence();
     let x_train = representation.encode(&train_seq)?;
-    let scaling = FeatureScaling::fit(&x_train, scaling_mode)?;
+    let scaling = FeatureScaling::fit(&x_train, m.scaling.mode())?;
     let xs_train = scaling.apply(&x_train)?;
     let representation_seconds = t_rep.elapsed().as_secs_f64();
 
-    progress.stage("geodesics", 0);
-    let distances = GeodesicSupport::max_normalised(&prep.rest, cfg.method.geodesic_m.unwrap_or(AE_GEODESIC_M))?;
+    ctx.progress.stage("geodesics", 0);
+    let distances = GeodesicSupport::max_normalised(&prep.rest, m.geodesic_m)?;
     let neighbors = NeighborIndex::new(representation.element_adjacency())?;
     let data = TrainingData::from_features(&xs_train)?;
 
     std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
-    let mut trainer = if resume {
+    let mut trainer = if ctx.resume {
         Trainer::resume(&checkpoint, ae_cfg.clone(), &data, &neighbors, &distances)?
     } else {
         Trainer::new(ae_cfg.clone(), &data, &neighbors, &distances)?
@@ -303,15 +384,16 @@ pub fn train(
     let mut log = std::fs::OpenOptions::new()
         .create(true)
         .write(true)
-        .append(resume)
-        .truncate(!resume)
+        .append(ctx.resume)
+        .truncate(!ctx.resume)
         .open(&log_path)
         .map_err(|e| Error::io(&log_path, e))?;
+    let progress = &mut *ctx.progress;
     progress.stage("training", ae_cfg.iterations as u64);
     progress.step(trainer.iteration() as u64, "");
     let t_train = Instant::now();
     let mut log_error: Option<std::io::Error> = None;
-    let summary = trainer.run(&RunOptions { checkpoint: Some(checkpoint.clone()), stop }, |r| {
+    let summary = trainer.run(&RunOptions { checkpoint: Some(checkpoint.clone()), stop: ctx.stop.clone() }, |r| {
         let l = &r.loss;
         let line = format!(
             "{{\"iteration\":{},\"loss\":{},\"reconstruction\":{},\"sparsity\":{},\"hinge\":{},\"step_seconds\":{},\"checkpoint\":{}}}\n",
@@ -356,9 +438,9 @@ pub fn train(
         .collect();
     summaries.sort_by_key(|c| c.dim);
     let header = AeHeader {
-        method: "autoencoder".into(),
-        representation: "acap".into(),
-        consistency: consistency_name.clone(),
+        method: MethodKind::Autoencoder.name().into(),
+        representation: RepresentationKind::Acap.name().into(),
+        consistency: m.consistency.name().into(),
         scaling,
         unit_box: prep.unit_box,
         components: ae_cfg.components,
@@ -367,85 +449,20 @@ pub fn train(
         analysis: summaries,
     };
     let art = AeArtifact { header, rest: prep.rest.clone(), representation, model, train_codes };
-
-    let truth = |idx: &[usize]| -> Vec<Vec<Vec3>> {
-        idx.iter().map(|&f| prep.sequence.frames[f].iter().map(|p| prep.unit_box.invert(*p)).collect()).collect()
-    };
-    let train_rec = art.decode_codes(&art.train_codes)?;
-    let train_erms = erms(&truth(&prep.train), &train_rec, Alignment::Centroid)?;
-    let (test_erms, test_erms_fitted) = if prep.test.is_empty() {
-        (None, None)
-    } else {
-        let test = MeshSequence { faces: prep.sequence.faces.clone(), frames: truth(&prep.test), names: Vec::new() };
-        let codes = art.encode_frames(&test)?;
-        let rec = art.decode_codes(&codes)?;
-        let forward = erms(&test.frames, &rec, Alignment::Centroid)?;
-        let fitted = if cfg.method.fit_test.unwrap_or(true) {
-            progress.stage("fitting test codes", test.n_frames() as u64);
-            let fitter = AeFitEncoder::new(&art, usize::MAX, DEFAULT_FIT_GAMMA)?;
-            let (_, rec) = fitter.fit_from(&test, &codes, |i| progress.step(i as u64 + 1, ""))?;
-            Some(erms(&test.frames, &rec, Alignment::Centroid)?)
-        } else {
-            None
-        };
-        (Some(forward), fitted)
-    };
     let locality = component_locality_of(&art, &distances, [ae_cfg.d_min, ae_cfg.d_max]);
-    let shares: Vec<f64> = locality.iter().map(|l| l.energy_share).collect();
-    let sizes: Vec<f64> = locality.iter().map(|l| l.support_size as f64).collect();
-    let metrics = Metrics {
-        method: "autoencoder".into(),
-        representation: "acap".into(),
-        components: ae_cfg.components,
-        train_erms,
-        test_erms,
-        test_erms_fitted,
-        erms_alignment: Alignment::Centroid.to_string(),
-        train_seconds,
-        representation_seconds,
-        iterations: summary.iterations_done,
-        objective: summary.last_loss.map(|l| l.total),
-        converged: None,
-        train_frames: prep.train.len(),
-        test_frames: prep.test.len(),
-        median_energy_share: median(&shares),
-        median_support_size: median(&sizes),
-        locality,
-    };
-
-    progress.stage("writing", 0);
-    let mut method_table = toml::Table::try_from(&ae_cfg).map_err(|e| Error::Invalid(e.to_string()))?;
-    for k in ["init_std", "epsilon"] {
-        method_table.remove(k);
-    }
-    let support = [ae_cfg.d_min, ae_cfg.d_max];
-    method_table.remove("d_min");
-    method_table.remove("d_max");
-    method_table.insert("support".into(), toml::Value::try_from(support).map_err(|e| Error::Invalid(e.to_string()))?);
-    method_table.insert("kind".into(), "autoencoder".into());
-    method_table.insert("consistency".into(), consistency_name.into());
-    method_table.insert("scaling".into(), cfg.method.scaling.as_deref().unwrap_or("per-dimension").into());
-    if let Some(f) = cfg.method.fit_test {
-        method_table.insert("fit_test".into(), f.into());
-    }
-    method_table.insert("geodesic_m".into(), cfg.method.geodesic_m.unwrap_or(AE_GEODESIC_M).into());
-    artifact::write_atomic(&out.join("config.toml"), resolved_toml(&cfg.name, &cfg.data, method_table).as_bytes())?;
-    art.model.save(out)?;
-    let mut arrays = ArrayStore::new();
-    rest_to_arrays(&art.rest, &mut arrays)?;
-    let k = ae_cfg.components;
-    arrays.insert(
-        "train_codes",
-        vec![art.train_codes.len(), k],
-        art.train_codes.iter().flatten().copied().collect(),
-    )?;
-    artifact::save_model(out, &art.header, &arrays)?;
-    let flat: Vec<f64> = art.train_codes.iter().flatten().copied().collect();
-    artifact::write_weights_csv(&out.join("weights.csv"), &train_seq.names, &flat, k)?;
-    artifact::write_json(&out.join("metrics.json"), &metrics)?;
-    art.write_components(&out.join("components"))?;
-    progress.finish_stage();
-    Ok(TrainOutcome { out_dir: out.to_path_buf(), metrics })
+    Ok(Fitted {
+        model: Box::new(art),
+        stats: FitStats {
+            train_seconds,
+            representation_seconds,
+            iterations: summary.iterations_done,
+            objective: summary.last_loss.map(|l| l.total),
+            converged: None,
+            locality,
+            refine_test: m.fit_test,
+        },
+        method: MethodConfig::Autoencoder(m.clone()),
+    })
 }
 
 /// Locality of the latent components: the rows C_k of the latent matrix, grouped per vertex
@@ -465,15 +482,6 @@ fn component_locality_of(art: &AeArtifact, distances: &GeodesicSupport, support:
             let ramp: Vec<f64> = d.iter().map(|&x| support_ramp(x, support[0], support[1])).collect();
             component_locality(center, &norms, &ramp)
         })
-        .collect()
-}
-
-/// Per-frame Erms (centroid-aligned) of reconstructions against frames.
-pub fn frame_erms(truth: &[Vec<Vec3>], rec: &[Vec<Vec3>]) -> Result<Vec<f64>> {
-    truth
-        .iter()
-        .zip(rec)
-        .map(|(t, r)| Ok(1000.0 * (frame_squared_error(t, r, Alignment::Centroid)? / (3.0 * t.len() as f64)).sqrt()))
         .collect()
 }
 

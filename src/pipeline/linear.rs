@@ -6,28 +6,31 @@
 //! bound to the stored rest mesh. All positions that leave this module are in the data's own
 //! units (the unit-box scaling, if any, is undone).
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::time::Instant;
 
 use serde::{Deserialize, Serialize};
 
-use super::Progress;
 use super::geodesic_support::GeodesicSupport;
-use super::metrics_file::{Metrics, median};
+use super::pose::{PoseOptions, PoseResult, model_targets};
 use crate::artifact::{self, ArrayStore};
-use crate::config::{Config, MethodKind, resolved_toml};
+use crate::config::{ConsistencyName, MethodConfig, MethodKind, PcaMethod, SplocsMethod};
 use crate::error::{Error, Result};
-use crate::mesh::{self, MeshSequence, TriMesh, Vec3};
+use crate::mesh::{MeshSequence, TriMesh, Vec3};
 use crate::methods::pca::{Pca, PcaConfig};
-use crate::methods::splocs::{AdmmConfig, SplocsConfig, SplocsSolver};
+use crate::methods::posing::{LinearPoser, PoseConfig};
+use crate::methods::splocs::SplocsSolver;
 use crate::methods::support_map::{
     ComponentLocality, SupportDistances, TriangleSupport, component_locality, support_ramp,
 };
 use crate::methods::{DataMatrix, LinearModel, WeightConstraint};
-use crate::preprocess::{self, UnitBox};
+use crate::model::{Component, FitContext, FitStats, Fitted, Model, PointFit, argmax};
+use crate::preprocess::{Prepared, UnitBox};
 use crate::representation::acap::Consistency;
-use crate::representation::roundtrip::{Alignment, erms};
+use crate::representation::roundtrip::Alignment;
 use crate::representation::{Element, Features, Representation, RepresentationKind, RepresentationOptions};
+
+pub use crate::config::SPLOCS_GEODESIC_M;
 
 /// Header of a linear model's `model.json`.
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -164,89 +167,23 @@ pub fn rest_from_arrays(a: &ArrayStore) -> Result<TriMesh> {
     Ok(rest)
 }
 
-/// Builds the SPLOCS hyperparameters from a validated config (defaults: the reference's).
-pub fn splocs_config(cfg: &Config) -> Result<SplocsConfig> {
-    let m = &cfg.method;
-    let d = SplocsConfig::default();
-    let fixed_centers = match &m.fixed_centers {
-        None => Vec::new(),
-        Some(list) => list.iter().map(read_fixed_center).collect::<Result<Vec<_>>>()?,
-    };
-    let c = SplocsConfig {
-        components: m.components.unwrap_or(d.components),
-        sparsity: m.sparsity.unwrap_or(d.sparsity),
-        support: m.support.unwrap_or(d.support),
-        weights: match m.weights.as_deref() {
-            Some(w) => WeightConstraint::parse(w).ok_or_else(|| Error::config("method.weights", format!("`{w}`")))?,
-            None => d.weights,
-        },
-        max_iterations: m.max_iterations.unwrap_or(d.max_iterations),
-        admm: m.admm.map(|a| AdmmConfig { rho: a.rho, iterations: a.iterations }).unwrap_or(d.admm),
-        tolerance: m.tolerance.unwrap_or(d.tolerance),
-        seed: m.seed.unwrap_or(d.seed),
-        fixed_centers,
-        threads: 0,
-    };
-    c.validate().map_err(|e| match e {
-        Error::Config { key, message } => Error::config(format!("method.{key}"), message),
-        other => other,
-    })?;
-    Ok(c)
-}
-
-fn read_fixed_center(c: &crate::config::FixedCenter) -> Result<Vec<usize>> {
-    match c {
-        crate::config::FixedCenter::Vertices(v) => Ok(v.clone()),
-        crate::config::FixedCenter::File(p) => {
-            let text = std::fs::read_to_string(p).map_err(|e| Error::io(p, e))?;
-            text.split(|ch: char| ch.is_whitespace() || ch == ',')
-                .filter(|t| !t.is_empty())
-                .enumerate()
-                .map(|(i, t)| {
-                    t.parse::<usize>()
-                        .map_err(|_| Error::parse(p, None, format!("entry {} (`{t}`) is not a vertex index", i + 1)))
-                })
-                .collect()
-        }
-    }
-}
-
-/// Default heat-method factor for SPLOCS support maps (the reference's m = 10).
-pub const SPLOCS_GEODESIC_M: f64 = 10.0;
-
-/// Result of training: where the artefacts are and the measured metrics.
-pub struct TrainOutcome {
-    pub out_dir: PathBuf,
-    pub metrics: Metrics,
-}
-
-/// Trains `pca` or `splocs` as configured and writes the artefact directory `out`.
-pub fn train(cfg: &Config, out: &Path, progress: &mut dyn Progress) -> Result<TrainOutcome> {
-    if !matches!(cfg.kind, MethodKind::Pca | MethodKind::Splocs) {
-        return Err(Error::Invalid(format!("linear::train does not handle kind = \"{}\"", cfg.kind.name())));
-    }
-    progress.stage("loading", 0);
-    let prep = preprocess::prepare(&cfg.data)?;
-    let kind_name = cfg.method.representation.as_deref().unwrap_or("displacement");
-    let kind = RepresentationKind::parse(kind_name)
-        .ok_or_else(|| Error::config("method.representation", format!("`{kind_name}`")))?;
-    let consistency = cfg.method.consistency.as_deref();
-    let options = RepresentationOptions { acap_consistency: parse_consistency(consistency), ..Default::default() };
-    let train_seq = prep.train_sequence();
-
-    progress.stage("representation", 0);
-    let t_rep = Instant::now();
+/// The representation of the training frames: the representation bound to the rest mesh, the
+/// features, and (with `subtract_rest`) the rest shape's own features subtracted from every row
+/// and returned (SPLOCS models deformations from the rest shape: zero for displacements and
+/// triangle gradients; logR = 0, S = I for ACAP), with the wall time.
+fn training_features(
+    kind: RepresentationKind,
+    consistency: ConsistencyName,
+    prep: &Prepared,
+    subtract_rest: bool,
+) -> Result<(Representation, Features, Option<Vec<f64>>, f64)> {
+    let t = Instant::now();
+    let options = RepresentationOptions { acap_consistency: consistency.to_acap(), ..Default::default() };
     let representation = Representation::new(kind, &prep.rest, options)?;
-    let mut x = representation.encode(&train_seq)?;
-    // SPLOCS models deformations from the rest shape (offset zero): subtract the rest shape's
-    // own features (zero for displacements and triangle gradients; logR = 0, S = I for ACAP)
-    // and keep them as the model's offset.
-    let rest_row = if cfg.kind == MethodKind::Splocs {
-        let rest_seq = MeshSequence {
-            faces: prep.rest.faces.clone(),
-            frames: vec![prep.rest.positions.clone()],
-            names: Vec::new(),
-        };
+    let mut x = representation.encode(&prep.train_sequence())?;
+    let rest_row = if subtract_rest {
+        let rest_seq =
+            MeshSequence { faces: prep.rest.faces.clone(), frames: vec![prep.rest.positions.clone()], names: Vec::new() };
         let r = representation.encode(&rest_seq)?.data;
         for row in x.data.chunks_exact_mut(r.len()) {
             row.iter_mut().zip(&r).for_each(|(v, o)| *v -= o);
@@ -255,146 +192,112 @@ pub fn train(cfg: &Config, out: &Path, progress: &mut dyn Progress) -> Result<Tr
     } else {
         None
     };
-    let representation_seconds = t_rep.elapsed().as_secs_f64();
-    let data = DataMatrix::from_features(&x)?;
+    Ok((representation, x, rest_row, t.elapsed().as_secs_f64()))
+}
 
-    let (model, method_table, iterations, objective, converged, locality, train_seconds);
-    match cfg.kind {
-        MethodKind::Pca => {
-            let pc = PcaConfig { components: cfg.method.components.unwrap_or(50), ..Default::default() };
-            progress.stage("pca", 1);
-            let t = Instant::now();
-            model = Pca::fit(data, &pc).map_err(|e| prefix_components(e, cfg))?;
-            train_seconds = t.elapsed().as_secs_f64();
-            progress.step(1, "done");
-            let mut tbl = toml::Table::try_from(&pc).map_err(|e| Error::Invalid(e.to_string()))?;
-            tbl.insert("kind".into(), "pca".into());
-            tbl.insert("representation".into(), kind.name().into());
-            method_table = tbl;
-            iterations = 1;
-            objective = None;
-            converged = None;
-            locality = measure_locality(&model, &representation, &prep.rest, [0.1, 0.7])?;
+/// Renames a method struct's error key `k` to `method.k`.
+fn method_key(e: Error) -> Error {
+    match e {
+        Error::Config { key, message } if !key.starts_with("method.") => {
+            Error::config(format!("method.{key}"), message)
         }
-        MethodKind::Splocs => {
-            let sc = splocs_config(cfg)?;
-            let m = cfg.method.geodesic_m.unwrap_or(SPLOCS_GEODESIC_M);
-            // The timer includes the heat-method factorisation of the support maps.
-            let t = Instant::now();
-            progress.stage("geodesics", 0);
-            let vertex_support = GeodesicSupport::unit_box(&prep.rest, m)?;
-            progress.stage("splocs", sc.max_iterations as u64 + 1);
-            let mut report = |i: usize, e: f64| progress.step(i as u64 + 1, &format!("objective {e:.6e}"));
-            let fit = match representation.element() {
-                Element::Vertex => SplocsSolver::fit(data, &vertex_support, &sc, &mut report)?,
-                Element::Triangle => {
-                    let tri = TriangleSupport::new(&vertex_support, &prep.rest.faces)?;
-                    SplocsSolver::fit(data, &tri, &sc, &mut report)?
-                }
-            };
-            train_seconds = t.elapsed().as_secs_f64();
-            let mut tbl = toml::Table::try_from(&sc).map_err(|e| Error::Invalid(e.to_string()))?;
-            tbl.remove("threads");
-            tbl.insert("kind".into(), "splocs".into());
-            tbl.insert("representation".into(), kind.name().into());
-            tbl.insert("geodesic_m".into(), m.into());
-            method_table = tbl;
-            iterations = fit.iterations;
-            objective = fit.objective_history.last().copied();
-            converged = Some(fit.converged);
-            locality = fit.locality.clone();
-            model = {
-                let mut m = fit.model;
-                if let Some(r) = rest_row {
-                    m.offset = r;
-                }
-                m
-            };
-        }
-        _ => unreachable!("checked above"),
+        other => other,
     }
-    progress.finish_stage();
+}
 
-    let artifact = LinearArtifact {
+fn artifact_of(
+    kind: MethodKind,
+    representation: Representation,
+    consistency: ConsistencyName,
+    prep: &Prepared,
+    model: LinearModel,
+) -> LinearArtifact {
+    let rk = representation.kind();
+    LinearArtifact {
         header: LinearHeader {
-            method: cfg.kind.name().to_string(),
-            representation: kind.name().to_string(),
-            consistency: (kind == RepresentationKind::Acap).then(|| consistency.unwrap_or("global").to_string()),
+            method: kind.name().to_string(),
+            representation: rk.name().to_string(),
+            consistency: (rk == RepresentationKind::Acap).then(|| consistency.name().to_string()),
             unit_box: prep.unit_box,
             components: model.n_components,
             constraint: model.constraint,
-            train_frames: train_seq.names.clone(),
+            train_frames: prep.train_sequence().names,
         },
         rest: prep.rest.clone(),
         model,
         representation,
-    };
-
-    progress.stage("measuring", 0);
-    let alignment = artifact.alignment();
-    let truth = |idx: &[usize]| -> Vec<Vec<Vec3>> {
-        idx.iter().map(|&f| prep.sequence.frames[f].iter().map(|p| prep.unit_box.invert(*p)).collect()).collect()
-    };
-    let train_rec = artifact.decode_rows(&artifact.model.reconstruct()?)?;
-    let train_erms = erms(&truth(&prep.train), &train_rec, alignment)?;
-    let test_erms = if prep.test.is_empty() {
-        None
-    } else {
-        let test_seq =
-            MeshSequence { faces: prep.sequence.faces.clone(), frames: truth(&prep.test), names: Vec::new() };
-        let w = artifact.encode_frames(&test_seq)?;
-        let k = artifact.model.n_components;
-        let mut rows = Vec::with_capacity(prep.test.len() * artifact.model.n_cols());
-        for f in 0..prep.test.len() {
-            rows.extend(artifact.model.synthesize(&w[f * k..(f + 1) * k])?);
-        }
-        let rec = artifact.decode_rows(&rows)?;
-        Some(erms(&test_seq.frames, &rec, alignment)?)
-    };
-
-    let shares: Vec<f64> = locality.iter().map(|l| l.energy_share).collect();
-    let sizes: Vec<f64> = locality.iter().map(|l| l.support_size as f64).collect();
-    let metrics = Metrics {
-        method: cfg.kind.name().to_string(),
-        representation: kind.name().to_string(),
-        components: artifact.model.n_components,
-        train_erms,
-        test_erms,
-        test_erms_fitted: None,
-        erms_alignment: alignment.to_string(),
-        train_seconds,
-        representation_seconds,
-        iterations,
-        objective,
-        converged,
-        train_frames: prep.train.len(),
-        test_frames: prep.test.len(),
-        median_energy_share: median(&shares),
-        median_support_size: median(&sizes),
-        locality,
-    };
-
-    progress.stage("writing", 0);
-    std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
-    artifact::write_atomic(&out.join("config.toml"), resolved_toml(&cfg.name, &cfg.data, method_table).as_bytes())?;
-    artifact.save(out)?;
-    artifact::write_weights_csv(
-        &out.join("weights.csv"),
-        &train_seq.names,
-        &artifact.model.weights,
-        artifact.model.n_components,
-    )?;
-    artifact::write_json(&out.join("metrics.json"), &metrics)?;
-    write_components(&artifact, &out.join("components"))?;
-    progress.finish_stage();
-    Ok(TrainOutcome { out_dir: out.to_path_buf(), metrics })
+    }
 }
 
-fn prefix_components(e: Error, _cfg: &Config) -> Error {
-    match e {
-        Error::Config { key, message } => Error::config(format!("method.{key}"), message),
-        other => other,
+/// Fits holistic PCA (`kind = "pca"`).
+pub fn fit_pca(m: &PcaMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> Result<Fitted> {
+    ctx.progress.stage("representation", 0);
+    let (representation, x, _, representation_seconds) =
+        training_features(m.representation, m.consistency, prep, false)?;
+    let pc = PcaConfig { components: m.components, ..Default::default() };
+    ctx.progress.stage(MethodKind::Pca.name(), 1);
+    let t = Instant::now();
+    let model = Pca::fit(DataMatrix::from_features(&x)?, &pc).map_err(method_key)?;
+    let train_seconds = t.elapsed().as_secs_f64();
+    ctx.progress.step(1, "done");
+    ctx.progress.finish_stage();
+    let locality = measure_locality(&model, &representation, &prep.rest, [0.1, 0.7])?;
+    let artifact = artifact_of(MethodKind::Pca, representation, m.consistency, prep, model);
+    Ok(Fitted {
+        model: Box::new(artifact),
+        stats: FitStats {
+            train_seconds,
+            representation_seconds,
+            iterations: 1,
+            locality,
+            ..Default::default()
+        },
+        method: MethodConfig::Pca(m.clone()),
+    })
+}
+
+/// Fits SPLOCS (`kind = "splocs"`) on the configured representation.
+pub fn fit_splocs(m: &SplocsMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> Result<Fitted> {
+    ctx.progress.stage("representation", 0);
+    let (representation, x, rest_row, representation_seconds) =
+        training_features(m.representation, m.consistency, prep, true)?;
+    let data = DataMatrix::from_features(&x)?;
+    let sc = m.solver_config()?;
+    sc.validate().map_err(method_key)?;
+    // The timer includes the heat-method factorisation of the support maps.
+    let t = Instant::now();
+    ctx.progress.stage("geodesics", 0);
+    let vertex_support = GeodesicSupport::unit_box(&prep.rest, m.geodesic_m)?;
+    ctx.progress.stage(MethodKind::Splocs.name(), sc.max_iterations as u64 + 1);
+    let progress = &mut *ctx.progress;
+    let mut report = |i: usize, e: f64| progress.step(i as u64 + 1, &format!("objective {e:.6e}"));
+    let fit = match representation.element() {
+        Element::Vertex => SplocsSolver::fit(data, &vertex_support, &sc, &mut report)?,
+        Element::Triangle => {
+            let tri = TriangleSupport::new(&vertex_support, &prep.rest.faces)?;
+            SplocsSolver::fit(data, &tri, &sc, &mut report)?
+        }
+    };
+    let train_seconds = t.elapsed().as_secs_f64();
+    ctx.progress.finish_stage();
+    let mut model = fit.model;
+    if let Some(r) = rest_row {
+        model.offset = r;
     }
+    let artifact = artifact_of(MethodKind::Splocs, representation, m.consistency, prep, model);
+    Ok(Fitted {
+        model: Box::new(artifact),
+        stats: FitStats {
+            train_seconds,
+            representation_seconds,
+            iterations: fit.iterations,
+            objective: fit.objective_history.last().copied(),
+            converged: Some(fit.converged),
+            locality: fit.locality,
+            refine_test: false,
+        },
+        method: MethodConfig::Splocs(m.clone()),
+    })
 }
 
 /// Locality of arbitrary linear components (e.g. PCA): centre = the element of largest group
@@ -446,30 +349,132 @@ pub fn vertex_magnitudes(model: &LinearModel, k: usize, element: Element, rest: 
     }
 }
 
-/// Writes, per component k, `kKK_magnitude.ply` (rest mesh coloured by magnitude, with a
-/// `magnitude` column) and the shapes at weight −1 and +1 (`kKK_minus.obj`, `kKK_plus.obj`;
-/// other weights 0), all in data units.
-pub fn write_components(a: &LinearArtifact, dir: &Path) -> Result<()> {
-    std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
-    let k = a.model.n_components;
-    let rest_data =
-        TriMesh::new(a.rest.positions.iter().map(|p| a.header.unit_box.invert(*p)).collect(), a.rest.faces.clone());
-    let width = (k.max(1) - 1).to_string().len().max(2);
-    for c in 0..k {
-        let mag = vertex_magnitudes(&a.model, c, a.representation.element(), &a.rest);
-        let colors = mesh::colormap(&mag);
-        mesh::write_ply(
-            &dir.join(format!("k{c:0width$}_magnitude.ply")),
-            &rest_data,
-            Some(&colors),
-            Some(("magnitude", &mag)),
-        )?;
-        for (sign, tag) in [(-1.0, "minus"), (1.0, "plus")] {
-            let mut w = vec![0.0; k];
-            w[c] = sign;
-            let p = a.synthesize(&w)?;
-            mesh::write_obj(&dir.join(format!("k{c:0width$}_{tag}.obj")), &TriMesh::new(p, a.rest.faces.clone()))?;
+impl LinearArtifact {
+    /// Whether posing and control points apply (per-vertex displacement models only).
+    fn per_vertex(&self) -> bool {
+        self.representation.kind() == RepresentationKind::Displacement
+    }
+}
+
+/// Control-point fit of a displacement model: Lewis–Anjyo with w0 = 0 (see
+/// `eval::control_points`).
+struct LinearPointFit<'a> {
+    artifact: &'a LinearArtifact,
+    vertices: Vec<usize>,
+    poser: LinearPoser<'a>,
+}
+
+impl PointFit for LinearPointFit<'_> {
+    fn reconstruct(&self, shape: &[Vec3]) -> Result<Vec<Vec3>> {
+        let a = self.artifact;
+        let targets: Vec<Vec3> = self.vertices.iter().map(|&v| shape[v]).collect();
+        let t = model_targets(&self.vertices, &targets, a.header.unit_box, Some(&a.rest.positions));
+        let w = self.poser.solve(&t, &vec![0.0; a.model.n_components])?;
+        a.synthesize(&w)
+    }
+}
+
+impl Model for LinearArtifact {
+    fn kind(&self) -> MethodKind {
+        if self.header.method == MethodKind::Pca.name() { MethodKind::Pca } else { MethodKind::Splocs }
+    }
+    fn representation(&self) -> RepresentationKind {
+        self.representation.kind()
+    }
+    fn rest(&self) -> TriMesh {
+        self.header.unit_box.invert_mesh(&self.rest)
+    }
+    fn n_components(&self) -> usize {
+        self.model.n_components
+    }
+    fn components(&self) -> Result<Vec<Component>> {
+        let width = (self.model.n_components.max(1) - 1).to_string().len().max(2);
+        Ok((0..self.model.n_components)
+            .map(|k| {
+                let magnitudes = vertex_magnitudes(&self.model, k, self.representation.element(), &self.rest);
+                Component { index: k, rank: k, name: format!("k{k:0width$}"), center: argmax(&magnitudes), magnitudes }
+            })
+            .collect())
+    }
+    fn element_norms(&self) -> (Vec<Vec<f64>>, &[Vec<usize>]) {
+        (
+            (0..self.model.n_components).map(|k| self.model.component_group_norms(k)).collect(),
+            self.representation.element_adjacency(),
+        )
+    }
+    fn alignment(&self) -> Alignment {
+        LinearArtifact::alignment(self)
+    }
+    fn train_frames(&self) -> &[String] {
+        &self.header.train_frames
+    }
+    fn train_weights(&self) -> Option<Vec<Vec<f64>>> {
+        Some(self.model.weights.chunks_exact(self.model.n_components.max(1)).map(<[f64]>::to_vec).collect())
+    }
+    fn decode(&self, weights: &[Vec<f64>]) -> Result<Vec<Vec<Vec3>>> {
+        let mut rows = Vec::with_capacity(weights.len() * self.model.n_cols());
+        for w in weights {
+            rows.extend(self.model.synthesize(w)?);
+        }
+        self.decode_rows(&rows)
+    }
+    fn encode(&self, frames: &MeshSequence) -> Result<Vec<Vec<f64>>> {
+        let w = self.encode_frames(frames)?;
+        Ok(w.chunks_exact(self.model.n_components.max(1)).map(<[f64]>::to_vec).collect())
+    }
+    fn start_weights(&self, from: Option<&[Vec3]>) -> Result<Vec<f64>> {
+        match from {
+            None => Ok(vec![0.0; self.model.n_components]),
+            Some(p) => Ok(Model::encode(self, &super::pose::single_frame(&self.rest, p)?)?.remove(0)),
         }
     }
-    Ok(())
+    fn start_description(&self) -> &'static str {
+        "all weights 0 (the model's offset: the training mean for PCA, the rest shape for SPLOCS)"
+    }
+    fn pose(&self, vertices: &[usize], targets: &[Vec3], w0: &[f64], options: &PoseOptions) -> Result<PoseResult> {
+        if !self.per_vertex() {
+            return Err(Error::Invalid(format!(
+                "posing a `{}` model on the `{}` representation is not supported: only displacement models \
+                 are posed per vertex (Eq. 8); train with representation = \"displacement\"",
+                self.header.method,
+                self.representation.kind().name()
+            )));
+        }
+        let start = self.synthesize(w0)?;
+        let t = model_targets(vertices, targets, self.header.unit_box, Some(&self.rest.positions));
+        let weights = LinearPoser::new(&self.model, vertices, &options.linear)?.solve(&t, w0)?;
+        let positions = self.synthesize(&weights)?;
+        Ok(PoseResult { start, positions, weights })
+    }
+    /// The support of the component with the largest magnitude at `v` (vertices above 10⁻³ of
+    /// that component's largest magnitude).
+    fn locality_set(&self, v: usize) -> Option<(String, Vec<usize>)> {
+        let m = &self.model;
+        if m.width != 3 || v >= m.n_elements {
+            return None;
+        }
+        let k = (0..m.n_components)
+            .max_by(|&p, &q| m.component_group_norms(p)[v].total_cmp(&m.component_group_norms(q)[v]))?;
+        let norms = m.component_group_norms(k);
+        let top = norms.iter().cloned().fold(0.0, f64::max);
+        let set: Vec<usize> = (0..m.n_elements).filter(|&u| norms[u] > 1e-3 * top).collect();
+        Some((format!("support of component {k} ({} vertices)", set.len()), set))
+    }
+    fn point_fit<'a>(&'a self, vertices: &[usize], gamma: f64) -> Result<Option<Box<dyn PointFit + 'a>>> {
+        if !self.per_vertex() {
+            return Ok(None);
+        }
+        let poser = LinearPoser::new(&self.model, vertices, &PoseConfig { gamma, beta: 0.0 })?;
+        Ok(Some(Box::new(LinearPointFit { artifact: self, vertices: vertices.to_vec(), poser })))
+    }
+    fn save(&self, dir: &Path) -> Result<()> {
+        LinearArtifact::save(self, dir)
+    }
+    fn write_views(&self, dir: &Path) -> Result<()> {
+        crate::model::write_component_meshes(self, &dir.join("components"))
+    }
+    fn write_components(&self, dir: &Path) -> Result<()> {
+        crate::model::write_component_meshes(self, dir)?;
+        crate::model::write_components_csv(self, dir)
+    }
 }

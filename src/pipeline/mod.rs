@@ -10,6 +10,9 @@ pub mod linear;
 pub mod pose;
 pub mod metrics_file;
 pub mod region;
+pub mod train;
+
+pub use train::{TrainOptions, TrainOutcome, train, train_prepared};
 
 /// Progress reporting hooks of long jobs (the CLI draws them with indicatif).
 pub trait Progress {

@@ -14,18 +14,19 @@ use std::time::Instant;
 
 use serde::{Deserialize, Serialize};
 
-use super::Progress;
-use super::linear::{TrainOutcome, rest_from_arrays, rest_to_arrays};
-use super::metrics_file::Metrics;
+use super::linear::{rest_from_arrays, rest_to_arrays};
+use super::pose::{PoseOptions, PoseResult, model_targets, single_frame};
 use crate::artifact::{self, ArrayStore};
-use crate::config::{Config, MethodKind, resolved_toml};
+use crate::config::{MethodConfig, MethodKind, RegionPcaMethod};
 use crate::error::{Error, Result};
 use crate::mesh::{self, MeshSequence, TriMesh, Vec3};
 use crate::methods::DataMatrix;
-use crate::methods::region_pca::{RegionBasis, RegionPcaConfig, RegionPcaModel};
-use crate::methods::segmentation::{SegmentationConfig, segment};
-use crate::preprocess::{self, UnitBox};
-use crate::representation::roundtrip::{Alignment, erms};
+use crate::methods::posing::{PoseConfig, RegionPoser};
+use crate::methods::region_pca::{RegionBasis, RegionPcaModel};
+use crate::methods::segmentation::segment;
+use crate::model::{Component, FitContext, FitStats, Fitted, Model, PointFit, argmax};
+use crate::preprocess::{Prepared, UnitBox};
+use crate::representation::roundtrip::Alignment;
 use crate::representation::{Features, Representation, RepresentationKind, RepresentationOptions};
 
 /// Header of a region PCA `model.json`.
@@ -136,22 +137,6 @@ impl RegionArtifact {
     }
 }
 
-fn seg_config(cfg: &Config) -> SegmentationConfig {
-    let m = &cfg.method;
-    let d = SegmentationConfig::default();
-    SegmentationConfig {
-        lambda: m.lambda.unwrap_or(d.lambda),
-        r: m.r.or(d.r),
-        threshold: m.threshold.unwrap_or(d.threshold),
-        regions: m.regions,
-        max_regions: m.max_regions.unwrap_or(d.max_regions),
-        seed: m.seed.unwrap_or(d.seed),
-        min_piece: m.min_piece.unwrap_or(d.min_piece),
-        keep_searching: m.keep_searching.unwrap_or(d.keep_searching),
-        ..d
-    }
-}
-
 fn prefix(e: Error) -> Error {
     match e {
         Error::Config { key, message } if !key.starts_with("method.") => {
@@ -161,55 +146,37 @@ fn prefix(e: Error) -> Error {
     }
 }
 
-/// Trains `region-pca` as configured and writes the artefact directory `out`.
-///
-/// Keys: `components` (total budget, default 50), `lambda`, `r` (model units: unit-box units when
-/// `data.unit_box`), `threshold`, `regions` / `max_regions`, `beta` (default 1), `gamma`
-/// (posing default, 0.025), `seed`.
-pub fn train(cfg: &Config, out: &Path, progress: &mut dyn Progress) -> Result<TrainOutcome> {
-    if cfg.kind != MethodKind::RegionPca {
-        return Err(Error::Invalid(format!("region::train does not handle kind = \"{}\"", cfg.kind.name())));
-    }
-    let rep_name = cfg.method.representation.as_deref().unwrap_or("displacement");
-    if rep_name != "displacement" {
-        return Err(Error::config(
-            "method.representation",
-            format!("`{rep_name}`: region-pca supports only displacement"),
-        ));
-    }
-    progress.stage("loading", 0);
-    let prep = preprocess::prepare(&cfg.data)?;
+/// Fits region PCA (`kind = "region-pca"`): segmentation of the training displacements, one
+/// PCA per region. The resolved config records the `r` used (0.1 × the rest mesh's diagonal
+/// when not given).
+pub fn fit(m: &RegionPcaMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> Result<Fitted> {
     let train_seq = prep.train_sequence();
-    progress.stage("representation", 0);
+    ctx.progress.stage("representation", 0);
     let t_rep = Instant::now();
     let representation =
         Representation::new(RepresentationKind::Displacement, &prep.rest, RepresentationOptions::default())?;
     let x = representation.encode(&train_seq)?;
     let representation_seconds = t_rep.elapsed().as_secs_f64();
 
-    let sc = seg_config(cfg);
-    sc.validate().map_err(prefix)?;
-    let rc = RegionPcaConfig { components: cfg.method.components.unwrap_or(50), beta: cfg.method.beta.unwrap_or(1.0) };
-    rc.validate().map_err(prefix)?;
-    let gamma = cfg.method.gamma.unwrap_or(0.025);
-
+    let sc = m.segmentation();
+    let rc = m.region_pca();
     let t = Instant::now();
-    progress.stage("segmentation", 0);
+    ctx.progress.stage("segmentation", 0);
     let seg = segment(&prep.rest.positions, &prep.rest.faces, &x.data, x.n_frames, &sc)?;
-    progress.stage("region pca", 1);
+    ctx.progress.stage("region pca", 1);
     let model = RegionPcaModel::fit(DataMatrix::from_features(&x)?, &seg.regions, &rc).map_err(prefix)?;
     let train_seconds = t.elapsed().as_secs_f64();
-    progress.step(1, &format!("{} regions", seg.n_regions()));
-    progress.finish_stage();
+    ctx.progress.step(1, &format!("{} regions", seg.n_regions()));
+    ctx.progress.finish_stage();
 
     let artifact = RegionArtifact {
         header: RegionHeader {
-            method: "region-pca".into(),
-            representation: "displacement".into(),
+            method: MethodKind::RegionPca.name().into(),
+            representation: RepresentationKind::Displacement.name().into(),
             unit_box: prep.unit_box,
             components: model.regions.iter().map(|r| r.n_components).collect(),
             beta: rc.beta,
-            gamma,
+            gamma: m.gamma,
             lambda: sc.lambda,
             r: seg.r,
             threshold: sc.threshold,
@@ -220,70 +187,16 @@ pub fn train(cfg: &Config, out: &Path, progress: &mut dyn Progress) -> Result<Tr
         model,
         representation,
     };
-
-    progress.stage("measuring", 0);
-    let truth = |idx: &[usize]| -> MeshSequence {
-        MeshSequence {
-            faces: prep.sequence.faces.clone(),
-            frames: idx
-                .iter()
-                .map(|&f| prep.sequence.frames[f].iter().map(|p| prep.unit_box.invert(*p)).collect())
-                .collect(),
-            names: Vec::new(),
-        }
-    };
-    let train_truth = truth(&prep.train);
-    let train_erms = erms(&train_truth.frames, &artifact.reconstruct_frames(&train_truth)?, Alignment::None)?;
-    let test_erms = if prep.test.is_empty() {
-        None
-    } else {
-        let t = truth(&prep.test);
-        Some(erms(&t.frames, &artifact.reconstruct_frames(&t)?, Alignment::None)?)
-    };
-    let metrics = Metrics {
-        method: "region-pca".into(),
-        representation: "displacement".into(),
-        components: artifact.model.n_components(),
-        train_erms,
-        test_erms,
-        test_erms_fitted: None,
-        erms_alignment: Alignment::None.to_string(),
-        train_seconds,
-        representation_seconds,
-        iterations: 1,
-        objective: None,
-        converged: None,
-        train_frames: prep.train.len(),
-        test_frames: prep.test.len(),
-        median_energy_share: None,
-        median_support_size: None,
-        locality: Vec::new(),
-    };
-
-    progress.stage("writing", 0);
-    std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
-    let mut tbl = toml::Table::new();
-    tbl.insert("kind".into(), "region-pca".into());
-    tbl.insert("representation".into(), "displacement".into());
-    tbl.insert("components".into(), (rc.components as i64).into());
-    tbl.insert("lambda".into(), sc.lambda.into());
-    tbl.insert("r".into(), seg.r.into());
-    tbl.insert("threshold".into(), sc.threshold.into());
-    match sc.regions {
-        Some(k) => tbl.insert("regions".into(), (k as i64).into()),
-        None => tbl.insert("max_regions".into(), (sc.max_regions as i64).into()),
-    };
-    tbl.insert("min_piece".into(), sc.min_piece.into());
-    tbl.insert("keep_searching".into(), sc.keep_searching.into());
-    tbl.insert("beta".into(), rc.beta.into());
-    tbl.insert("gamma".into(), gamma.into());
-    tbl.insert("seed".into(), (sc.seed as i64).into());
-    artifact::write_atomic(&out.join("config.toml"), resolved_toml(&cfg.name, &cfg.data, tbl).as_bytes())?;
-    artifact.save(out)?;
-    write_segmentation_ply(&out.join("segmentation.ply"), &artifact)?;
-    artifact::write_json(&out.join("metrics.json"), &metrics)?;
-    progress.finish_stage();
-    Ok(TrainOutcome { out_dir: out.to_path_buf(), metrics })
+    let mut resolved = m.clone();
+    resolved.r = Some(seg.r);
+    if resolved.regions.is_none() {
+        resolved.max_regions = Some(sc.max_regions);
+    }
+    Ok(Fitted {
+        model: Box::new(artifact),
+        stats: FitStats { train_seconds, representation_seconds, iterations: 1, ..Default::default() },
+        method: MethodConfig::RegionPca(resolved),
+    })
 }
 
 /// Writes the rest mesh (data units) coloured by cluster, with scalar `region` = cluster index.
@@ -292,8 +205,133 @@ pub fn write_segmentation_ply(path: &Path, a: &RegionArtifact) -> Result<()> {
     // Spread cluster indices over the colour map; neighbours in index get distant colours.
     let spread: Vec<f64> = a.labels.iter().map(|&l| ((l * 7) % m.max(1)) as f64).collect();
     let colors = mesh::colormap_range(&spread, 0.0, (m.max(2) - 1) as f64);
-    let rest =
-        TriMesh::new(a.rest.positions.iter().map(|p| a.header.unit_box.invert(*p)).collect(), a.rest.faces.clone());
+    let rest = a.header.unit_box.invert_mesh(&a.rest);
     let scal: Vec<f64> = a.labels.iter().map(|&l| l as f64).collect();
     mesh::write_ply(path, &rest, Some(&colors), Some(("region", &scal)))
+}
+
+/// Control-point fit of region PCA: Eq. 9/10 with the model's β and ζ0 = 0.
+struct RegionPointFit<'a> {
+    artifact: &'a RegionArtifact,
+    vertices: Vec<usize>,
+    poser: RegionPoser<'a>,
+}
+
+impl PointFit for RegionPointFit<'_> {
+    fn reconstruct(&self, shape: &[Vec3]) -> Result<Vec<Vec3>> {
+        let a = self.artifact;
+        let targets: Vec<Vec3> = self.vertices.iter().map(|&v| shape[v]).collect();
+        let t = model_targets(&self.vertices, &targets, a.header.unit_box, Some(&a.rest.positions));
+        let z = self.poser.solve(&t, &vec![0.0; a.model.n_components()])?;
+        Ok(a.decode_rows(&a.model.reconstruct(&z)?)?.remove(0))
+    }
+}
+
+impl RegionArtifact {
+    /// Per (region, component): the region index, the component within it, and the per-vertex
+    /// norm of its basis vector (zero outside the region).
+    fn basis_norms(&self) -> Vec<(usize, usize, Vec<f64>)> {
+        let n = self.model.n_vertices;
+        let mut out = Vec::new();
+        for (i, r) in self.model.regions.iter().enumerate() {
+            for p in 0..r.n_components {
+                let mut norms = vec![0.0; n];
+                for (l, &v) in r.vertices.iter().enumerate() {
+                    norms[v] = (0..3).map(|c| r.at(p, l, c).powi(2)).sum::<f64>().sqrt();
+                }
+                out.push((i, p, norms));
+            }
+        }
+        out
+    }
+}
+
+impl Model for RegionArtifact {
+    fn kind(&self) -> MethodKind {
+        MethodKind::RegionPca
+    }
+    fn representation(&self) -> RepresentationKind {
+        RepresentationKind::Displacement
+    }
+    fn rest(&self) -> TriMesh {
+        self.header.unit_box.invert_mesh(&self.rest)
+    }
+    fn n_components(&self) -> usize {
+        self.model.n_components()
+    }
+    fn components(&self) -> Result<Vec<Component>> {
+        Ok(self
+            .basis_norms()
+            .into_iter()
+            .enumerate()
+            .map(|(k, (i, p, magnitudes))| Component {
+                index: k,
+                rank: k,
+                name: format!("r{i:02}_c{p:02}"),
+                center: argmax(&magnitudes),
+                magnitudes,
+            })
+            .collect())
+    }
+    fn element_norms(&self) -> (Vec<Vec<f64>>, &[Vec<usize>]) {
+        (self.basis_norms().into_iter().map(|(_, _, n)| n).collect(), self.representation.element_adjacency())
+    }
+    fn alignment(&self) -> Alignment {
+        Alignment::None
+    }
+    fn train_frames(&self) -> &[String] {
+        &self.header.train_frames
+    }
+    fn train_weights(&self) -> Option<Vec<Vec<f64>>> {
+        None
+    }
+    fn decode(&self, weights: &[Vec<f64>]) -> Result<Vec<Vec<Vec3>>> {
+        let mut rows = Vec::with_capacity(weights.len() * 3 * self.model.n_vertices);
+        for z in weights {
+            rows.extend(self.model.reconstruct(z)?);
+        }
+        self.decode_rows(&rows)
+    }
+    fn encode(&self, frames: &MeshSequence) -> Result<Vec<Vec<f64>>> {
+        self.encode_frames(frames)
+    }
+    fn start_weights(&self, from: Option<&[Vec3]>) -> Result<Vec<f64>> {
+        match from {
+            None => Ok(vec![0.0; self.model.n_components()]),
+            Some(p) => Ok(self.encode_frames(&single_frame(&self.rest, p)?)?.remove(0)),
+        }
+    }
+    fn start_description(&self) -> &'static str {
+        "all coefficients 0 (the per-region training means)"
+    }
+    fn pose(&self, vertices: &[usize], targets: &[Vec3], w0: &[f64], options: &PoseOptions) -> Result<PoseResult> {
+        let start = self.decode(&[w0.to_vec()])?.remove(0);
+        let t = model_targets(vertices, targets, self.header.unit_box, Some(&self.rest.positions));
+        let weights = RegionPoser::new(&self.model, vertices, &options.linear)?.solve(&t, w0)?;
+        let positions = self.decode(std::slice::from_ref(&weights))?.remove(0);
+        Ok(PoseResult { start, positions, weights })
+    }
+    /// The grown region(s) containing `v` (several when `v` is a shared boundary vertex).
+    fn locality_set(&self, v: usize) -> Option<(String, Vec<usize>)> {
+        let grown = self.model.memberships();
+        let mine: Vec<usize> = grown.get(v)?.iter().map(|&(r, _)| r).collect();
+        let set: Vec<usize> = (0..grown.len()).filter(|&u| grown[u].iter().any(|(r, _)| mine.contains(r))).collect();
+        let names: Vec<String> = mine.iter().map(|r| r.to_string()).collect();
+        Some((format!("region(s) {} ({} vertices)", names.join("+"), set.len()), set))
+    }
+    fn point_fit<'a>(&'a self, vertices: &[usize], gamma: f64) -> Result<Option<Box<dyn PointFit + 'a>>> {
+        let poser = RegionPoser::new(&self.model, vertices, &PoseConfig { gamma, beta: self.header.beta })?;
+        Ok(Some(Box::new(RegionPointFit { artifact: self, vertices: vertices.to_vec(), poser })))
+    }
+    fn save(&self, dir: &Path) -> Result<()> {
+        RegionArtifact::save(self, dir)
+    }
+    fn write_views(&self, dir: &Path) -> Result<()> {
+        write_segmentation_ply(&dir.join("segmentation.ply"), self)
+    }
+    fn write_components(&self, dir: &Path) -> Result<()> {
+        crate::model::write_component_meshes(self, dir)?;
+        crate::model::write_components_csv(self, dir)?;
+        write_segmentation_ply(&dir.join("segmentation.ply"), self)
+    }
 }

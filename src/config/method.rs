@@ -1,0 +1,634 @@
+//! The `[method]` table, typed: one struct per method with its keys, its defaults (in its
+//! `Default`) and its validation, gathered in [`MethodConfig`], a serde enum tagged by `kind`.
+//!
+//! Each struct is parsed with `deny_unknown_fields` and validated once, where it is parsed
+//! ([`MethodConfig::from_table`]); errors name `method.<key>` and the bad value. Serialising a
+//! parsed struct writes every key with its resolved value (the artefact's `config.toml`), and
+//! that text parses back to the same struct.
+//!
+//! The defaults come from the methods' own hyperparameter structs ([`SplocsConfig`],
+//! [`SegmentationConfig`], [`RegionPcaConfig`], [`AutoencoderConfig`]), and the value checks are
+//! theirs too ([`MethodSettings::validate`] builds the method's struct and calls its
+//! `validate`), so a rule is written once.
+
+use std::path::PathBuf;
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::{Error, Result};
+use crate::methods::WeightConstraint;
+use crate::methods::region_pca::RegionPcaConfig;
+use crate::methods::segmentation::SegmentationConfig;
+use crate::methods::splocs::{AdmmConfig, SplocsConfig};
+use crate::nn::config::{AutoencoderConfig, ComputeDevice, Engine};
+use crate::representation::RepresentationKind;
+use crate::representation::acap::Consistency;
+use crate::representation::scaling::ScalingMode;
+
+/// Method kinds (the `kind` key).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum MethodKind {
+    Pca,
+    Splocs,
+    RegionPca,
+    Autoencoder,
+}
+
+impl MethodKind {
+    /// Name as written in configs and model headers.
+    pub fn name(self) -> &'static str {
+        match self {
+            MethodKind::Pca => "pca",
+            MethodKind::Splocs => "splocs",
+            MethodKind::RegionPca => "region-pca",
+            MethodKind::Autoencoder => "autoencoder",
+        }
+    }
+
+    /// Every kind, in the order the docs list them.
+    pub const ALL: [MethodKind; 4] =
+        [MethodKind::Autoencoder, MethodKind::Splocs, MethodKind::Pca, MethodKind::RegionPca];
+
+    /// Parses a config name.
+    pub fn parse(s: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|k| k.name() == s)
+    }
+}
+
+/// ACAP rotation consistency (`consistency` key): `bfs` | `global`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ConsistencyName {
+    Bfs,
+    #[default]
+    Global,
+}
+
+impl ConsistencyName {
+    /// The representation's option.
+    pub fn to_acap(self) -> Consistency {
+        match self {
+            ConsistencyName::Bfs => Consistency::Bfs,
+            ConsistencyName::Global => Consistency::Global,
+        }
+    }
+    /// Name as written in configs and headers.
+    pub fn name(self) -> &'static str {
+        match self {
+            ConsistencyName::Bfs => "bfs",
+            ConsistencyName::Global => "global",
+        }
+    }
+}
+
+/// Feature scaling of the autoencoder (`scaling` key).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ScalingName {
+    /// One range per feature dimension (the paper).
+    #[default]
+    PerDimension,
+    /// The reference code's: one range for the 3 rotation dims, one for the 6 stretch dims.
+    Grouped,
+    /// One range for all 9 dimensions.
+    Global,
+}
+
+impl ScalingName {
+    /// The scaling mode of [`crate::representation::scaling`].
+    pub fn mode(self) -> ScalingMode {
+        match self {
+            ScalingName::PerDimension => ScalingMode::PerDimension,
+            ScalingName::Grouped => ScalingMode::reference_grouped(),
+            ScalingName::Global => ScalingMode::Grouped { groups: vec![(0..9).collect()] },
+        }
+    }
+}
+
+/// A painted vertex set: inline indices or a file of whitespace/comma-separated indices.
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(untagged)]
+pub enum FixedCenter {
+    Vertices(Vec<usize>),
+    File(PathBuf),
+}
+
+impl FixedCenter {
+    /// The vertex indices (reading the file for [`FixedCenter::File`]).
+    pub fn read(&self) -> Result<Vec<usize>> {
+        match self {
+            FixedCenter::Vertices(v) => Ok(v.clone()),
+            FixedCenter::File(p) => {
+                let text = std::fs::read_to_string(p).map_err(|e| Error::io(p, e))?;
+                text.split(|ch: char| ch.is_whitespace() || ch == ',')
+                    .filter(|t| !t.is_empty())
+                    .enumerate()
+                    .map(|(i, t)| {
+                        t.parse::<usize>().map_err(|_| {
+                            Error::parse(p, None, format!("entry {} (`{t}`) is not a vertex index", i + 1))
+                        })
+                    })
+                    .collect()
+            }
+        }
+    }
+}
+
+/// Default heat-method factor for SPLOCS support maps (the reference's m = 10).
+pub const SPLOCS_GEODESIC_M: f64 = 10.0;
+/// Default heat-method factor for the autoencoder's support maps (Crane et al.'s m = 1).
+pub const AE_GEODESIC_M: f64 = 1.0;
+
+/// `kind = "pca"`: holistic PCA of the training features.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct PcaMethod {
+    /// Number of components K (≤ the number of training frames).
+    pub components: usize,
+    /// `displacement` | `triangle-gradient` | `acap`.
+    pub representation: RepresentationKind,
+    /// Accepted for a uniform configuration; PCA is deterministic.
+    pub seed: u64,
+    /// ACAP rotation consistency (acap only).
+    pub consistency: ConsistencyName,
+}
+
+impl Default for PcaMethod {
+    fn default() -> Self {
+        PcaMethod {
+            components: 50,
+            representation: RepresentationKind::Displacement,
+            seed: 0,
+            consistency: ConsistencyName::Global,
+        }
+    }
+}
+
+/// `kind = "splocs"`: sparse localized deformation components (Neumann et al. 2013).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SplocsMethod {
+    pub components: usize,
+    /// `displacement` | `triangle-gradient` | `acap`.
+    pub representation: RepresentationKind,
+    /// λ, weight of the group-sparsity term.
+    pub sparsity: f64,
+    /// [d_min, d_max] of the support maps (unit-box geodesic distance).
+    pub support: [f64; 2],
+    /// `nonnegative` (Eq. 4) | `signed` (Eq. 3).
+    pub weights: WeightConstraint,
+    pub max_iterations: usize,
+    pub admm: AdmmConfig,
+    /// Convergence: mean relative objective change over the last 5 iterations (0: never stop early).
+    pub tolerance: f64,
+    pub seed: u64,
+    /// Painted vertex sets fixing the first components' centres.
+    pub fixed_centers: Vec<FixedCenter>,
+    /// Heat-method time factor m (t = m·h²) of the support maps.
+    pub geodesic_m: f64,
+    /// ACAP rotation consistency (acap only).
+    pub consistency: ConsistencyName,
+}
+
+impl Default for SplocsMethod {
+    fn default() -> Self {
+        let d = SplocsConfig::default();
+        SplocsMethod {
+            components: d.components,
+            representation: RepresentationKind::Displacement,
+            sparsity: d.sparsity,
+            support: d.support,
+            weights: d.weights,
+            max_iterations: d.max_iterations,
+            admm: d.admm,
+            tolerance: d.tolerance,
+            seed: d.seed,
+            fixed_centers: Vec::new(),
+            geodesic_m: SPLOCS_GEODESIC_M,
+            consistency: ConsistencyName::Global,
+        }
+    }
+}
+
+impl SplocsMethod {
+    /// The solver's hyperparameters, with the painted sets read (files are read here).
+    pub fn solver_config(&self) -> Result<SplocsConfig> {
+        let fixed_centers = self.fixed_centers.iter().map(FixedCenter::read).collect::<Result<Vec<_>>>()?;
+        Ok(self.solver_config_with(fixed_centers))
+    }
+
+    fn solver_config_with(&self, fixed_centers: Vec<Vec<usize>>) -> SplocsConfig {
+        SplocsConfig {
+            components: self.components,
+            sparsity: self.sparsity,
+            support: self.support,
+            weights: self.weights,
+            max_iterations: self.max_iterations,
+            admm: self.admm.clone(),
+            tolerance: self.tolerance,
+            seed: self.seed,
+            fixed_centers,
+            threads: 0,
+        }
+    }
+}
+
+/// `kind = "region-pca"`: segmentation + one PCA per region (Tena et al. 2011).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct RegionPcaMethod {
+    /// Total component budget K over the regions.
+    pub components: usize,
+    /// Only `displacement`.
+    pub representation: RepresentationKind,
+    pub seed: u64,
+    /// λ ∈ [0, 1]: weight of the correlation term.
+    pub lambda: f64,
+    /// Decay length of exp(−G/r) in model units; absent: 0.1 × the rest mesh's diagonal (the
+    /// trained model's `config.toml` records the value used).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub r: Option<f64>,
+    /// Correlation threshold in [−1, 1].
+    pub threshold: f64,
+    /// Fixed number of regions (skips the automatic search).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub regions: Option<usize>,
+    /// Largest k of the automatic search (default 20).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub max_regions: Option<usize>,
+    /// Fragment merging fraction in [0, 1).
+    pub min_piece: f64,
+    /// Try every k up to `max_regions` and keep the largest compact one.
+    pub keep_searching: bool,
+    /// β of the coupled encoding.
+    pub beta: f64,
+    /// Default γ of posing.
+    pub gamma: f64,
+}
+
+impl Default for RegionPcaMethod {
+    fn default() -> Self {
+        let s = SegmentationConfig::default();
+        let r = RegionPcaConfig::default();
+        RegionPcaMethod {
+            components: r.components,
+            representation: RepresentationKind::Displacement,
+            seed: s.seed,
+            lambda: s.lambda,
+            r: s.r,
+            threshold: s.threshold,
+            regions: s.regions,
+            max_regions: None,
+            min_piece: s.min_piece,
+            keep_searching: s.keep_searching,
+            beta: r.beta,
+            gamma: crate::methods::posing::PoseConfig::default().gamma,
+        }
+    }
+}
+
+impl RegionPcaMethod {
+    /// The segmentation's hyperparameters.
+    pub fn segmentation(&self) -> SegmentationConfig {
+        let d = SegmentationConfig::default();
+        SegmentationConfig {
+            lambda: self.lambda,
+            r: self.r,
+            threshold: self.threshold,
+            regions: self.regions,
+            max_regions: self.max_regions.unwrap_or(d.max_regions),
+            seed: self.seed,
+            min_piece: self.min_piece,
+            keep_searching: self.keep_searching,
+            ..d
+        }
+    }
+    /// The per-region PCA's hyperparameters.
+    pub fn region_pca(&self) -> RegionPcaConfig {
+        RegionPcaConfig { components: self.components, beta: self.beta }
+    }
+}
+
+/// `kind = "autoencoder"`: the mesh-convolutional autoencoder (Tan et al. 2018).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct AutoencoderMethod {
+    pub components: usize,
+    /// [d_min, d_max] of the support maps (geodesic distance / its maximum).
+    pub support: [f64; 2],
+    pub seed: u64,
+    /// Heat-method time factor m of the support maps.
+    pub geodesic_m: f64,
+    pub iterations: usize,
+    pub learning_rate: f64,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub learning_rate_final: Option<f64>,
+    pub beta1: f64,
+    pub beta2: f64,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub batch_size: Option<usize>,
+    pub layers: usize,
+    pub lambda1: f64,
+    pub lambda2: f64,
+    pub theta: f64,
+    pub checkpoint_every: usize,
+    /// `per-dimension` | `grouped` | `global`.
+    pub scaling: ScalingName,
+    pub consistency: ConsistencyName,
+    /// `hand` | `graph`.
+    pub engine: Engine,
+    /// `cpu` | `wgpu`.
+    pub device: ComputeDevice,
+    /// Also report `test_erms_fitted`.
+    pub fit_test: bool,
+}
+
+impl Default for AutoencoderMethod {
+    fn default() -> Self {
+        let d = AutoencoderConfig::default();
+        AutoencoderMethod {
+            components: d.components,
+            support: [d.d_min, d.d_max],
+            seed: d.seed,
+            geodesic_m: AE_GEODESIC_M,
+            iterations: d.iterations,
+            learning_rate: d.learning_rate,
+            learning_rate_final: d.learning_rate_final,
+            beta1: d.beta1,
+            beta2: d.beta2,
+            batch_size: d.batch_size,
+            layers: d.layers,
+            lambda1: d.lambda1,
+            lambda2: d.lambda2,
+            theta: d.theta,
+            checkpoint_every: d.checkpoint_every,
+            scaling: ScalingName::PerDimension,
+            consistency: ConsistencyName::Global,
+            engine: d.engine,
+            device: d.device,
+            fit_test: true,
+        }
+    }
+}
+
+impl AutoencoderMethod {
+    /// The network's hyperparameters.
+    pub fn network_config(&self) -> AutoencoderConfig {
+        AutoencoderConfig {
+            components: self.components,
+            layers: self.layers,
+            learning_rate: self.learning_rate,
+            learning_rate_final: self.learning_rate_final,
+            beta1: self.beta1,
+            beta2: self.beta2,
+            iterations: self.iterations,
+            batch_size: self.batch_size,
+            lambda1: self.lambda1,
+            lambda2: self.lambda2,
+            theta: self.theta,
+            d_min: self.support[0],
+            d_max: self.support[1],
+            checkpoint_every: self.checkpoint_every,
+            seed: self.seed,
+            engine: self.engine,
+            device: self.device,
+            ..AutoencoderConfig::default()
+        }
+    }
+}
+
+/// The `[method]` table: one variant per method, tagged by `kind`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "kebab-case")]
+pub enum MethodConfig {
+    Pca(PcaMethod),
+    Splocs(SplocsMethod),
+    RegionPca(RegionPcaMethod),
+    Autoencoder(AutoencoderMethod),
+}
+
+/// What every method's config answers (implemented by each variant's struct).
+pub trait MethodSettings {
+    /// The method kind.
+    fn kind(&self) -> MethodKind;
+    /// Number of components K requested.
+    fn components(&self) -> usize;
+    /// The representation the method runs on.
+    fn representation(&self) -> RepresentationKind;
+    /// Checks every value that does not depend on the data; errors name `method.<key>`.
+    fn validate(&self) -> Result<()>;
+    /// Whether the trained model can be fitted to sparse control points (`meshdeco eval`'s
+    /// `[control_points]`): per-vertex models and the autoencoder.
+    fn supports_control_points(&self) -> bool {
+        self.representation() == RepresentationKind::Displacement
+    }
+}
+
+/// Renames a method struct's error key `k` to `method.k` (and `d_min`/`d_max` to `support`).
+fn method_key(e: Error) -> Error {
+    match e {
+        Error::Config { key, message } => {
+            let key = match key.as_str() {
+                "d_min" | "d_max" => "support".to_string(),
+                _ => key,
+            };
+            Error::config(format!("method.{key}"), message)
+        }
+        other => other,
+    }
+}
+
+fn positive(key: &str, x: f64) -> Result<()> {
+    if x.is_finite() && x > 0.0 { Ok(()) } else { Err(Error::config(key, format!("{x} must be a positive number"))) }
+}
+
+impl MethodSettings for PcaMethod {
+    fn kind(&self) -> MethodKind {
+        MethodKind::Pca
+    }
+    fn components(&self) -> usize {
+        self.components
+    }
+    fn representation(&self) -> RepresentationKind {
+        self.representation
+    }
+    fn validate(&self) -> Result<()> {
+        crate::methods::PcaConfig { components: self.components, ..Default::default() }.validate().map_err(method_key)
+    }
+}
+
+impl MethodSettings for SplocsMethod {
+    fn kind(&self) -> MethodKind {
+        MethodKind::Splocs
+    }
+    fn components(&self) -> usize {
+        self.components
+    }
+    fn representation(&self) -> RepresentationKind {
+        self.representation
+    }
+    fn validate(&self) -> Result<()> {
+        // Painted sets given as files are read (and checked) when training starts.
+        let inline: Vec<Vec<usize>> = self
+            .fixed_centers
+            .iter()
+            .map(|c| match c {
+                FixedCenter::Vertices(v) => v.clone(),
+                FixedCenter::File(_) => vec![0],
+            })
+            .collect();
+        if self.max_iterations == 0 {
+            return Err(Error::config("method.max_iterations", "0 must be at least 1"));
+        }
+        self.solver_config_with(inline).validate().map_err(method_key)?;
+        positive("method.geodesic_m", self.geodesic_m)
+    }
+}
+
+impl MethodSettings for RegionPcaMethod {
+    fn kind(&self) -> MethodKind {
+        MethodKind::RegionPca
+    }
+    fn components(&self) -> usize {
+        self.components
+    }
+    fn representation(&self) -> RepresentationKind {
+        self.representation
+    }
+    fn validate(&self) -> Result<()> {
+        if self.representation != RepresentationKind::Displacement {
+            return Err(Error::config(
+                "method.representation",
+                format!("`{}` is not available for kind = \"region-pca\" (only displacement)", self.representation.name()),
+            ));
+        }
+        if self.regions.is_some() && self.max_regions.is_some() {
+            return Err(Error::config(
+                "method.regions",
+                "give either regions (fixed) or max_regions (automatic), not both",
+            ));
+        }
+        self.segmentation().validate().map_err(method_key)?;
+        self.region_pca().validate().map_err(method_key)?;
+        if !(self.gamma.is_finite() && self.gamma >= 0.0) {
+            return Err(Error::config("method.gamma", format!("{} must be a non-negative number", self.gamma)));
+        }
+        Ok(())
+    }
+}
+
+impl MethodSettings for AutoencoderMethod {
+    fn kind(&self) -> MethodKind {
+        MethodKind::Autoencoder
+    }
+    fn components(&self) -> usize {
+        self.components
+    }
+    fn representation(&self) -> RepresentationKind {
+        RepresentationKind::Acap
+    }
+    fn supports_control_points(&self) -> bool {
+        true
+    }
+    fn validate(&self) -> Result<()> {
+        if self.iterations == 0 {
+            return Err(Error::config("method.iterations", "0 must be at least 1"));
+        }
+        if self.checkpoint_every == 0 {
+            return Err(Error::config("method.checkpoint_every", "0 must be at least 1"));
+        }
+        self.network_config().validate().map_err(method_key)?;
+        positive("method.geodesic_m", self.geodesic_m)
+    }
+}
+
+impl MethodConfig {
+    /// The variant's settings (the one `match` over the variants).
+    pub fn settings(&self) -> &dyn MethodSettings {
+        match self {
+            MethodConfig::Pca(m) => m,
+            MethodConfig::Splocs(m) => m,
+            MethodConfig::RegionPca(m) => m,
+            MethodConfig::Autoencoder(m) => m,
+        }
+    }
+
+    /// The method kind.
+    pub fn kind(&self) -> MethodKind {
+        self.settings().kind()
+    }
+
+    /// Number of components K requested.
+    pub fn components(&self) -> usize {
+        self.settings().components()
+    }
+
+    /// The representation the method runs on.
+    pub fn representation(&self) -> RepresentationKind {
+        self.settings().representation()
+    }
+
+    /// Parses and validates a `[method]` table. Errors name `method.<key>`: an unknown key, a
+    /// key of another kind, a value of the wrong type or out of range.
+    pub fn from_table(table: &toml::Table) -> Result<Self> {
+        let kind_name = match table.get("kind") {
+            Some(toml::Value::String(s)) => s.clone(),
+            Some(other) => return Err(Error::config("method.kind", format!("`{other}` must be a string"))),
+            None => return Err(Error::config("method.kind", "is required (autoencoder, splocs, pca or region-pca)")),
+        };
+        let Some(kind) = MethodKind::parse(&kind_name) else {
+            return Err(Error::config(
+                "method.kind",
+                format!("`{kind_name}`: expected autoencoder, splocs, pca or region-pca"),
+            ));
+        };
+        let parsed: std::result::Result<MethodConfig, _> = toml::Value::Table(table.clone()).try_into();
+        let m = match parsed {
+            Ok(m) => m,
+            Err(e) => return Err(Self::name_the_key(table, kind, &e.to_string())),
+        };
+        m.settings().validate()?;
+        Ok(m)
+    }
+
+    /// Turns a serde error into one naming the key: an unknown field becomes "does not apply to
+    /// kind = …" (with the accepted keys), any other error is pinned on the first key whose value
+    /// alone fails to parse.
+    fn name_the_key(table: &toml::Table, kind: MethodKind, message: &str) -> Error {
+        let message = message.trim();
+        if let Some(rest) = message.strip_prefix("unknown field `")
+            && let Some((field, expected)) = rest.split_once('`')
+        {
+            let accepted = expected.trim_start_matches(',').trim().replace("expected one of ", "");
+            let known_elsewhere = MethodKind::ALL.into_iter().any(|k| {
+                let mut t = toml::Table::new();
+                t.insert("kind".into(), k.name().into());
+                t.insert(field.to_string(), table[field].clone());
+                toml::Value::Table(t).try_into::<MethodConfig>().is_ok()
+            });
+            let what = if known_elsewhere { "does not apply to" } else { "is not a key of" };
+            return Error::config(
+                format!("method.{field}"),
+                format!("{what} kind = \"{}\" (it accepts: {accepted})", kind.name()),
+            );
+        }
+        for (key, value) in table {
+            if key == "kind" {
+                continue;
+            }
+            let mut t = toml::Table::new();
+            t.insert("kind".into(), kind.name().into());
+            t.insert(key.clone(), value.clone());
+            if let Err(e) = toml::Value::Table(t).try_into::<MethodConfig>() {
+                return Error::config(format!("method.{key}"), format!("`{value}`: {}", e.to_string().trim()));
+            }
+        }
+        Error::config("method", message.to_string())
+    }
+
+    /// The resolved table: every key with its value (what `config.toml` of an artefact holds).
+    pub fn to_table(&self) -> Result<toml::Table> {
+        toml::Table::try_from(self).map_err(|e| Error::Invalid(format!("serialising the method config: {e}")))
+    }
+}

@@ -1,0 +1,132 @@
+//! The one path from a config to an artefact directory, used by `meshdeco train` and by
+//! `meshdeco eval`: prepare the data → fit the method ([`crate::model::fit`]) → measure on
+//! vertices in data units (train Erms, test Erms with the model's own encoding and, where the
+//! model has one, with refined encodings; locality) → write.
+//!
+//! Artefact directory (every method): `config.toml` (the resolved config: every default written
+//! out; it trains again as is), the model files ([`Model::save`]), `weights.csv` (training
+//! weights, where stored), `metrics.json` ([`Metrics`]) and the method's views
+//! ([`Model::write_views`]: `components/`, `segmentation.ply`).
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
+
+use super::Progress;
+use super::ae_fit::DEFAULT_FIT_GAMMA;
+use super::metrics_file::{Metrics, median};
+use crate::artifact;
+use crate::config::{Config, resolved_toml};
+use crate::error::{Error, Result};
+use crate::mesh::{MeshSequence, Vec3};
+use crate::metrics::erms::erms;
+use crate::model::{FitContext, Model, RefineOptions, reconstruct};
+use crate::preprocess::{self, Prepared};
+
+/// Options of [`train`] besides the config.
+#[derive(Debug, Clone, Default)]
+pub struct TrainOptions {
+    /// Continue from the checkpoint in the artefact directory (autoencoder).
+    pub resume: bool,
+    /// Set (e.g. by Ctrl-C) to stop early, keeping a checkpoint (autoencoder).
+    pub stop: Option<Arc<AtomicBool>>,
+}
+
+/// Result of training: where the artefacts are, the measured metrics, the model and its
+/// reconstruction of the test frames (data units; empty without a test split).
+pub struct TrainOutcome {
+    pub out_dir: PathBuf,
+    pub metrics: Metrics,
+    pub model: Box<dyn Model>,
+    pub test_reconstruction: Vec<Vec<Vec3>>,
+}
+
+/// Loads and prepares `cfg.data`, then [`train_prepared`].
+pub fn train(cfg: &Config, out: &Path, options: &TrainOptions, progress: &mut dyn Progress) -> Result<TrainOutcome> {
+    progress.stage("loading", 0);
+    let prep = preprocess::prepare(&cfg.data)?;
+    train_prepared(cfg, &prep, out, options, progress)
+}
+
+/// The frames of `idx` in data units.
+pub fn frames_in_data_units(prep: &Prepared, idx: &[usize]) -> Vec<Vec<Vec3>> {
+    idx.iter().map(|&f| prep.sequence.frames[f].iter().map(|p| prep.unit_box.invert(*p)).collect()).collect()
+}
+
+/// Fits `cfg.method` on prepared data, measures, and writes the artefact directory `out`.
+pub fn train_prepared(
+    cfg: &Config,
+    prep: &Prepared,
+    out: &Path,
+    options: &TrainOptions,
+    progress: &mut dyn Progress,
+) -> Result<TrainOutcome> {
+    let mut ctx = FitContext { out, resume: options.resume, stop: options.stop.clone(), progress };
+    let fitted = crate::model::fit(prep, &cfg.method, &mut ctx)?;
+    let progress = ctx.progress;
+    let model = fitted.model;
+    let stats = fitted.stats;
+
+    progress.stage("measuring", 0);
+    let alignment = model.alignment();
+    let faces = prep.sequence.faces.clone();
+    let train_truth = frames_in_data_units(prep, &prep.train);
+    let train_rec = match model.train_weights() {
+        Some(w) => model.decode(&w)?,
+        None => reconstruct(
+            model.as_ref(),
+            &MeshSequence { faces: faces.clone(), frames: train_truth.clone(), names: Vec::new() },
+        )?,
+    };
+    let train_erms = erms(&train_truth, &train_rec, alignment)?;
+    let (mut test_erms, mut test_erms_fitted, mut test_reconstruction) = (None, None, Vec::new());
+    if !prep.test.is_empty() {
+        let test = MeshSequence { faces, frames: frames_in_data_units(prep, &prep.test), names: Vec::new() };
+        let codes = model.encode(&test)?;
+        test_reconstruction = model.decode(&codes)?;
+        test_erms = Some(erms(&test.frames, &test_reconstruction, alignment)?);
+        if stats.refine_test {
+            progress.stage("fitting test codes", test.n_frames() as u64);
+            let opts = RefineOptions { points: usize::MAX, gamma: DEFAULT_FIT_GAMMA };
+            let refined = model.refine(&test, &codes, &opts, &mut |i| progress.step(i as u64 + 1, ""))?;
+            if let Some((_, rec)) = refined {
+                test_erms_fitted = Some(erms(&test.frames, &rec, alignment)?);
+            }
+        }
+    }
+    let shares: Vec<f64> = stats.locality.iter().map(|l| l.energy_share).collect();
+    let sizes: Vec<f64> = stats.locality.iter().map(|l| l.support_size as f64).collect();
+    let metrics = Metrics {
+        method: model.kind().name().to_string(),
+        representation: model.representation().name().to_string(),
+        components: model.n_components(),
+        train_erms,
+        test_erms,
+        test_erms_fitted,
+        erms_alignment: alignment.to_string(),
+        train_seconds: stats.train_seconds,
+        representation_seconds: stats.representation_seconds,
+        iterations: stats.iterations,
+        objective: stats.objective,
+        converged: stats.converged,
+        train_frames: prep.train.len(),
+        test_frames: prep.test.len(),
+        median_energy_share: median(&shares),
+        median_support_size: median(&sizes),
+        locality: stats.locality,
+    };
+
+    progress.stage("writing", 0);
+    std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
+    let method_table = fitted.method.to_table()?;
+    artifact::write_atomic(&out.join("config.toml"), resolved_toml(&cfg.name, &cfg.data, method_table).as_bytes())?;
+    model.save(out)?;
+    if let Some(w) = model.train_weights() {
+        let flat: Vec<f64> = w.iter().flatten().copied().collect();
+        artifact::write_weights_csv(&out.join("weights.csv"), model.train_frames(), &flat, model.n_components())?;
+    }
+    artifact::write_json(&out.join("metrics.json"), &metrics)?;
+    model.write_views(out)?;
+    progress.finish_stage();
+    Ok(TrainOutcome { out_dir: out.to_path_buf(), metrics, model, test_reconstruction })
+}
