@@ -300,15 +300,8 @@ mod tests {
         let t2 = w[0] * w[0] + w[1] * w[1] + w[2] * w[2];
         let t = t2.sqrt();
         let (a, b) = if t < 1e-6 { (1.0 - t2 / 6.0, 0.5 - t2 / 24.0) } else { (t.sin() / t, (1.0 - t.cos()) / t2) };
-        let k = skew(w);
-        let k2 = mat_mul(&k, &k);
-        let mut r = IDENTITY;
-        for i in 0..3 {
-            for j in 0..3 {
-                r[i][j] += a * k[i][j] + b * k2[i][j];
-            }
-        }
-        r
+        let (k, k2) = (skew(w), mat_mul(&skew(w), &skew(w)));
+        std::array::from_fn(|i| std::array::from_fn(|j| IDENTITY[i][j] + (a * k[i][j] + b * k2[i][j])))
     }
 
     /// The former triangle-gradient `rotation_exp` (series below 1e-8, `(δ + a·K) + b·K²`).
