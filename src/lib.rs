@@ -12,6 +12,7 @@ pub mod artifact;
 pub mod config;
 pub mod error;
 pub mod geometry;
+pub mod math;
 pub mod mesh;
 pub mod model;
 pub mod methods;

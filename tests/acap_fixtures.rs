@@ -134,10 +134,10 @@ fn bfs_on_reference_rotations_is_no_worse_than_reference_bfs() {
     let reference = load_obj(&dir.join("1.obj"));
     let acap = Acap::new(&reference).unwrap();
     let gt_l = read_matrices(&dir.join("LOGRNEW_GT.txt")).unwrap();
+    use meshdeco::math::mat3::{axis_angle, exp_so3};
     use meshdeco::representation::acap_consistency::{
         BfsTree, RotationField, bfs_consistency, global_consistency, neighbour_energy,
     };
-    use meshdeco::representation::acap_rotation::{axis_angle, exp_so3};
     let mut offsets = vec![0];
     let mut ring = Vec::new();
     for nb in acap.neighbors() {
@@ -200,8 +200,8 @@ fn global_consistency_never_worse_than_bfs_on_fixtures() {
         let b = acap.encode_frame(&m.positions, Consistency::Bfs).unwrap();
         for (x, y) in f.log_r.iter().zip(&b.log_r) {
             let (wx, wy) = (vee(x), vee(y));
-            let rx = meshdeco::representation::acap_rotation::exp_so3(wx);
-            let ry = meshdeco::representation::acap_rotation::exp_so3(wy);
+            let rx = meshdeco::math::mat3::exp_so3(wx);
+            let ry = meshdeco::math::mat3::exp_so3(wy);
             for r in 0..3 {
                 for c in 0..3 {
                     assert!((rx[r][c] - ry[r][c]).abs() < 1e-9);

@@ -31,6 +31,7 @@
 
 use faer::sparse::{SparseColMat, SymbolicSparseColMat};
 
+use crate::math::vec3::{cross, dot, norm, sub};
 use crate::mesh::{Topology, Vec3};
 
 /// Relative threshold of [`is_degenerate`]: `|(b − a) × (c − a)| ≤ DEGENERATE_RELATIVE_AREA · ℓ_max²`.
@@ -276,19 +277,6 @@ impl SymmetricPattern {
             SymbolicSparseColMat::new_checked(self.n, self.n, self.col_ptr.clone(), None, self.row_idx.clone());
         SparseColMat::new(symbolic, values)
     }
-}
-
-fn sub(a: Vec3, b: Vec3) -> Vec3 {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-fn dot(a: Vec3, b: Vec3) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-fn cross(a: Vec3, b: Vec3) -> Vec3 {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
-}
-fn norm(a: Vec3) -> f64 {
-    dot(a, a).sqrt()
 }
 
 #[cfg(test)]

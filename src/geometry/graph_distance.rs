@@ -202,7 +202,7 @@ mod tests {
         let d = dijkstra(&t, &s.positions, &[0]);
         let h = s.mean_edge_length();
         for (p, dv) in s.positions.iter().zip(&d) {
-            let gc = crate::geometry::normals::dot(*p, s.positions[0]).clamp(-1.0, 1.0).acos();
+            let gc = crate::math::vec3::dot(*p, s.positions[0]).clamp(-1.0, 1.0).acos();
             // Chords are shorter than arcs (by < 0.1% at this resolution), edge paths longer than
             // geodesics: by at most 15% plus one edge (zig-zag near the source).
             assert!(*dv >= 0.998 * gc - 1e-12 && *dv <= 1.15 * gc + h, "{dv} vs {gc}");

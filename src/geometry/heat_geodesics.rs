@@ -90,6 +90,7 @@ use crate::geometry::cotan_laplacian::{EdgeIncidence, SymmetricPattern};
 use crate::geometry::graph_distance::EdgeGraph;
 use crate::geometry::intrinsic_delaunay::{IntrinsicTriangulation, area_from_lengths};
 use crate::geometry::sparse_cholesky::{FactorLayout, SparseCholesky};
+use crate::math::DisjointSet;
 use crate::mesh::Vec3;
 use crate::{Error, Result};
 
@@ -279,14 +280,14 @@ impl HeatGeodesics {
         }
 
         // Components over the kept faces (union–find); pin = smallest vertex of each.
-        let mut parent: Vec<usize> = (0..n).collect();
+        let mut sets = DisjointSet::new(n);
         let mut on_face = vec![false; n];
         for f in &kept {
             for &v in f {
                 on_face[v] = true;
             }
-            union(&mut parent, f[0], f[1]);
-            union(&mut parent, f[0], f[2]);
+            sets.union(f[0], f[1]);
+            sets.union(f[0], f[2]);
         }
         let mut label = vec![NONE; n];
         let mut root_label = vec![NONE; n];
@@ -296,7 +297,7 @@ impl HeatGeodesics {
             if !on_face[v] {
                 continue;
             }
-            let r = find(&mut parent, v);
+            let r = sets.find(v);
             if root_label[r] == NONE {
                 root_label[r] = n_components;
                 n_components += 1;
@@ -660,32 +661,12 @@ fn argmax_finite(d: &[f64]) -> Option<usize> {
     best
 }
 
-fn find(parent: &mut [usize], mut v: usize) -> usize {
-    while parent[v] != v {
-        parent[v] = parent[parent[v]];
-        v = parent[v];
-    }
-    v
-}
-
-fn union(parent: &mut [usize], a: usize, b: usize) {
-    let (ra, rb) = (find(parent, a), find(parent, b));
-    if ra != rb {
-        let (lo, hi) = (ra.min(rb), ra.max(rb));
-        parent[hi] = lo;
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::geometry::intrinsic_delaunay::IntrinsicTriangulation;
-    use crate::geometry::normals::dot;
+    use crate::math::vec3::{dot, scale};
     use crate::mesh::primitives::{cylinder, grid, icosphere};
-
-    fn scale(a: Vec3, s: f64) -> Vec3 {
-        [a[0] * s, a[1] * s, a[2] * s]
-    }
 
     /// The heat method's own values (m = 1, no clamping to the bounds), for accuracy tests:
     /// clamping can only reduce the error, so these bound the default's error too.

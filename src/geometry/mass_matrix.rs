@@ -6,6 +6,7 @@
 //! are ≥ 0; a vertex on no face (or only on zero-area faces) gets 0. A degenerate triangle
 //! contributes its (tiny, finite) area like any other.
 
+use crate::math::vec3::{cross, norm, sub};
 use crate::mesh::Vec3;
 
 /// Area of every face (half the length of the cross product of two edges), in length².
@@ -15,10 +16,7 @@ pub fn face_areas(positions: &[Vec3], faces: &[[usize; 3]]) -> Vec<f64> {
         .iter()
         .map(|f| {
             let (a, b, c) = (positions[f[0]], positions[f[1]], positions[f[2]]);
-            let u = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
-            let v = [c[0] - a[0], c[1] - a[1], c[2] - a[2]];
-            let n = [u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]];
-            0.5 * (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt()
+            0.5 * norm(cross(sub(b, a), sub(c, a)))
         })
         .collect()
 }

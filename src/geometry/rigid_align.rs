@@ -16,6 +16,8 @@
 
 use nalgebra::{Matrix3, Vector3};
 
+use crate::math::mat3::transpose;
+use crate::math::vec3::dot;
 use crate::mesh::Vec3;
 use crate::{Error, Result};
 
@@ -39,7 +41,7 @@ impl RigidTransform {
         let r = &self.rotation;
         let mut out = self.translation;
         for (k, o) in out.iter_mut().enumerate() {
-            *o += r[k][0] * p[0] + r[k][1] * p[1] + r[k][2] * p[2];
+            *o += dot(r[k], p);
         }
         out
     }
@@ -52,11 +54,11 @@ impl RigidTransform {
     /// The inverse motion `q ↦ Rᵀ(q − t)`.
     pub fn inverse(&self) -> Self {
         let r = &self.rotation;
-        let rt = [[r[0][0], r[1][0], r[2][0]], [r[0][1], r[1][1], r[2][1]], [r[0][2], r[1][2], r[2][2]]];
+        let rt = transpose(r);
         let t = self.translation;
         let mut tt = [0.0; 3];
         for k in 0..3 {
-            tt[k] = -(rt[k][0] * t[0] + rt[k][1] * t[1] + rt[k][2] * t[2]);
+            tt[k] = -dot(rt[k], t);
         }
         RigidTransform { rotation: rt, translation: tt }
     }
@@ -142,7 +144,7 @@ fn solve(source: &[Vec3], target: &[Vec3], weights: Option<&[f64]>) -> RigidTran
         [[r[(0, 0)], r[(0, 1)], r[(0, 2)]], [r[(1, 0)], r[(1, 1)], r[(1, 2)]], [r[(2, 0)], r[(2, 1)], r[(2, 2)]]];
     let mut translation = ct;
     for k in 0..3 {
-        translation[k] -= rotation[k][0] * cs[0] + rotation[k][1] * cs[1] + rotation[k][2] * cs[2];
+        translation[k] -= dot(rotation[k], cs);
     }
     RigidTransform { rotation, translation }
 }

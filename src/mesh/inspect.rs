@@ -13,7 +13,8 @@ use serde::Serialize;
 use super::sequence::read_sequence;
 use super::{MeshSequence, Topology, Vec3, bounding_box, dist};
 use crate::error::Result;
-use crate::geometry::normals::{cross, norm, sub};
+use crate::math::DisjointSet;
+use crate::math::vec3::{cross, norm, sub};
 
 /// What a [`Warning`] is about.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
@@ -332,21 +333,13 @@ fn non_manifold_vertices(
     is_repeated: &impl Fn(usize) -> bool,
 ) -> Vec<usize> {
     // Union–find over corners `3 · face + k`.
-    let mut parent: Vec<usize> = (0..3 * faces.len()).collect();
-    fn root(parent: &mut [usize], mut x: usize) -> usize {
-        while parent[x] != x {
-            parent[x] = parent[parent[x]];
-            x = parent[x];
-        }
-        x
-    }
+    let mut corners = DisjointSet::new(3 * faces.len());
     let corner = |face: usize, v: usize| 3 * face + faces[face].iter().position(|&u| u == v).expect("vertex of face");
     for (e, inc) in topology.edges.iter().zip(&topology.edge_faces) {
         let proper: Vec<usize> = inc.iter().map(|&(f, _)| f).filter(|&f| !is_repeated(f)).collect();
         if let [f1, f2] = proper[..] {
             for &v in e {
-                let (a, b) = (root(&mut parent, corner(f1, v)), root(&mut parent, corner(f2, v)));
-                parent[a] = b;
+                corners.union(corner(f1, v), corner(f2, v));
             }
         }
     }
@@ -354,7 +347,7 @@ fn non_manifold_vertices(
     for (fi, f) in faces.iter().enumerate() {
         if !is_repeated(fi) {
             for (k, &v) in f.iter().enumerate() {
-                fans.push((v, root(&mut parent, 3 * fi + k)));
+                fans.push((v, corners.find(3 * fi + k)));
             }
         }
     }

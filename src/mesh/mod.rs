@@ -5,6 +5,7 @@
 
 pub mod inspect;
 pub mod load;
+pub mod normals;
 pub mod obj;
 pub mod off;
 pub mod ply;
@@ -19,8 +20,10 @@ pub use sequence::{LoadedSequence, load_sequence, read_sequence};
 pub use topology::Topology;
 pub use write::{colormap, colormap_range, write_mesh, write_obj, write_off, write_ply};
 
-/// One vertex position, `[x, y, z]`.
-pub type Vec3 = [f64; 3];
+/// One vertex position, `[x, y, z]` (the 3-vector type of [`crate::math::vec3`]).
+pub use crate::math::Vec3;
+/// Euclidean distance of two points (see [`crate::math::vec3::dist`]).
+pub use crate::math::vec3::dist;
 
 /// A triangle mesh: positions (N) and triangles (T) as 0-based vertex indices.
 #[derive(Debug, Clone, PartialEq)]
@@ -112,12 +115,6 @@ impl MeshSequence {
             names: indices.iter().map(|&i| self.names[i].clone()).collect(),
         }
     }
-}
-
-/// Euclidean distance of two points.
-pub fn dist(a: Vec3, b: Vec3) -> f64 {
-    let d = [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
-    (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt()
 }
 
 /// Axis-aligned bounding box `(min, max)` of points; `([0;3],[0;3])` for none.

@@ -152,15 +152,15 @@ pub fn cylinder(n_around: usize, n_along: usize, radius: f64, height: f64) -> Tr
 }
 
 fn unit(p: Vec3) -> Vec3 {
-    let l = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
-    [p[0] / l, p[1] / l, p[2] / l]
+    crate::math::vec3::normalize(p)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::geometry::normals::{cross, dot, face_normals_raw, sub};
+    use crate::math::vec3::{cross, dot, sub};
     use crate::mesh::Topology;
+    use crate::mesh::normals::face_normals_raw;
 
     #[test]
     fn icosphere_counts_closed_outward_and_on_sphere() {

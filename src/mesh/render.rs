@@ -7,8 +7,9 @@
 
 use std::path::Path;
 
+use super::normals::{NormalWeighting, vertex_normals};
 use super::{TriMesh, Vec3};
-use crate::geometry::normals::{NormalWeighting, vertex_normals};
+use crate::math::vec3::{dot, norm};
 use crate::{Error, Result};
 
 /// Viewing direction (orthographic; +y is up except for `Top`).
@@ -105,11 +106,7 @@ pub fn render(mesh: &TriMesh, colors: Option<&[[u8; 3]]>, opts: &RenderOptions) 
     let px: Vec<[f64; 3]> =
         q.iter().map(|p| [0.5 * w as f64 + s * (p[0] - cx), 0.5 * h as f64 - s * (p[1] - cy), p[2]]).collect();
     // Light from the camera, a little up and to the left.
-    let light = {
-        let l: Vec3 = [-0.3, 0.4, 1.0];
-        let len = (l[0] * l[0] + l[1] * l[1] + l[2] * l[2]).sqrt();
-        [l[0] / len, l[1] / len, l[2] / len]
-    };
+    let light = crate::math::vec3::normalize([-0.3, 0.4, 1.0]);
     let mut depth = vec![f64::NEG_INFINITY; w * h];
     let col = |v: usize| colors.map_or(opts.base_color, |c| c[v]);
     for f in &mesh.faces {
@@ -141,8 +138,8 @@ pub fn render(mesh: &TriMesh, colors: Option<&[[u8; 3]]>, opts: &RenderOptions) 
                 for k in 0..3 {
                     nrm[k] = l1 * normals[f[0]][k] + l2 * normals[f[1]][k] + l3 * normals[f[2]][k];
                 }
-                let len = (nrm[0] * nrm[0] + nrm[1] * nrm[1] + nrm[2] * nrm[2]).sqrt().max(1e-300);
-                let lambert = ((nrm[0] * light[0] + nrm[1] * light[1] + nrm[2] * light[2]) / len).abs();
+                let len = norm(nrm).max(1e-300);
+                let lambert = (dot(nrm, light) / len).abs();
                 let shade = 0.2 + 0.8 * lambert;
                 let (ca, cb, cc) = (col(f[0]), col(f[1]), col(f[2]));
                 for k in 0..3 {

@@ -36,6 +36,7 @@
 
 use faer::{Mat, Side};
 
+use crate::math::DisjointSet;
 use crate::mesh::{Topology, Vec3, dist};
 use crate::rng::Rng;
 use crate::{Error, Result};
@@ -341,27 +342,16 @@ fn remove_spurs(labels: &mut [usize], faces: &[[usize; 3]], topo: &Topology) {
 fn merge_fragments(labels: &mut [usize], faces: &[[usize; 3]], topo: &Topology, min_piece: f64) {
     use std::collections::HashMap;
     let n = labels.len();
-    fn find(p: &mut [usize], mut x: usize) -> usize {
-        while p[x] != x {
-            p[x] = p[p[x]];
-            x = p[x];
-        }
-        x
-    }
     for _ in 0..3 {
-        let mut parent: Vec<usize> = (0..n).collect();
+        // Pieces are identified by their smallest vertex (the disjoint sets' root).
+        let mut sets = DisjointSet::new(n);
         for f in faces {
             if labels[f[0]] == labels[f[1]] && labels[f[1]] == labels[f[2]] {
-                let a = find(&mut parent, f[0]);
-                for &v in &f[1..] {
-                    let b = find(&mut parent, v);
-                    if a != b {
-                        parent[b] = a;
-                    }
-                }
+                sets.union(f[0], f[1]);
+                sets.union(f[0], f[2]);
             }
         }
-        let piece: Vec<usize> = (0..n).map(|v| find(&mut parent, v)).collect();
+        let piece: Vec<usize> = sets.roots();
         let mut size: HashMap<usize, usize> = HashMap::new();
         let mut cluster_size: HashMap<usize, usize> = HashMap::new();
         for v in 0..n {
@@ -625,25 +615,15 @@ pub fn is_compact(labels: &[usize], c: usize, faces: &[[usize; 3]]) -> bool {
 /// the cluster's vertices in no such triangle.
 pub fn cluster_pieces(labels: &[usize], c: usize, faces: &[[usize; 3]]) -> (Vec<usize>, usize) {
     let n = labels.len();
-    let mut parent: Vec<usize> = (0..n).collect();
-    fn find(p: &mut [usize], mut x: usize) -> usize {
-        while p[x] != x {
-            p[x] = p[p[x]];
-            x = p[x];
-        }
-        x
-    }
+    let mut sets = DisjointSet::new(n);
     let mut covered = vec![false; n];
     for f in faces {
         if f.iter().all(|&v| labels[v] == c) {
             for &v in f {
                 covered[v] = true;
             }
-            let r0 = find(&mut parent, f[0]);
-            for &v in &f[1..] {
-                let rv = find(&mut parent, v);
-                parent[rv] = r0;
-            }
+            sets.union(f[0], f[1]);
+            sets.union(f[0], f[2]);
         }
     }
     let mut sizes = std::collections::HashMap::new();
@@ -656,7 +636,7 @@ pub fn cluster_pieces(labels: &[usize], c: usize, faces: &[[usize; 3]]) -> (Vec<
             uncovered += 1;
             continue;
         }
-        *sizes.entry(find(&mut parent, v)).or_insert(0usize) += 1;
+        *sizes.entry(sets.find(v)).or_insert(0usize) += 1;
     }
     let mut pieces: Vec<usize> = sizes.into_values().collect();
     pieces.sort_unstable_by(|a, b| b.cmp(a));

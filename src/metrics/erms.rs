@@ -30,21 +30,43 @@ impl fmt::Display for Alignment {
     }
 }
 
-/// Sum over vertices of `‖truth_v − result_v‖²` for one frame (data units²), after
-/// `alignment`. Errors when the vertex counts differ.
-pub fn frame_squared_error(truth: &[Vec3], result: &[Vec3], alignment: Alignment) -> Result<f64> {
-    if truth.len() != result.len() {
-        return Err(Error::Invalid(format!("frame has {} vertices, the result {}", truth.len(), result.len())));
-    }
-    let shift: Vec3 = match alignment {
+/// The translation added to every result vertex before measuring under `alignment` (data
+/// units): zero for [`Alignment::None`] or no vertices, else the mean of `truth_v − result_v`
+/// (so the shifted result's centroid is the truth's). Assumes equal lengths (pairs beyond the
+/// shorter slice are ignored, the mean divides by `truth.len()`).
+pub fn alignment_shift(truth: &[Vec3], result: &[Vec3], alignment: Alignment) -> Vec3 {
+    match alignment {
         Alignment::None => [0.0; 3],
         Alignment::Centroid if truth.is_empty() => [0.0; 3],
         Alignment::Centroid => {
             let n = truth.len() as f64;
             std::array::from_fn(|k| truth.iter().zip(result).map(|(t, r)| t[k] - r[k]).sum::<f64>() / n)
         }
-    };
-    Ok(truth.iter().zip(result).map(|(t, r)| (0..3).map(|k| (t[k] - r[k] - shift[k]).powi(2)).sum::<f64>()).sum())
+    }
+}
+
+/// `‖truth_v − (result_v + shift)‖²` of one vertex (data units²).
+#[inline]
+pub fn vertex_squared_error(truth: Vec3, result: Vec3, shift: Vec3) -> f64 {
+    (0..3).map(|k| (truth[k] - result[k] - shift[k]).powi(2)).sum::<f64>()
+}
+
+/// Sum over vertices of `‖truth_v − result_v‖²` for one frame (data units²), after
+/// `alignment`. Errors when the vertex counts differ.
+pub fn frame_squared_error(truth: &[Vec3], result: &[Vec3], alignment: Alignment) -> Result<f64> {
+    if truth.len() != result.len() {
+        return Err(Error::Invalid(format!("frame has {} vertices, the result {}", truth.len(), result.len())));
+    }
+    let shift = alignment_shift(truth, result, alignment);
+    Ok(truth.iter().zip(result).map(|(t, r)| vertex_squared_error(*t, *r, shift)).sum())
+}
+
+/// Erms from a sum of squared vertex distances and the number of coordinates it covers
+/// (3 × vertices × frames): `1000·sqrt(sum / n_coords)`, data units × 1000; 0 when
+/// `n_coords` is 0.
+#[inline]
+pub fn erms_from_squared_error(sum: f64, n_coords: usize) -> f64 {
+    if n_coords == 0 { 0.0 } else { 1000.0 * (sum / n_coords as f64).sqrt() }
 }
 
 /// Erms of F result frames against F ground-truth frames of N vertices each (module docs), as
@@ -59,7 +81,7 @@ pub fn erms(truth: &[Vec<Vec3>], result: &[Vec<Vec3>], alignment: Alignment) -> 
         sum += frame_squared_error(t, r, alignment)?;
         count += 3 * t.len();
     }
-    Ok(if count == 0 { 0.0 } else { 1000.0 * (sum / count as f64).sqrt() })
+    Ok(erms_from_squared_error(sum, count))
 }
 
 /// An Erms value together with the alignment it was measured under.

@@ -33,17 +33,18 @@
 //! order. Only the BFS tree depends on it, and on the fixtures both orders give identical
 //! results.
 
-use crate::geometry::normals::{NormalWeighting, vertex_normals};
+pub use crate::math::mat3::Mat3;
+use crate::math::mat3::{
+    IDENTITY, add_outer, axis_angle, exp_so3, inverse, mat_mul, polar_decomposition, skew, unskew,
+};
+use crate::math::vec3::{dist, dot, norm, scale, sub};
+use crate::mesh::normals::{NormalWeighting, vertex_normals};
 use crate::mesh::{Topology, TriMesh, Vec3};
 use crate::representation::Features;
 pub use crate::representation::acap_consistency::{BfsTree, RotationField};
 use crate::representation::acap_consistency::{IDENTITY_ANGLE, bfs_consistency, global_consistency, neighbour_energy};
 pub use crate::representation::acap_fit_inverse::{FitInverse, RingFit};
 pub use crate::representation::acap_reconstruct::AcapReconstruction;
-pub use crate::representation::acap_rotation::Mat3;
-use crate::representation::acap_rotation::{
-    IDENTITY, axis_angle, exp_so3, inverse, mat_mul, polar_decomposition, skew, unskew,
-};
 use crate::{Error, Result};
 use rayon::prelude::*;
 
@@ -219,14 +220,14 @@ fn sexp(x: f64) -> f64 {
 /// Cotangent of the angle at `o` between `a − o` and `b − o`, as the reference computes it
 /// (0 for a degenerate side, 1 when the cosine is exactly 1).
 fn cot_at(o: Vec3, a: Vec3, b: Vec3) -> f64 {
-    let u = [a[0] - o[0], a[1] - o[1], a[2] - o[2]];
-    let v = [b[0] - o[0], b[1] - o[1], b[2] - o[2]];
-    let nu = (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).sqrt();
-    let nv = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+    let u = sub(a, o);
+    let v = sub(b, o);
+    let nu = norm(u);
+    let nv = norm(v);
     if nu < 1e-12 || nv < 1e-12 {
         return 0.0;
     }
-    let c = (u[0] * v[0] + u[1] * v[1] + u[2] * v[2]) / (nu * nv);
+    let c = dot(u, v) / (nu * nv);
     if c == 1.0 {
         return 1.0;
     }
@@ -282,14 +283,14 @@ impl Acap {
             let mut ata = [[0.0; 3]; 3];
             let mut len_sum = 0.0;
             for &j in nb {
-                let e = [q[j][0] - q[i][0], q[j][1] - q[i][1], q[j][2] - q[i][2]];
-                len_sum += (e[0] * e[0] + e[1] * e[1] + e[2] * e[2]).sqrt();
+                let e = sub(q[j], q[i]);
+                len_sum += norm(e);
                 let id = topo.edge_id(i, j).ok_or_else(|| {
                     Error::Invalid(format!("ACAP reference: ring neighbours {i} and {j} share no edge"))
                 })?;
                 let sw = edge_weight[id].sqrt();
                 let a = [sw * e[0], sw * e[1], sw * e[2]];
-                add_outer(&mut ata, a, a);
+                add_outer(&mut ata, a, a, 1.0);
                 row_scale.push(sw);
                 ref_rows.push(a);
             }
@@ -300,7 +301,7 @@ impl Acap {
             }
             let h = NORMAL_SCALE * len_sum / nb.len() as f64;
             let a = [normals[i][0] * h, normals[i][1] * h, normals[i][2] * h];
-            add_outer(&mut ata, a, a);
+            add_outer(&mut ata, a, a, 1.0);
             ref_normal_rows.push(a);
             inv_ata.push(inverse(&ata).ok_or_else(|| {
                 Error::Numerical(format!(
@@ -379,13 +380,7 @@ impl Acap {
                     return [0.0; 3];
                 }
                 let p = positions[i];
-                let len_sum: f64 = self.ring[s..e]
-                    .iter()
-                    .map(|&j| {
-                        let d = [positions[j][0] - p[0], positions[j][1] - p[1], positions[j][2] - p[2]];
-                        (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt()
-                    })
-                    .sum();
+                let len_sum: f64 = self.ring[s..e].iter().map(|&j| dist(positions[j], p)).sum();
                 let h = NORMAL_SCALE * len_sum / (e - s) as f64;
                 [normals[i][0] * h, normals[i][1] * h, normals[i][2] * h]
             })
@@ -412,10 +407,10 @@ impl Acap {
             for k in s..e {
                 let j = self.ring[k];
                 let sw = self.row_scale[k];
-                let d = [sw * (positions[j][0] - p[0]), sw * (positions[j][1] - p[1]), sw * (positions[j][2] - p[2])];
-                add_outer(&mut m, d, self.ref_rows[k]);
+                let d = scale(sub(positions[j], p), sw);
+                add_outer(&mut m, d, self.ref_rows[k], 1.0);
             }
-            add_outer(&mut m, beta[i], self.ref_normal_rows[i]);
+            add_outer(&mut m, beta[i], self.ref_normal_rows[i], 1.0);
             out.push(mat_mul(&m, &self.inv_ata[i]));
         }
         Ok(out)
@@ -521,15 +516,6 @@ impl Acap {
     }
 }
 
-#[inline]
-fn add_outer(m: &mut Mat3, b: Vec3, a: Vec3) {
-    for r in 0..3 {
-        for c in 0..3 {
-            m[r][c] += b[r] * a[c];
-        }
-    }
-}
-
 fn check_finite(p: &[Vec3], what: &str) -> Result<()> {
     if let Some(v) = p.iter().position(|x| !x.iter().all(|c| c.is_finite())) {
         return Err(Error::Invalid(format!("{what}: vertex {v} has a non-finite position {:?}", p[v])));
@@ -581,7 +567,7 @@ mod tests {
             .positions
             .iter()
             .map(|p| {
-                let q = crate::representation::acap_rotation::mat_vec(&r, *p);
+                let q = crate::math::mat3::mat_vec(&r, *p);
                 [q[0] + 3.0, q[1] - 1.0, q[2] + 0.5]
             })
             .collect();
@@ -604,7 +590,7 @@ mod tests {
             let back = acap.decode_frame(&f.features()).unwrap();
             // The decoder keeps the reference centroid (origin here).
             for (b, p) in back.iter().zip(&m.positions) {
-                let want = crate::representation::acap_rotation::mat_vec(&r, *p);
+                let want = crate::math::mat3::mat_vec(&r, *p);
                 for k in 0..3 {
                     assert!((b[k] - want[k]).abs() < 1e-9, "{decoder:?}");
                 }

@@ -30,7 +30,7 @@
 //!   The search stops when no move improves E; hence E(global) ≤ E(BFS) always.
 
 #![allow(clippy::needless_range_loop)] // index loops over 3-vectors read like the formulas
-use crate::mesh::Vec3;
+use crate::math::vec3::{Vec3, dist2, dot};
 use std::f64::consts::PI;
 
 /// Angles at or below this are treated as the identity rotation (the reference's 1e-6).
@@ -101,7 +101,7 @@ impl BfsTree {
 /// θ ≤ [`IDENTITY_ANGLE`]) and cycle count 0. A child j of parent i:
 /// * θ_j ≤ 1e-6: takes the parent's axis and cycle count, stored angle 0;
 /// * otherwise: if a_j·a_i < 0, a_j ← −a_j and θ_j ← 2π − θ_j (the stored angle lies in
-///   [0, 2π)). Near θ = π the axis comes from [`super::acap_rotation::axis_angle`], which is
+///   [0, 2π)). Near θ = π the axis comes from [`crate::math::mat3::axis_angle`], which is
 ///   accurate there; the reference instead copies the parent's axis within 1e-6 of π, which
 ///   misrepresents the rotation unless both axes agree, so that branch is not reproduced;
 /// * the child inherits the parent's cycle count k; if |θ_j − θ_i| > π (stored angles),
@@ -131,11 +131,7 @@ pub fn bfs_consistency(tree: &BfsTree, axis: &[Vec3], theta: &[f64]) -> Rotation
             (pa, 0.0)
         } else {
             let a = axis[j];
-            if a[0] * pa[0] + a[1] * pa[1] + a[2] * pa[2] < 0.0 {
-                ([-a[0], -a[1], -a[2]], TWO_PI - theta[j])
-            } else {
-                (a, theta[j])
-            }
+            if dot(a, pa) < 0.0 { ([-a[0], -a[1], -a[2]], TWO_PI - theta[j]) } else { (a, theta[j]) }
         };
         let mut k = pk;
         if (t - pt).abs() > PI {
@@ -157,17 +153,6 @@ pub fn bfs_consistency(tree: &BfsTree, axis: &[Vec3], theta: &[f64]) -> Rotation
 pub fn neighbour_energy(field: &RotationField, edges: &[[usize; 2]]) -> f64 {
     let w: Vec<Vec3> = (0..field.axis.len()).map(|i| field.vector(i)).collect();
     edges.iter().map(|&[i, j]| dist2(w[i], w[j])).sum()
-}
-
-#[inline]
-fn dist2(a: Vec3, b: Vec3) -> f64 {
-    let d = [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
-    d[0] * d[0] + d[1] * d[1] + d[2] * d[2]
-}
-
-#[inline]
-fn dot(a: Vec3, b: Vec3) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 
 /// Rewrites vertex i as (−a, −φ) when φ < 0 (the same vector ω).

@@ -41,9 +41,10 @@
 
 #![allow(clippy::needless_range_loop)] // index loops over 3-vectors read like the formulas
 
+use crate::math::mat3::{Mat3, mat_vec};
+use crate::math::vec3::{dot, normalize, sub};
 use crate::mesh::Vec3;
 use crate::representation::acap_reconstruct::{PinnedSystem, edge_term_adjoint};
-use crate::representation::acap_rotation::{Mat3, mat_vec};
 use crate::{Error, Result};
 
 /// The encoder's 1-ring fit data (reference only): rings in CSR form (`ring[ring_offsets[i]..
@@ -104,8 +105,7 @@ impl FitInverse {
         let mut h = Vec::with_capacity(n);
         for i in 0..n {
             let hi = mat_vec(&inv_ata[i], ref_normal_rows[i]);
-            let hn = (hi[0] * hi[0] + hi[1] * hi[1] + hi[2] * hi[2]).sqrt();
-            let u = if hn > 0.0 && hn.is_finite() { [hi[0] / hn, hi[1] / hn, hi[2] / hn] } else { [0.0; 3] };
+            let u = normalize(hi);
             let mut sum = [0.0; 3];
             for k in ring_offsets[i]..ring_offsets[i + 1] {
                 let ai = mat_vec(&inv_ata[i], ref_rows[k]);
@@ -176,13 +176,13 @@ impl FitInverse {
                 let col = &mut rhs[c * mrows..(c + 1) * mrows];
                 let ri = self.system.row(i);
                 if ri != usize::MAX {
-                    col[ri] -= self.g_sum[i][0] * y[0] + self.g_sum[i][1] * y[1] + self.g_sum[i][2] * y[2];
+                    col[ri] -= dot(self.g_sum[i], y);
                 }
                 for k in s..e {
                     let rj = self.system.row(self.ring[k]);
                     if rj != usize::MAX {
                         let gk = self.g[k];
-                        col[rj] += gk[0] * y[0] + gk[1] * y[1] + gk[2] * y[2];
+                        col[rj] += dot(gk, y);
                     }
                 }
             }
@@ -190,7 +190,7 @@ impl FitInverse {
         if let Some(EdgeTerm { rest, edges, weights }) = &self.edge_term {
             for (&[i, j], &c) in edges.iter().zip(weights) {
                 let (ti, tj) = (&transforms[i], &transforms[j]);
-                let e = [rest[i][0] - rest[j][0], rest[i][1] - rest[j][1], rest[i][2] - rest[j][2]];
+                let e = sub(rest[i], rest[j]);
                 let (ri, rj) = (self.system.row(i), self.system.row(j));
                 for k in 0..3 {
                     let d = 0.5
@@ -252,6 +252,6 @@ impl FitInverse {
 /// (I − u uᵀ) v for a unit (or zero) u.
 #[inline]
 fn project(u: Vec3, v: Vec3) -> Vec3 {
-    let d = u[0] * v[0] + u[1] * v[1] + u[2] * v[2];
+    let d = dot(u, v);
     [v[0] - d * u[0], v[1] - d * u[1], v[2] - d * u[2]]
 }

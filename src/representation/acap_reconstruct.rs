@@ -19,8 +19,10 @@
 //! that its centroid equals that component's centroid in the reference mesh.
 
 #![allow(clippy::needless_range_loop)] // index loops over 3-vectors read like the formulas
+use crate::math::DisjointSet;
+use crate::math::mat3::Mat3;
+use crate::math::vec3::sub;
 use crate::mesh::Vec3;
-use crate::representation::acap_rotation::Mat3;
 use crate::{Error, Result};
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::sparse::linalg::SupernodalThreshold;
@@ -60,21 +62,10 @@ impl PinnedSystem {
     ) -> Result<Self> {
         let n = rest.len();
         // Components by union–find; the smallest vertex of each is pinned.
-        let mut uf: Vec<usize> = (0..n).collect();
-        fn find(uf: &mut [usize], mut x: usize) -> usize {
-            while uf[x] != x {
-                uf[x] = uf[uf[x]];
-                x = uf[x];
-            }
-            x
-        }
+        // (DisjointSet keeps the smallest element of every set as its root.)
+        let mut uf = DisjointSet::new(n);
         for &[i, j] in edges {
-            let (a, b) = (find(&mut uf, i), find(&mut uf, j));
-            if a != b {
-                // Keep the smaller index as root so that roots are the smallest vertices.
-                let (lo, hi) = (a.min(b), a.max(b));
-                uf[hi] = lo;
-            }
+            uf.union(i, j);
         }
         let mut component = vec![usize::MAX; n];
         let mut comp_of_root = vec![usize::MAX; n];
@@ -82,7 +73,7 @@ impl PinnedSystem {
         let mut reduced = vec![usize::MAX; n];
         let mut n_free = 0;
         for v in 0..n {
-            let r = find(&mut uf, v);
+            let r = uf.find(v);
             if comp_of_root[r] == usize::MAX {
                 comp_of_root[r] = centroids.len();
                 centroids.push(([0.0; 3], 0));
@@ -324,7 +315,7 @@ pub(crate) fn edge_term_adjoint(
 ) {
     let m = system.n_reduced();
     for (&[i, j], &c) in edges.iter().zip(weights) {
-        let e = [rest[i][0] - rest[j][0], rest[i][1] - rest[j][1], rest[i][2] - rest[j][2]];
+        let e = sub(rest[i], rest[j]);
         let (ri, rj) = (system.row(i), system.row(j));
         for k in 0..3 {
             let li = if ri != usize::MAX { lam[k * m + ri] } else { 0.0 };
@@ -359,7 +350,7 @@ fn solve3(symbolic: &SymbolicCholesky<usize>, values: &[f64], rhs: &mut [f64], m
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::representation::acap_rotation::{IDENTITY, exp_so3};
+    use crate::math::mat3::{IDENTITY, exp_so3};
 
     fn tetra() -> (Vec<Vec3>, Vec<[usize; 2]>) {
         let p = vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];

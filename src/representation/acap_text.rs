@@ -4,8 +4,8 @@
 //! single spaces and the shortest representation that reads back to the same `f64`.
 
 use crate::artifact::write_atomic_with;
+use crate::math::mat3::Mat3;
 use crate::representation::acap::AcapFrame;
-use crate::representation::acap_rotation::Mat3;
 use crate::{Error, Result};
 use std::io::Write;
 use std::path::Path;

@@ -13,9 +13,10 @@ use std::fmt;
 
 use super::{Representation, RepresentationKind};
 use crate::error::Result;
-use crate::mesh::{MeshSequence, Vec3};
+use crate::mesh::MeshSequence;
 
 pub use crate::metrics::erms::{Alignment, erms, frame_squared_error};
+use crate::metrics::erms::{alignment_shift, erms_from_squared_error, vertex_squared_error};
 
 /// Per-frame and total error of an encode → decode round trip.
 #[derive(Debug, Clone, PartialEq)]
@@ -46,15 +47,10 @@ pub fn roundtrip(rep: &Representation, seq: &MeshSequence) -> Result<RoundTripRe
     for (f, (t, r)) in seq.frames.iter().zip(&decoded).enumerate() {
         let sq = frame_squared_error(t, r, alignment)?;
         let name = seq.names.get(f).cloned().unwrap_or_else(|| format!("{f}"));
-        frames.push((name, if n == 0 { 0.0 } else { 1000.0 * (sq / (3 * n) as f64).sqrt() }));
-        let shift: Vec3 = if alignment == Alignment::Centroid && n > 0 {
-            std::array::from_fn(|k| t.iter().zip(r).map(|(a, b)| a[k] - b[k]).sum::<f64>() / n as f64)
-        } else {
-            [0.0; 3]
-        };
+        frames.push((name, erms_from_squared_error(sq, 3 * n)));
+        let shift = alignment_shift(t, r, alignment);
         for (a, b) in t.iter().zip(r) {
-            let d2: f64 = (0..3).map(|k| (a[k] - b[k] - shift[k]).powi(2)).sum();
-            max_distance = max_distance.max(d2.sqrt());
+            max_distance = max_distance.max(vertex_squared_error(*a, *b, shift).sqrt());
         }
     }
     let total = erms(&seq.frames, &decoded, alignment)?;

@@ -54,11 +54,10 @@ use faer::sparse::{SparseColMat, Triplet};
 use faer::{Conj, Mat, Par, Side};
 
 use crate::error::{Error, Result};
-use crate::geometry::normals::{cross, dot, norm, sub};
+pub use crate::math::mat3::Mat3;
+use crate::math::mat3::{ReflectionFix, add_outer, exp_so3, log_so3, mat_mul, polar_svd};
+use crate::math::vec3::{cross, dot, norm, scale, sub};
 use crate::mesh::{Topology, TriMesh, Vec3};
-
-/// A 3×3 matrix, row-major (`m[row][col]`), acting on column vectors.
-pub type Mat3 = [[f64; 3]; 3];
 
 /// Numbers per triangle in the feature vector.
 pub const WIDTH: usize = 9;
@@ -97,18 +96,18 @@ struct RestTriangle {
 /// triangle is degenerate (see [`DEGENERATE_TOL`]) or not finite.
 fn gram_schmidt(e1: Vec3, e2: Vec3) -> Option<(Vec3, Vec3, f64, f64, f64)> {
     let r11 = norm(e1);
-    let scale = r11.max(norm(e2));
-    if r11 == 0.0 || !r11.is_finite() || !scale.is_finite() {
+    let longest = r11.max(norm(e2));
+    if r11 == 0.0 || !r11.is_finite() || !longest.is_finite() {
         return None;
     }
-    let q1 = scale3(e1, 1.0 / r11);
+    let q1 = scale(e1, 1.0 / r11);
     let r12 = dot(q1, e2);
-    let w = sub(e2, scale3(q1, r12));
+    let w = sub(e2, scale(q1, r12));
     let r22 = norm(w);
-    if r22.is_nan() || r22 <= DEGENERATE_TOL * scale {
+    if r22.is_nan() || r22 <= DEGENERATE_TOL * longest {
         return None;
     }
-    Some((q1, scale3(w, 1.0 / r22), r11, r12, r22))
+    Some((q1, scale(w, 1.0 / r22), r11, r12, r22))
 }
 
 impl RestTriangle {
@@ -119,7 +118,7 @@ impl RestTriangle {
         let b = -r12 / (r11 * r22);
         let c = 1.0 / r22;
         let d0 = [a * q1[0] + b * q2[0], a * q1[1] + b * q2[1], a * q1[2] + b * q2[2]];
-        let d1 = scale3(q2, c);
+        let d1 = scale(q2, c);
         Some(RestTriangle { q1, q2, n: cross(q1, q2), r11, r12, r22, d: [d0, d1] })
     }
 
@@ -127,90 +126,6 @@ impl RestTriangle {
     fn metric(&self) -> (f64, f64, f64) {
         (dot(self.d[0], self.d[0]), dot(self.d[0], self.d[1]), dot(self.d[1], self.d[1]))
     }
-}
-
-fn scale3(a: Vec3, s: f64) -> Vec3 {
-    [a[0] * s, a[1] * s, a[2] * s]
-}
-
-fn outer_add(m: &mut Mat3, a: Vec3, b: Vec3, s: f64) {
-    for i in 0..3 {
-        for j in 0..3 {
-            m[i][j] += s * a[i] * b[j];
-        }
-    }
-}
-
-/// `a · b` for 3×3 matrices.
-pub fn mat_mul(a: &Mat3, b: &Mat3) -> Mat3 {
-    let mut c = [[0.0; 3]; 3];
-    for i in 0..3 {
-        for j in 0..3 {
-            c[i][j] = a[i][0] * b[0][j] + a[i][1] * b[1][j] + a[i][2] * b[2][j];
-        }
-    }
-    c
-}
-
-/// `aᵀ`.
-pub fn transpose(a: &Mat3) -> Mat3 {
-    [[a[0][0], a[1][0], a[2][0]], [a[0][1], a[1][1], a[2][1]], [a[0][2], a[1][2], a[2][2]]]
-}
-
-/// Rodrigues' formula: the rotation `exp([u]×)` for the axis-angle vector `u` (angle `‖u‖`
-/// radians about `u/‖u‖`, right-hand rule). Second-order series below 1e-8 rad.
-pub fn rotation_exp(u: Vec3) -> Mat3 {
-    let t2 = dot(u, u);
-    let t = t2.sqrt();
-    let (a, b) = if t < 1e-8 { (1.0 - t2 / 6.0, 0.5 - t2 / 24.0) } else { (t.sin() / t, (1.0 - t.cos()) / t2) };
-    let k = [[0.0, -u[2], u[1]], [u[2], 0.0, -u[0]], [-u[1], u[0], 0.0]];
-    let k2 = mat_mul(&k, &k);
-    let mut r = [[0.0; 3]; 3];
-    for i in 0..3 {
-        for j in 0..3 {
-            r[i][j] = if i == j { 1.0 } else { 0.0 } + a * k[i][j] + b * k2[i][j];
-        }
-    }
-    r
-}
-
-/// The axis-angle vector `u` of a rotation `r` (`r = exp([u]×)`), angle θ = ‖u‖ ∈ [0, π].
-/// Goes through the unit quaternion (Shepperd's method), so it is accurate near 0 and near π;
-/// at exactly θ = π the sign of the axis is the one the quaternion extraction yields.
-pub fn rotation_log(r: &Mat3) -> Vec3 {
-    let tr = r[0][0] + r[1][1] + r[2][2];
-    // Quaternion (w, x, y, z) from the largest of 4 candidate pivots.
-    let (w, x, y, z);
-    if tr >= r[0][0] && tr >= r[1][1] && tr >= r[2][2] {
-        let s = (1.0 + tr).max(0.0).sqrt() * 2.0; // 4w
-        w = 0.25 * s;
-        x = (r[2][1] - r[1][2]) / s;
-        y = (r[0][2] - r[2][0]) / s;
-        z = (r[1][0] - r[0][1]) / s;
-    } else if r[0][0] >= r[1][1] && r[0][0] >= r[2][2] {
-        let s = (1.0 + r[0][0] - r[1][1] - r[2][2]).max(0.0).sqrt() * 2.0; // 4x
-        w = (r[2][1] - r[1][2]) / s;
-        x = 0.25 * s;
-        y = (r[0][1] + r[1][0]) / s;
-        z = (r[0][2] + r[2][0]) / s;
-    } else if r[1][1] >= r[2][2] {
-        let s = (1.0 - r[0][0] + r[1][1] - r[2][2]).max(0.0).sqrt() * 2.0; // 4y
-        w = (r[0][2] - r[2][0]) / s;
-        x = (r[0][1] + r[1][0]) / s;
-        y = 0.25 * s;
-        z = (r[1][2] + r[2][1]) / s;
-    } else {
-        let s = (1.0 - r[0][0] - r[1][1] + r[2][2]).max(0.0).sqrt() * 2.0; // 4z
-        w = (r[1][0] - r[0][1]) / s;
-        x = (r[0][2] + r[2][0]) / s;
-        y = (r[1][2] + r[2][1]) / s;
-        z = 0.25 * s;
-    }
-    let (w, v) = if w < 0.0 { (-w, [-x, -y, -z]) } else { (w, [x, y, z]) };
-    let sv = norm(v);
-    // θ = 2·atan2(‖v‖, w); u = θ·v/‖v‖, with the limit 2/w for tiny ‖v‖.
-    let f = if sv < 1e-12 { 2.0 / w } else { 2.0 * sv.atan2(w) / sv };
-    scale3(v, f)
 }
 
 /// `p = g(P − I) = [a−1, b−1, c−1, d, e, f]` of a symmetric `P` (Eq. (13); the lower triangle is
@@ -229,26 +144,6 @@ pub fn stretch_to_vec(p: &Mat3) -> [f64; 6] {
 /// Inverse of [`stretch_to_vec`]: `P = I + g⁻¹(p)`.
 pub fn vec_to_stretch(p: &[f64]) -> Mat3 {
     [[1.0 + p[0], p[3], p[4]], [p[3], 1.0 + p[1], p[5]], [p[4], p[5], 1.0 + p[2]]]
-}
-
-/// Polar rotation `U ∈ SO(3)` and symmetric `P = Uᵀ·J` of a 3×3 `J` by SVD, with a reflection
-/// fixed by negating the singular vector of the smallest singular value (and that value).
-fn polar_svd(j: &Mat3) -> (Mat3, Mat3) {
-    let m = nalgebra::Matrix3::from_fn(|r, c| j[r][c]);
-    let svd = m.svd(true, true);
-    let (Some(mut u), Some(v_t)) = (svd.u, svd.v_t) else {
-        return ([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]], *j);
-    };
-    let mut sigma = svd.singular_values;
-    if (u * v_t).determinant() < 0.0 {
-        // Sorted descending: index 2 is the smallest singular value.
-        u.column_mut(2).neg_mut();
-        sigma[2] = -sigma[2];
-    }
-    let rot = u * v_t;
-    let stretch = v_t.transpose() * nalgebra::Matrix3::from_diagonal(&sigma) * v_t;
-    let to = |a: nalgebra::Matrix3<f64>| -> Mat3 { std::array::from_fn(|r| std::array::from_fn(|c| a[(r, c)])) };
-    (to(rot), to(stretch))
 }
 
 /// Rotation `U` and stretch `P` (in the given convention) of one triangle, rest frame `rt`,
@@ -271,26 +166,26 @@ fn rotation_stretch(rt: &RestTriangle, e1: Vec3, e2: Vec3, convention: NormalCon
             let a2 = [-s * q1d[0] + c * q2d[0], -s * q1d[1] + c * q2d[1], -s * q1d[2] + c * q2d[2]];
             let nd = cross(q1d, q2d);
             let mut u = [[0.0; 3]; 3];
-            outer_add(&mut u, a1, rt.q1, 1.0);
-            outer_add(&mut u, a2, rt.q2, 1.0);
-            outer_add(&mut u, nd, rt.n, 1.0);
+            add_outer(&mut u, a1, rt.q1, 1.0);
+            add_outer(&mut u, a2, rt.q2, 1.0);
+            add_outer(&mut u, nd, rt.n, 1.0);
             let mut p = [[0.0; 3]; 3];
-            outer_add(&mut p, rt.q1, rt.q1, s00);
-            outer_add(&mut p, rt.q1, rt.q2, s01);
-            outer_add(&mut p, rt.q2, rt.q1, s01);
-            outer_add(&mut p, rt.q2, rt.q2, s11v);
+            add_outer(&mut p, rt.q1, rt.q1, s00);
+            add_outer(&mut p, rt.q1, rt.q2, s01);
+            add_outer(&mut p, rt.q2, rt.q1, s01);
+            add_outer(&mut p, rt.q2, rt.q2, s11v);
             (u, p)
         }
         None => {
             // Degenerate deformed triangle: J = V'·D, polar by SVD.
             let mut j = [[0.0; 3]; 3];
-            outer_add(&mut j, e1, rt.d[0], 1.0);
-            outer_add(&mut j, e2, rt.d[1], 1.0);
-            polar_svd(&j)
+            add_outer(&mut j, e1, rt.d[0], 1.0);
+            add_outer(&mut j, e2, rt.d[1], 1.0);
+            polar_svd(&j, ReflectionFix::Last)
         }
     };
     if convention == NormalConvention::UnitNormal {
-        outer_add(&mut p, rt.n, rt.n, 1.0);
+        add_outer(&mut p, rt.n, rt.n, 1.0);
     }
     // Exact symmetry.
     for (i, k) in [(0, 1), (0, 2), (1, 2)] {
@@ -307,8 +202,8 @@ pub fn deformation_gradient(rest: [Vec3; 3], deformed: [Vec3; 3]) -> Result<Mat3
     let rt = RestTriangle::new(rest[0], rest[1], rest[2])
         .ok_or_else(|| Error::Invalid(format!("degenerate rest triangle {rest:?}")))?;
     let mut j = [[0.0; 3]; 3];
-    outer_add(&mut j, sub(deformed[1], deformed[0]), rt.d[0], 1.0);
-    outer_add(&mut j, sub(deformed[2], deformed[0]), rt.d[1], 1.0);
+    add_outer(&mut j, sub(deformed[1], deformed[0]), rt.d[0], 1.0);
+    add_outer(&mut j, sub(deformed[2], deformed[0]), rt.d[1], 1.0);
     Ok(j)
 }
 
@@ -355,7 +250,7 @@ impl TriangleGradient {
         for ((f, rt), q) in self.faces.iter().zip(&self.rest).zip(out.chunks_exact_mut(WIDTH)) {
             let p0 = positions[f[0]];
             let (u, p) = rotation_stretch(rt, sub(positions[f[1]], p0), sub(positions[f[2]], p0), self.convention);
-            q[..3].copy_from_slice(&rotation_log(&u));
+            q[..3].copy_from_slice(&log_so3(&u));
             q[3..].copy_from_slice(&stretch_to_vec(&p));
         }
         Ok(out)
@@ -382,7 +277,7 @@ impl TriangleGradient {
 
 /// `J = exp([u]×)·(I + g⁻¹(p))` for one 9-vector.
 fn gradient_of(q: &[f64]) -> Mat3 {
-    mat_mul(&rotation_exp([q[0], q[1], q[2]]), &vec_to_stretch(&q[3..9]))
+    mat_mul(&exp_so3([q[0], q[1], q[2]]), &vec_to_stretch(&q[3..9]))
 }
 
 fn check_positions(positions: &[Vec3], n: usize) -> Result<()> {
@@ -484,7 +379,7 @@ impl GradientReconstruction {
             }
         }
         for (c, cnt) in rest_centroids.iter_mut() {
-            *c = scale3(*c, 1.0 / *cnt as f64);
+            *c = scale(*c, 1.0 / *cnt as f64);
         }
         // K = Σ_t Gᵀ M G: local [[a+2b+c, −a−b, −b−c], [·, a, b], [·, ·, c]].
         let mut trip = Vec::with_capacity(tris.len() * 9);
@@ -679,14 +574,14 @@ mod tests {
         }
         for q in &mut p {
             let l = norm(*q);
-            *q = scale3(*q, 1.0 / l);
+            *q = scale(*q, 1.0 / l);
         }
         TriMesh::new(p, f)
     }
 
     fn rot(axis: Vec3, angle: f64) -> Mat3 {
-        let a = scale3(axis, angle / norm(axis));
-        rotation_exp(a)
+        let a = scale(axis, angle / norm(axis));
+        exp_so3(a)
     }
 
     fn apply(m: &Mat3, p: Vec3) -> Vec3 {
@@ -697,35 +592,6 @@ mod tests {
         let ca: Vec3 = std::array::from_fn(|k| a.iter().map(|p| p[k]).sum::<f64>() / a.len() as f64);
         let cb: Vec3 = std::array::from_fn(|k| b.iter().map(|p| p[k]).sum::<f64>() / b.len() as f64);
         a.iter().zip(b).map(|(p, q)| norm(sub(sub(*p, ca), sub(*q, cb)))).fold(0.0, f64::max)
-    }
-
-    #[test]
-    fn exp_log_round_trip_including_near_pi() {
-        for (axis, angle) in [
-            ([1.0, 2.0, 3.0], 0.7),
-            ([0.0, 0.0, 1.0], 1e-10),
-            ([-1.0, 0.5, 0.2], 3.0),
-            ([0.3, -0.4, 0.9], std::f64::consts::PI - 1e-9),
-            ([0.0, 1.0, 0.0], 2.5),
-        ] {
-            let u = scale3(axis, angle / norm(axis));
-            let r = rotation_exp(u);
-            let back = rotation_log(&r);
-            let err = norm(sub(back, u));
-            assert!(err < 1e-7 * angle.max(1e-3), "axis {axis:?} angle {angle}: got {back:?}");
-            // Orthonormal with det +1.
-            let rtr = mat_mul(&transpose(&r), &r);
-            for (i, row) in rtr.iter().enumerate() {
-                for (j, x) in row.iter().enumerate() {
-                    assert!((x - if i == j { 1.0 } else { 0.0 }).abs() < 1e-14);
-                }
-            }
-            assert!((nalgebra::Matrix3::from_fn(|a, b| r[a][b]).determinant() - 1.0).abs() < 1e-14);
-        }
-        // Angle above π maps back into [0, π] with the opposite axis.
-        let u = [0.0, 0.0, 4.0];
-        let back = rotation_log(&rotation_exp(u));
-        assert!(norm(sub(back, [0.0, 0.0, 4.0 - 2.0 * std::f64::consts::PI])) < 1e-12, "{back:?}");
     }
 
     #[test]
@@ -744,7 +610,7 @@ mod tests {
         let q = tg.encode_frame(&m.positions).unwrap();
         for (f, qt) in m.faces.iter().zip(q.chunks_exact(9)) {
             let [a, b, c] = f.map(|v| m.positions[v]);
-            let n = crate::geometry::normals::normalize(cross(sub(b, a), sub(c, a)));
+            let n = crate::math::vec3::normalize(cross(sub(b, a), sub(c, a)));
             let expect = [-n[0] * n[0], -n[1] * n[1], -n[2] * n[2], -n[0] * n[1], -n[0] * n[2], -n[1] * n[2]];
             assert!(norm([qt[0], qt[1], qt[2]]) < 1e-12);
             for k in 0..6 {
@@ -756,8 +622,8 @@ mod tests {
     #[test]
     fn rigid_rotation_gives_constant_axis_angle_and_zero_stretch() {
         let m = sphere(2);
-        let u_true = scale3([0.2, -0.5, 0.8], 2.2 / norm([0.2, -0.5, 0.8]));
-        let r = rotation_exp(u_true);
+        let u_true = scale([0.2, -0.5, 0.8], 2.2 / norm([0.2, -0.5, 0.8]));
+        let r = exp_so3(u_true);
         let moved: Vec<Vec3> = m
             .positions
             .iter()
@@ -788,7 +654,7 @@ mod tests {
         // P − I = (s−1)(I − n·nᵀ).
         let s = 1.7;
         let g = grid(4, 3);
-        let scaled: Vec<Vec3> = g.positions.iter().map(|p| scale3(*p, s)).collect();
+        let scaled: Vec<Vec3> = g.positions.iter().map(|p| scale(*p, s)).collect();
         for (conv, expect) in [
             (NormalConvention::UnitNormal, [s - 1.0, s - 1.0, 0.0]),
             (NormalConvention::MinNorm, [s - 1.0, s - 1.0, -1.0]),
@@ -803,10 +669,10 @@ mod tests {
         }
         let m = sphere(1);
         let tg = TriangleGradient::new(&m, NormalConvention::UnitNormal).unwrap();
-        let scaled: Vec<Vec3> = m.positions.iter().map(|p| scale3(*p, s)).collect();
+        let scaled: Vec<Vec3> = m.positions.iter().map(|p| scale(*p, s)).collect();
         for (f, qt) in m.faces.iter().zip(tg.encode_frame(&scaled).unwrap().chunks_exact(9)) {
             let [a, b, c] = f.map(|v| m.positions[v]);
-            let n = crate::geometry::normals::normalize(cross(sub(b, a), sub(c, a)));
+            let n = crate::math::vec3::normalize(cross(sub(b, a), sub(c, a)));
             let k = s - 1.0;
             let want = [
                 k * (1.0 - n[0] * n[0]),
@@ -860,7 +726,7 @@ mod tests {
         let tg = TriangleGradient::new(&rest, NormalConvention::MinNorm).unwrap();
         // Collapse onto a line (zero area), mirrored in x.
         let q = tg.encode_frame(&[[0., 0., 0.], [-2., 0., 0.], [-1., 0., 0.]]).unwrap();
-        let u = rotation_exp([q[0], q[1], q[2]]);
+        let u = exp_so3([q[0], q[1], q[2]]);
         let det = nalgebra::Matrix3::from_fn(|r, c| u[r][c]).determinant();
         assert!((det - 1.0).abs() < 1e-12);
         let j = gradient_of(&q);

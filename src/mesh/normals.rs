@@ -1,9 +1,10 @@
 //! Per-face and per-vertex normals.
 //!
 //! Face normal of triangle (a, b, c): (b − a) × (c − a), whose length is twice the area; the
-//! direction follows the counter-clockwise vertex order (right-hand rule).
+//! direction follows the counter-clockwise vertex order (right-hand rule). Positions are in
+//! data units; unit normals are dimensionless.
 
-use crate::mesh::Vec3;
+use crate::math::vec3::{Vec3, cross, normalize, sub};
 
 /// How face normals are combined into a vertex normal.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -42,35 +43,10 @@ pub fn vertex_normals(positions: &[Vec3], faces: &[[usize; 3]], weighting: Norma
     acc.into_iter().map(normalize).collect()
 }
 
-/// a − b.
-pub fn sub(a: Vec3, b: Vec3) -> Vec3 {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-
-/// a × b.
-pub fn cross(a: Vec3, b: Vec3) -> Vec3 {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
-}
-
-/// a · b.
-pub fn dot(a: Vec3, b: Vec3) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
-/// ‖a‖.
-pub fn norm(a: Vec3) -> f64 {
-    dot(a, a).sqrt()
-}
-
-/// a / ‖a‖, or zero for a zero (or non-finite-length) vector.
-pub fn normalize(a: Vec3) -> Vec3 {
-    let l = norm(a);
-    if l > 0.0 && l.is_finite() { [a[0] / l, a[1] / l, a[2] / l] } else { [0.0; 3] }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::math::vec3::norm;
 
     #[test]
     fn flat_square_normals_point_up() {
