@@ -84,7 +84,13 @@ fn bench_ae(c: &mut Criterion) {
             eprintln!(
                 "training a 30-iteration SCAPE autoencoder for the posing benchmark (set MESHDECO_AE_MODEL to skip)"
             );
-            meshdeco::pipeline::train(&cfg, &out, &meshdeco::pipeline::TrainOptions::default(), &mut meshdeco::pipeline::Silent).unwrap();
+            meshdeco::pipeline::train(
+                &cfg,
+                &out,
+                &meshdeco::pipeline::TrainOptions::default(),
+                &mut meshdeco::pipeline::Silent,
+            )
+            .unwrap();
             out
         }
     };

@@ -14,8 +14,8 @@ pub mod error;
 pub mod geometry;
 pub mod math;
 pub mod mesh;
-pub mod model;
 pub mod methods;
+pub mod model;
 pub mod nn;
 pub mod pipeline;
 pub mod preprocess;
@@ -24,5 +24,5 @@ pub mod rng;
 pub mod synthetic;
 
 pub use error::{Error, Result};
-pub mod metrics;
 pub mod eval;
+pub mod metrics;

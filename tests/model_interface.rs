@@ -83,7 +83,8 @@ fn every_kind_encodes_synthesizes_and_exports_components() {
 
         // synthesize: dial 1 of component 1 at 0.7 equals the library's synthesis.
         let out = d.join(format!("{name}-synth.obj"));
-        let o = meshdeco(&["synthesize", dir.to_str().unwrap(), "--weights", "1:0.7", "--out", out.to_str().unwrap()], &d);
+        let o =
+            meshdeco(&["synthesize", dir.to_str().unwrap(), "--weights", "1:0.7", "--out", out.to_str().unwrap()], &d);
         assert!(o.status.success(), "{name} synthesize: {}", text(&o));
         let mut dials = vec![0.0; k];
         dials[1] = 0.7;
@@ -146,7 +147,10 @@ fn saved_config_is_the_resolved_typed_config_and_trains_again() {
         let table = saved.method.to_table().unwrap();
         let saved_text = std::fs::read_to_string(dir.join("config.toml")).unwrap();
         for key in table.keys() {
-            assert!(saved_text.contains(&format!("{key} =")) || saved_text.contains(&format!("[method.{key}]")), "{name}: {key}");
+            assert!(
+                saved_text.contains(&format!("{key} =")) || saved_text.contains(&format!("[method.{key}]")),
+                "{name}: {key}"
+            );
         }
         // It trains again as is, to the same metrics (training is seeded).
         let again = d.join(format!("{name}-again"));

@@ -93,11 +93,22 @@ fn face_poses_region_vs_holistic() {
     };
     let t = std::time::Instant::now();
     let out_r = out_dir("face-region");
-    let r =
-        meshdeco::pipeline::train(&Config::from_toml(&toml("region-pca", "regions = 6")).unwrap(), &out_r, &meshdeco::pipeline::TrainOptions::default(), &mut Silent).unwrap();
+    let r = meshdeco::pipeline::train(
+        &Config::from_toml(&toml("region-pca", "regions = 6")).unwrap(),
+        &out_r,
+        &meshdeco::pipeline::TrainOptions::default(),
+        &mut Silent,
+    )
+    .unwrap();
     let secs = t.elapsed().as_secs_f64();
     let out_p = out_dir("face-pca");
-    let h = meshdeco::pipeline::train(&Config::from_toml(&toml("pca", "")).unwrap(), &out_p, &meshdeco::pipeline::TrainOptions::default(), &mut Silent).unwrap();
+    let h = meshdeco::pipeline::train(
+        &Config::from_toml(&toml("pca", "")).unwrap(),
+        &out_p,
+        &meshdeco::pipeline::TrainOptions::default(),
+        &mut Silent,
+    )
+    .unwrap();
     eprintln!(
         "face-poses K = {k}: region PCA (6 regions) train Erms {:.3}, test Erms {:.3} ({secs:.1} s); holistic PCA train Erms {:.3}, test Erms {:.3}",
         r.metrics.train_erms,
@@ -109,7 +120,13 @@ fn face_poses_region_vs_holistic() {
     // Automatic segmentation (k grown until a cluster is not compact), 6 components per region.
     let out_a = out_dir("face-region-auto");
     let cfg = toml("region-pca", "max_regions = 16").replace(&format!("components = {k}"), "components = 96");
-    let auto = meshdeco::pipeline::train(&Config::from_toml(&cfg).unwrap(), &out_a, &meshdeco::pipeline::TrainOptions::default(), &mut Silent).unwrap();
+    let auto = meshdeco::pipeline::train(
+        &Config::from_toml(&cfg).unwrap(),
+        &out_a,
+        &meshdeco::pipeline::TrainOptions::default(),
+        &mut Silent,
+    )
+    .unwrap();
     let a = RegionArtifact::load(&out_a).unwrap();
     eprintln!(
         "face-poses automatic segmentation: {} regions, {} components, train Erms {:.3}, test Erms {:.3}",

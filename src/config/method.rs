@@ -500,7 +500,10 @@ impl MethodSettings for RegionPcaMethod {
         if self.representation != RepresentationKind::Displacement {
             return Err(Error::config(
                 "method.representation",
-                format!("`{}` is not available for kind = \"region-pca\" (only displacement)", self.representation.name()),
+                format!(
+                    "`{}` is not available for kind = \"region-pca\" (only displacement)",
+                    self.representation.name()
+                ),
             ));
         }
         if self.regions.is_some() && self.max_regions.is_some() {

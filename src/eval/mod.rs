@@ -203,9 +203,8 @@ fn measure(cell: &Cell, cfg: &EvalConfig, ds: &DatasetData, trained: &TrainOutco
     let metrics = &trained.metrics;
     let model = trained.model.as_ref();
     let alignment = model.alignment();
-    let test_erms = metrics
-        .test_erms
-        .ok_or_else(|| Error::Invalid(format!("{name}: training measured no test split")))?;
+    let test_erms =
+        metrics.test_erms.ok_or_else(|| Error::Invalid(format!("{name}: training measured no test split")))?;
     let mut test_rec = trained.test_reconstruction.clone();
     if alignment == Alignment::Centroid {
         // The same alignment for STED (its temporal part sees per-frame translations).

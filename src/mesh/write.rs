@@ -180,10 +180,7 @@ pub fn write_mesh(path: &Path, mesh: &TriMesh) -> Result<()> {
         Some("ply") => write_ply(path, mesh, None, None),
         Some("off") => write_off(path, mesh),
         Some("obj") => write_obj(path, mesh),
-        _ => Err(Error::Invalid(format!(
-            "{}: unknown output format (use .obj, .ply or .off)",
-            path.display()
-        ))),
+        _ => Err(Error::Invalid(format!("{}: unknown output format (use .obj, .ply or .off)", path.display()))),
     }
 }
 

@@ -22,7 +22,7 @@ pub mod registry;
 
 use std::path::Path;
 
-pub use registry::{Fitted, FitContext, FitStats, fit, load_model};
+pub use registry::{FitContext, FitStats, Fitted, fit, load_model};
 
 use crate::config::MethodKind;
 use crate::error::{Error, Result};
@@ -256,9 +256,8 @@ pub fn encode_frames(
 pub fn parse_dials(flag: &str, s: &str, k: usize) -> Result<Vec<f64>> {
     let mut w = vec![0.0; k];
     for part in s.split(',').map(str::trim).filter(|p| !p.is_empty()) {
-        let (i, v) = part
-            .split_once(':')
-            .ok_or_else(|| Error::Invalid(format!("{flag}: `{part}` is not index:weight")))?;
+        let (i, v) =
+            part.split_once(':').ok_or_else(|| Error::Invalid(format!("{flag}: `{part}` is not index:weight")))?;
         let i: usize = i
             .trim()
             .parse()

@@ -152,18 +152,10 @@ impl AutoencoderConfig {
             return Err(bad("layers", format!("{} must be in 1..=16", self.layers)));
         }
         let pos = |key: &str, v: f64| -> Result<()> {
-            if v.is_finite() && v > 0.0 {
-                Ok(())
-            } else {
-                Err(bad(key, format!("{v} must be a positive number")))
-            }
+            if v.is_finite() && v > 0.0 { Ok(()) } else { Err(bad(key, format!("{v} must be a positive number"))) }
         };
         let nonneg = |key: &str, v: f64| -> Result<()> {
-            if v.is_finite() && v >= 0.0 {
-                Ok(())
-            } else {
-                Err(bad(key, format!("{v} must be a finite number ≥ 0")))
-            }
+            if v.is_finite() && v >= 0.0 { Ok(()) } else { Err(bad(key, format!("{v} must be a finite number ≥ 0"))) }
         };
         pos("init_std", self.init_std)?;
         pos("learning_rate", self.learning_rate)?;

@@ -33,10 +33,10 @@ use serde::{Deserialize, Serialize};
 
 use super::autoencoder::AeArtifact;
 use crate::error::{Error, Result};
+use crate::math::mat3::{Mat3, exp_so3, mat_mul, unskew};
 use crate::mesh::Vec3;
 use crate::nn::latent_fit::DecoderVjp;
 use crate::representation::acap::Acap;
-use crate::representation::acap_rotation::{Mat3, exp_so3, mat_mul, unskew};
 
 /// Hyperparameters of [`AePoser`].
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]

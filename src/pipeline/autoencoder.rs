@@ -332,8 +332,7 @@ impl Model for AeArtifact {
         Ok(PoseResult { start, positions, weights })
     }
     fn point_fit<'a>(&'a self, vertices: &[usize], gamma: f64) -> Result<Option<Box<dyn PointFit + 'a>>> {
-        let fitter =
-            AeFitEncoder::with_vertices(self, vertices.to_vec(), gamma)?.with_iterations(AE_FIT_ITERATIONS)?;
+        let fitter = AeFitEncoder::with_vertices(self, vertices.to_vec(), gamma)?.with_iterations(AE_FIT_ITERATIONS)?;
         Ok(Some(Box::new(AePointFit { artifact: self, fitter })))
     }
     fn save(&self, dir: &Path) -> Result<()> {

@@ -182,8 +182,11 @@ fn training_features(
     let representation = Representation::new(kind, &prep.rest, options)?;
     let mut x = representation.encode(&prep.train_sequence())?;
     let rest_row = if subtract_rest {
-        let rest_seq =
-            MeshSequence { faces: prep.rest.faces.clone(), frames: vec![prep.rest.positions.clone()], names: Vec::new() };
+        let rest_seq = MeshSequence {
+            faces: prep.rest.faces.clone(),
+            frames: vec![prep.rest.positions.clone()],
+            names: Vec::new(),
+        };
         let r = representation.encode(&rest_seq)?.data;
         for row in x.data.chunks_exact_mut(r.len()) {
             row.iter_mut().zip(&r).for_each(|(v, o)| *v -= o);
@@ -245,13 +248,7 @@ pub fn fit_pca(m: &PcaMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> Resu
     let artifact = artifact_of(MethodKind::Pca, representation, m.consistency, prep, model);
     Ok(Fitted {
         model: Box::new(artifact),
-        stats: FitStats {
-            train_seconds,
-            representation_seconds,
-            iterations: 1,
-            locality,
-            ..Default::default()
-        },
+        stats: FitStats { train_seconds, representation_seconds, iterations: 1, locality, ..Default::default() },
         method: MethodConfig::Pca(m.clone()),
     })
 }

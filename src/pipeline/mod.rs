@@ -2,13 +2,13 @@
 //! compute the representation, fit the method, measure, and write the artefact directory
 //! (see [`crate::artifact`]).
 
-pub mod autoencoder;
-pub mod geodesic_support;
 pub mod ae_fit;
 pub mod ae_pose;
+pub mod autoencoder;
+pub mod geodesic_support;
 pub mod linear;
-pub mod pose;
 pub mod metrics_file;
+pub mod pose;
 pub mod region;
 pub mod train;
 

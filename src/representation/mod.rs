@@ -21,7 +21,6 @@ pub mod acap;
 pub mod acap_consistency;
 pub mod acap_fit_inverse;
 pub mod acap_reconstruct;
-pub mod acap_rotation;
 pub mod acap_text;
 pub mod displacement;
 pub mod roundtrip;
