@@ -10,6 +10,7 @@
 //! rest = "first"                  # first | mean | <mesh file>
 //! align = "none"                  # none | rigid
 //! unit_box = false                # scale into the unit box (SPLOCS's convention); outputs keep data units
+//! # template = "t.obj"           # with a NumPy path (F×N×3 .npy, or .npz + array = "name"): the faces
 //! [method]
 //! kind = "autoencoder"            # autoencoder | splocs | pca | region-pca
 //! components = 50
@@ -180,6 +181,10 @@ pub struct DataConfig {
     pub rest: RestShape,
     pub align: Align,
     pub unit_box: bool,
+    /// Name of the array inside a `.npz` `path`.
+    pub array: Option<String>,
+    /// Mesh file whose faces a NumPy `path` uses.
+    pub template: Option<PathBuf>,
 }
 
 /// Raw TOML of the whole file; `deny_unknown_fields` makes typos errors.
@@ -200,6 +205,8 @@ struct RawData {
     rest: Option<String>,
     align: Option<String>,
     unit_box: Option<bool>,
+    array: Option<String>,
+    template: Option<PathBuf>,
 }
 
 /// A validated experiment configuration.
@@ -275,7 +282,27 @@ impl Config {
             "rigid" => Align::Rigid,
             other => return Err(Error::config("data.align", format!("`{other}`: expected none or rigid"))),
         };
-        let data = DataConfig { path: d.path, train, test, rest, align, unit_box: d.unit_box.unwrap_or(false) };
+        let numpy = crate::mesh::npy::is_numpy_path(&d.path);
+        if numpy && d.template.is_none() {
+            return Err(Error::config(
+                "data.template",
+                format!("is required with a NumPy data.path (`{}`): the mesh file giving the faces", d.path),
+            ));
+        }
+        if !numpy && (d.template.is_some() || d.array.is_some()) {
+            let key = if d.template.is_some() { "data.template" } else { "data.array" };
+            return Err(Error::config(key, format!("applies to a NumPy data.path (.npy or .npz) only, not `{}`", d.path)));
+        }
+        let data = DataConfig {
+            path: d.path,
+            train,
+            test,
+            rest,
+            align,
+            unit_box: d.unit_box.unwrap_or(false),
+            array: d.array,
+            template: d.template,
+        };
 
         let method = MethodConfig::from_table(&raw.method)?;
         Ok(Config { name, data, method, source: None })
@@ -433,6 +460,12 @@ impl DataConfig {
         t.insert("rest".into(), self.rest.to_string().into());
         t.insert("align".into(), (if self.align == Align::Rigid { "rigid" } else { "none" }).into());
         t.insert("unit_box".into(), self.unit_box.into());
+        if let Some(a) = &self.array {
+            t.insert("array".into(), a.clone().into());
+        }
+        if let Some(p) = &self.template {
+            t.insert("template".into(), p.display().to_string().into());
+        }
         t
     }
 }

@@ -25,4 +25,5 @@ pub mod synthetic;
 
 pub use error::{Error, Result};
 pub mod eval;
+pub mod export;
 pub mod metrics;

@@ -7,6 +7,8 @@
 //! computes in the scaled space is mapped back with [`UnitBox::invert`] before it is written
 //! or measured, so outputs and metrics are in the data's own units.
 
+use std::path::Path;
+
 use serde::{Deserialize, Serialize};
 
 use crate::config::{Align, DataConfig, RestShape};
@@ -80,9 +82,25 @@ pub fn load_frames(path: &str) -> Result<MeshSequence> {
     if crate::synthetic::is_synthetic(path) { crate::synthetic::load(path) } else { mesh::load_sequence(path) }
 }
 
+/// Loads the frames of a `[data]` section: a NumPy `.npy`/`.npz` array with its template mesh
+/// (`data.template`, `data.array`), or anything [`load_frames`] reads.
+pub fn load_data(cfg: &DataConfig) -> Result<MeshSequence> {
+    if mesh::npy::is_numpy_path(&cfg.path) {
+        let template = cfg.template.as_deref().ok_or_else(|| {
+            Error::config("data.template", format!("is required with a NumPy data.path (`{}`): the mesh file giving the faces", cfg.path))
+        })?;
+        mesh::npy::load_npy_sequence(Path::new(&cfg.path), cfg.array.as_deref(), template)
+    } else {
+        if let Some(a) = &cfg.array {
+            return Err(Error::config("data.array", format!("`{a}` applies to a .npz data.path only")));
+        }
+        load_frames(&cfg.path)
+    }
+}
+
 /// Loads and preprocesses the data of a config.
 pub fn prepare(cfg: &DataConfig) -> Result<Prepared> {
-    let seq = load_frames(&cfg.path)?;
+    let seq = load_data(cfg)?;
     prepare_sequence(seq, cfg)
 }
 
@@ -175,6 +193,8 @@ mod tests {
             rest: RestShape::First,
             align: Align::None,
             unit_box: false,
+            array: None,
+            template: None,
         }
     }
 

@@ -6,6 +6,7 @@ use clap::{Parser, Subcommand};
 
 mod apply;
 mod eval;
+mod export;
 mod features;
 mod geodesic;
 mod inspect;
@@ -32,6 +33,8 @@ pub enum Command {
     Encode(apply::EncodeArgs),
     /// Build a shape from component weights ("index:weight,…").
     Synthesize(apply::SynthesizeArgs),
+    /// Export a model as glTF 2.0 (.glb): its neutral mesh with one morph target per component.
+    Export(export::ExportArgs),
     /// Compute a representation's features (ACAP in the reference's LOGRNEW.txt / S.txt layout).
     Features(features::FeaturesArgs),
     /// Encode → decode every frame and print per-frame and total Erms against the input.
@@ -58,6 +61,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Interpolate(a) => apply::interpolate(a),
         Command::Encode(a) => apply::encode(a),
         Command::Synthesize(a) => apply::synthesize(a),
+        Command::Export(a) => export::run(a),
         Command::Features(a) => features::features(a),
         Command::Roundtrip(a) => features::roundtrip_cmd(a),
         Command::Geodesic(a) => geodesic::run(a),

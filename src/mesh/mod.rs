@@ -5,6 +5,7 @@
 
 pub mod inspect;
 pub mod load;
+pub mod npy;
 pub mod normals;
 pub mod obj;
 pub mod off;

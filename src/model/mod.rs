@@ -100,6 +100,12 @@ pub trait Model {
         check_len("weights", dials.len(), self.n_components())?;
         Ok(dials.to_vec())
     }
+    /// The dials whose [`Model::synthesis_weights`] are `weights` (its inverse; the identity for
+    /// linear and region models; the autoencoder: `(z_i − Z_r,i) / (Z_h,i − Z_r,i)`).
+    fn dials(&self, weights: &[f64]) -> Result<Vec<f64>> {
+        check_len("weights", weights.len(), self.n_components())?;
+        Ok(weights.to_vec())
+    }
     /// The model's own encoding of frames (data units) into weights (linear models:
     /// least squares honouring the weight constraint; region PCA: Eq. 6/7; the autoencoder: its
     /// encoder network).

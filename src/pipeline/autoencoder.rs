@@ -305,6 +305,19 @@ impl Model for AeArtifact {
             dials.iter().enumerate().filter(|(_, w)| **w != 0.0).map(|(i, w)| (i, *w)).collect();
         self.synthesis_code(&pairs)
     }
+    fn dials(&self, weights: &[f64]) -> Result<Vec<f64>> {
+        crate::model::check_len("weights", weights.len(), self.header.components)?;
+        let zr = self.reference_code();
+        Ok(self
+            .header
+            .analysis
+            .iter()
+            .map(|s| {
+                let span = s.z_extreme - zr[s.dim];
+                if span != 0.0 { (weights[s.dim] - zr[s.dim]) / span } else { 0.0 }
+            })
+            .collect())
+    }
     fn encode(&self, frames: &MeshSequence) -> Result<Vec<Vec<f64>>> {
         self.encode_frames(frames)
     }

@@ -61,6 +61,9 @@ pub struct RegionArtifact {
     pub labels: Vec<usize>,
     pub model: RegionPcaModel,
     pub representation: Representation,
+    /// Coefficients ζ of the training frames (P each; empty for artefacts written before they
+    /// were stored).
+    pub train_weights: Vec<Vec<f64>>,
 }
 
 impl RegionArtifact {
@@ -74,6 +77,13 @@ impl RegionArtifact {
             a.insert(&format!("region{i}_vertices"), vec![ni], r.vertices.iter().map(|&v| v as f64).collect())?;
             a.insert(&format!("region{i}_mean"), vec![3 * ni], r.mean.clone())?;
             a.insert(&format!("region{i}_basis"), vec![r.n_components, 3 * ni], r.basis.clone())?;
+        }
+        if !self.train_weights.is_empty() {
+            a.insert(
+                "train_weights",
+                vec![self.train_weights.len(), self.model.n_components()],
+                self.train_weights.iter().flatten().copied().collect(),
+            )?;
         }
         artifact::save_model(dir, &self.header, &a)
     }
@@ -102,7 +112,14 @@ impl RegionArtifact {
         let model = RegionPcaModel { n_vertices: n, regions, beta: header.beta };
         let representation =
             Representation::new(RepresentationKind::Displacement, &rest, RepresentationOptions::default())?;
-        Ok(RegionArtifact { header, rest, labels, model, representation })
+        let p = model.n_components();
+        let f = header.train_frames.len();
+        let train_weights = if arrays.names().any(|n| n == "train_weights") {
+            arrays.get_shaped("train_weights", &[f, p])?.chunks_exact(p.max(1)).map(<[f64]>::to_vec).collect()
+        } else {
+            Vec::new()
+        };
+        Ok(RegionArtifact { header, rest, labels, model, representation, train_weights })
     }
 
     /// Positions (data units) of displacement rows (`n` × N·3).
@@ -186,7 +203,15 @@ pub fn fit(m: &RegionPcaMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> Re
         labels: seg.labels.clone(),
         model,
         representation,
+        train_weights: Vec::new(),
     };
+    let mut artifact = artifact;
+    let train_truth = MeshSequence {
+        faces: prep.rest.faces.clone(),
+        frames: super::train::frames_in_data_units(prep, &prep.train),
+        names: Vec::new(),
+    };
+    artifact.train_weights = artifact.encode_frames(&train_truth)?;
     let mut resolved = m.clone();
     resolved.r = Some(seg.r);
     if resolved.regions.is_none() {
@@ -283,7 +308,7 @@ impl Model for RegionArtifact {
         &self.header.train_frames
     }
     fn train_weights(&self) -> Option<Vec<Vec<f64>>> {
-        None
+        (!self.train_weights.is_empty()).then(|| self.train_weights.clone())
     }
     fn decode(&self, weights: &[Vec<f64>]) -> Result<Vec<Vec<Vec3>>> {
         let mut rows = Vec::with_capacity(weights.len() * 3 * self.model.n_vertices);

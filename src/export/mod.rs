@@ -1,0 +1,5 @@
+//! Exports of trained models into other tools' formats: glTF 2.0 morph targets ([`gltf`]).
+
+pub mod gltf;
+
+pub use gltf::{ExportOptions, ExportReport, export_glb, read_glb};

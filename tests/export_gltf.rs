@@ -1,0 +1,239 @@
+//! `meshdeco export` (glTF 2.0 morph targets) and NumPy data, as a user meets them: the Khronos
+//! validator on an export of every model kind, the morph targets replayed against `meshdeco
+//! synthesize`, the animation against the model's reconstruction of its training frames, and a
+//! sequence written as `.npy` / `.npz` training to the same metrics as the mesh files.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use meshdeco::export::read_glb;
+use meshdeco::mesh::{self, Vec3};
+use meshdeco::model::{self, load_model};
+
+fn meshdeco(args: &[&str], cwd: &Path) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_meshdeco")).args(args).current_dir(cwd).output().expect("run meshdeco")
+}
+
+fn tmp(tag: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("meshdeco-export-{tag}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn text(o: &Output) -> String {
+    format!("{}{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr))
+}
+
+fn train(d: &Path, name: &str, data: &str, method: &str) -> PathBuf {
+    let cfg = d.join(format!("{name}.toml"));
+    std::fs::write(&cfg, format!("name = \"{name}\"\n[data]\n{data}\n[method]\n{method}\n")).unwrap();
+    let out = d.join(name);
+    let o = meshdeco(&["train", "--config", cfg.to_str().unwrap(), "--out", out.to_str().unwrap()], d);
+    assert!(o.status.success(), "{name}: {}", text(&o));
+    out
+}
+
+const BUMPS: &str = "path = \"synthetic:bumps\"\ntrain = \"1-30\"\ntest = \"rest\"";
+
+const KINDS: [(&str, &str); 6] = [
+    ("pca", "kind = \"pca\"\ncomponents = 4"),
+    ("splocs", "kind = \"splocs\"\ncomponents = 3"),
+    ("splocs-acap", "kind = \"splocs\"\ncomponents = 3\nrepresentation = \"acap\""),
+    ("splocs-gradient", "kind = \"splocs\"\ncomponents = 3\nrepresentation = \"triangle-gradient\""),
+    ("region", "kind = \"region-pca\"\ncomponents = 12\nregions = 3"),
+    ("ae", "kind = \"autoencoder\"\ncomponents = 3\niterations = 100\ncheckpoint_every = 100\nfit_test = false"),
+];
+
+fn max_dist(a: &[Vec3], b: &[Vec3]) -> f64 {
+    a.iter().zip(b).map(|(p, q)| mesh::dist(*p, *q)).fold(0.0, f64::max)
+}
+
+/// The directory holding `node_modules/gltf-validator`, installed with npm on first use; `None`
+/// (with the reason printed) where Node or npm is absent. In CI (`CI` set) a missing Node is an
+/// error, since `.ci/run` installs it.
+fn validator_dir() -> Option<PathBuf> {
+    let node = Command::new("node").arg("--version").output();
+    if node.as_ref().map_or(true, |o| !o.status.success()) {
+        assert!(std::env::var_os("CI").is_none(), "CI: node is missing (.ci/run installs nodejs)");
+        eprintln!("SKIP gltf validator: `node` not found");
+        return None;
+    }
+    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("gltf-validator");
+    if !dir.join("node_modules/gltf-validator").is_dir() {
+        std::fs::create_dir_all(&dir).unwrap();
+        let o = Command::new("npm")
+            .args(["install", "--no-audit", "--no-fund", "--silent", "gltf-validator@2.0.0-dev.3.10"])
+            .current_dir(&dir)
+            .output();
+        match o {
+            Ok(o) if o.status.success() => {}
+            other => {
+                assert!(std::env::var_os("CI").is_none(), "CI: npm install gltf-validator failed: {other:?}");
+                eprintln!("SKIP gltf validator: npm install failed: {other:?}");
+                return None;
+            }
+        }
+    }
+    Some(dir)
+}
+
+#[test]
+fn every_kind_exports_valid_gltf_that_replays_the_model() {
+    let d = tmp("kinds");
+    let mut files = Vec::new();
+    for (name, method) in KINDS {
+        let dir = train(&d, name, BUMPS, method);
+        let glb = d.join(format!("{name}.glb"));
+        let o = meshdeco(
+            &["export", dir.to_str().unwrap(), "--out", glb.to_str().unwrap(), "--animation", "--colors"],
+            &d,
+        );
+        assert!(o.status.success(), "{name}: {}", text(&o));
+        let out = text(&o);
+        assert!(out.contains("additivity error"), "{out}");
+        files.push(glb.clone());
+
+        let m = load_model(&dir).unwrap();
+        let k = m.n_components();
+        let g = read_glb(&glb).unwrap();
+        assert_eq!(g.targets.len(), k, "{name}");
+        assert_eq!(g.names.len(), k, "{name}");
+        assert_eq!(g.faces, m.rest().faces, "{name}");
+        // Targets are in rank order, named by rank, index and centre.
+        let ranked = model::ranked(m.as_ref()).unwrap();
+        for (t, c) in ranked.iter().enumerate() {
+            assert_eq!(g.names[t], format!("r{} k{} v{}", c.rank, c.index, c.center), "{name}");
+        }
+        // Weights w on the morph targets against `meshdeco synthesize` with the same weights.
+        let dials: Vec<f64> = (0..k).map(|i| [0.7, -0.4, 1.1, 0.3][i % 4]).collect();
+        let spec: Vec<String> = dials.iter().enumerate().map(|(i, w)| format!("{i}:{w}")).collect();
+        let synth = d.join(format!("{name}-synth.obj"));
+        let o = meshdeco(
+            &["synthesize", dir.to_str().unwrap(), "--weights", &spec.join(","), "--out", synth.to_str().unwrap()],
+            &d,
+        );
+        assert!(o.status.success(), "{name}: {}", text(&o));
+        let want = mesh::load_mesh(&synth).unwrap().positions;
+        let file_order: Vec<f64> = ranked.iter().map(|c| dials[c.index]).collect();
+        let err = max_dist(&g.blend(&file_order), &want);
+        let linear = ["pca", "splocs", "region"].contains(&name);
+        println!("{name}: blended targets vs synthesize: max distance {err:.3e}");
+        if linear {
+            assert!(err < 1e-5, "{name}: blended morph targets differ from synthesize by {err}");
+        }
+        // The animation replays the training frames: frame i of a linear model equals the model's
+        // reconstruction of training frame i.
+        let train = m.train_weights().unwrap();
+        assert_eq!(g.animation.len(), train.len(), "{name}");
+        if linear {
+            let rec = m.decode(&train).unwrap();
+            for (i, (keys, r)) in g.animation.iter().zip(&rec).enumerate() {
+                let err = max_dist(&g.blend(keys), r);
+                assert!(err < 1e-5, "{name}: animation frame {i} differs from the reconstruction by {err}");
+            }
+        }
+    }
+    // The Khronos validator: zero errors and zero warnings on every kind.
+    if let Some(dir) = validator_dir() {
+        let script = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/js/validate_gltf.js");
+        let mut args = vec![script.to_string()];
+        args.extend(files.iter().map(|f| f.display().to_string()));
+        let o = Command::new("node").args(&args).env("NODE_PATH", dir.join("node_modules")).output().unwrap();
+        assert!(o.status.success(), "validator: {}", text(&o));
+        let lines: Vec<serde_json::Value> =
+            String::from_utf8_lossy(&o.stdout).lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+        assert_eq!(lines.len(), files.len());
+        for r in &lines {
+            println!("validator: {r}");
+            assert_eq!((r["errors"].as_u64(), r["warnings"].as_u64()), (Some(0), Some(0)), "{r}");
+        }
+    }
+    std::fs::remove_dir_all(&d).unwrap();
+}
+
+#[test]
+fn additivity_error_is_zero_for_displacement_models_and_measured_for_nonlinear_ones() {
+    let d = tmp("additivity");
+    for (name, method, exact) in [
+        ("splocs", KINDS[1].1, true),
+        ("splocs-acap", KINDS[2].1, false),
+    ] {
+        let dir = train(&d, name, BUMPS, method);
+        let m = load_model(&dir).unwrap();
+        let r = meshdeco::export::export_glb(m.as_ref(), &d.join(format!("{name}.glb")), &Default::default())
+            .unwrap();
+        let e = r.additivity_erms.unwrap();
+        println!("{name}: additivity error {e:.4e}");
+        assert!(e.is_finite() && e >= 0.0);
+        if exact {
+            assert!(e < 1e-9, "{name}: a displacement model blends exactly, got {e}");
+        } else {
+            assert!(e > 1e-9, "{name}: ACAP decoding is nonlinear; an additivity error of {e} means it was not measured");
+        }
+    }
+    std::fs::remove_dir_all(&d).unwrap();
+}
+
+#[test]
+fn export_refuses_bad_arguments() {
+    let d = tmp("bad");
+    let dir = train(&d, "pca", BUMPS, KINDS[0].1);
+    for (args, needle) in [
+        (vec!["--out", "x.gltf"], ".glb"),
+        (vec!["--out", "x.glb", "--animation", "--fps", "0"], "--fps"),
+    ] {
+        let mut all = vec!["export", dir.to_str().unwrap()];
+        all.extend(args);
+        let o = meshdeco(&all, &d);
+        assert!(!o.status.success() && text(&o).contains(needle), "{}", text(&o));
+    }
+    assert!(!d.join("x.glb").exists());
+    std::fs::remove_dir_all(&d).unwrap();
+}
+
+#[test]
+fn numpy_sequences_train_like_mesh_files() {
+    let d = tmp("npy");
+    let seq = meshdeco::preprocess::load_frames("synthetic:bumps").unwrap();
+    mesh::write_obj(&d.join("template.obj"), &seq.mesh(0)).unwrap();
+    mesh::npy::write_npy(&d.join("bumps.npy"), &seq.frames).unwrap();
+    mesh::npy::write_npz(&d.join("bumps.npz"), &[("other", &seq.frames[..2]), ("verts", &seq.frames)]).unwrap();
+    let method = "kind = \"splocs\"\ncomponents = 3";
+    let reference = train(&d, "mesh", BUMPS, method);
+    let split = "train = \"1-30\"\ntest = \"rest\"\ntemplate = \"template.obj\"";
+    let a = train(&d, "npy", &format!("path = \"bumps.npy\"\n{split}"), method);
+    let b = train(&d, "npz", &format!("path = \"bumps.npz\"\narray = \"verts\"\n{split}"), method);
+    let metrics = |p: &Path| -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(p.join("metrics.json")).unwrap()).unwrap()
+    };
+    let m0 = metrics(&reference);
+    for dir in [&a, &b] {
+        let m = metrics(dir);
+        // SPLOCS adds partial sums in parallel: equal up to round-off.
+        for key in ["train_erms", "test_erms", "objective", "median_energy_share"] {
+            let (x, y) = (m[key].as_f64().unwrap(), m0[key].as_f64().unwrap());
+            assert!((x - y).abs() <= 1e-9 * y.abs(), "{}: {key} {x} vs {y}", dir.display());
+        }
+        assert_eq!(m["train_frames"], m0["train_frames"]);
+        assert_eq!(m["test_frames"], m0["test_frames"]);
+    }
+    // Errors name the file, the array and the shape.
+    let cases = [
+        (format!("path = \"bumps.npz\"\n{split}"), "data.array"),
+        (format!("path = \"bumps.npz\"\narray = \"nope\"\n{split}"), "no array `nope` (it holds: "),
+        ("path = \"bumps.npy\"\ntrain = \"1-30\"".to_string(), "data.template"),
+        (format!("path = \"bumps.npy\"\n{}", split.replace("template.obj", "small.obj")), "template mesh has 3"),
+    ];
+    mesh::write_obj(&d.join("small.obj"), &mesh::TriMesh::new(vec![[0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]], vec![[0, 1, 2]]))
+        .unwrap();
+    for (i, (data, needle)) in cases.iter().enumerate() {
+        let cfg = d.join(format!("bad{i}.toml"));
+        std::fs::write(&cfg, format!("[data]\n{data}\n[method]\n{method}\n")).unwrap();
+        let out = d.join(format!("bad{i}"));
+        let o = meshdeco(&["train", "--config", cfg.to_str().unwrap(), "--out", out.to_str().unwrap()], &d);
+        assert!(!o.status.success() && text(&o).contains(needle), "case {i}: `{needle}` not in {}", text(&o));
+        assert!(!text(&o).contains("panicked"), "{}", text(&o));
+    }
+    std::fs::remove_dir_all(&d).unwrap();
+}
