@@ -291,7 +291,10 @@ impl Config {
         }
         if !numpy && (d.template.is_some() || d.array.is_some()) {
             let key = if d.template.is_some() { "data.template" } else { "data.array" };
-            return Err(Error::config(key, format!("applies to a NumPy data.path (.npy or .npz) only, not `{}`", d.path)));
+            return Err(Error::config(
+                key,
+                format!("applies to a NumPy data.path (.npy or .npz) only, not `{}`", d.path),
+            ));
         }
         let data = DataConfig {
             path: d.path,

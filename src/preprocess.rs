@@ -87,7 +87,10 @@ pub fn load_frames(path: &str) -> Result<MeshSequence> {
 pub fn load_data(cfg: &DataConfig) -> Result<MeshSequence> {
     if mesh::npy::is_numpy_path(&cfg.path) {
         let template = cfg.template.as_deref().ok_or_else(|| {
-            Error::config("data.template", format!("is required with a NumPy data.path (`{}`): the mesh file giving the faces", cfg.path))
+            Error::config(
+                "data.template",
+                format!("is required with a NumPy data.path (`{}`): the mesh file giving the faces", cfg.path),
+            )
         })?;
         mesh::npy::load_npy_sequence(Path::new(&cfg.path), cfg.array.as_deref(), template)
     } else {

@@ -85,10 +85,8 @@ fn every_kind_exports_valid_gltf_that_replays_the_model() {
     for (name, method) in KINDS {
         let dir = train(&d, name, BUMPS, method);
         let glb = d.join(format!("{name}.glb"));
-        let o = meshdeco(
-            &["export", dir.to_str().unwrap(), "--out", glb.to_str().unwrap(), "--animation", "--colors"],
-            &d,
-        );
+        let o =
+            meshdeco(&["export", dir.to_str().unwrap(), "--out", glb.to_str().unwrap(), "--animation", "--colors"], &d);
         assert!(o.status.success(), "{name}: {}", text(&o));
         let out = text(&o);
         assert!(out.contains("additivity error"), "{out}");
@@ -155,21 +153,20 @@ fn every_kind_exports_valid_gltf_that_replays_the_model() {
 #[test]
 fn additivity_error_is_zero_for_displacement_models_and_measured_for_nonlinear_ones() {
     let d = tmp("additivity");
-    for (name, method, exact) in [
-        ("splocs", KINDS[1].1, true),
-        ("splocs-acap", KINDS[2].1, false),
-    ] {
+    for (name, method, exact) in [("splocs", KINDS[1].1, true), ("splocs-acap", KINDS[2].1, false)] {
         let dir = train(&d, name, BUMPS, method);
         let m = load_model(&dir).unwrap();
-        let r = meshdeco::export::export_glb(m.as_ref(), &d.join(format!("{name}.glb")), &Default::default())
-            .unwrap();
+        let r = meshdeco::export::export_glb(m.as_ref(), &d.join(format!("{name}.glb")), &Default::default()).unwrap();
         let e = r.additivity_erms.unwrap();
         println!("{name}: additivity error {e:.4e}");
         assert!(e.is_finite() && e >= 0.0);
         if exact {
             assert!(e < 1e-9, "{name}: a displacement model blends exactly, got {e}");
         } else {
-            assert!(e > 1e-9, "{name}: ACAP decoding is nonlinear; an additivity error of {e} means it was not measured");
+            assert!(
+                e > 1e-9,
+                "{name}: ACAP decoding is nonlinear; an additivity error of {e} means it was not measured"
+            );
         }
     }
     std::fs::remove_dir_all(&d).unwrap();
@@ -179,10 +176,9 @@ fn additivity_error_is_zero_for_displacement_models_and_measured_for_nonlinear_o
 fn export_refuses_bad_arguments() {
     let d = tmp("bad");
     let dir = train(&d, "pca", BUMPS, KINDS[0].1);
-    for (args, needle) in [
-        (vec!["--out", "x.gltf"], ".glb"),
-        (vec!["--out", "x.glb", "--animation", "--fps", "0"], "--fps"),
-    ] {
+    for (args, needle) in
+        [(vec!["--out", "x.gltf"], ".glb"), (vec!["--out", "x.glb", "--animation", "--fps", "0"], "--fps")]
+    {
         let mut all = vec!["export", dir.to_str().unwrap()];
         all.extend(args);
         let o = meshdeco(&all, &d);
@@ -225,8 +221,11 @@ fn numpy_sequences_train_like_mesh_files() {
         ("path = \"bumps.npy\"\ntrain = \"1-30\"".to_string(), "data.template"),
         (format!("path = \"bumps.npy\"\n{}", split.replace("template.obj", "small.obj")), "template mesh has 3"),
     ];
-    mesh::write_obj(&d.join("small.obj"), &mesh::TriMesh::new(vec![[0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]], vec![[0, 1, 2]]))
-        .unwrap();
+    mesh::write_obj(
+        &d.join("small.obj"),
+        &mesh::TriMesh::new(vec![[0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]], vec![[0, 1, 2]]),
+    )
+    .unwrap();
     for (i, (data, needle)) in cases.iter().enumerate() {
         let cfg = d.join(format!("bad{i}.toml"));
         std::fs::write(&cfg, format!("[data]\n{data}\n[method]\n{method}\n")).unwrap();

@@ -48,7 +48,11 @@ pub fn run(a: ExportArgs) -> Result<()> {
         a.out.display(),
         r.bytes,
         r.targets,
-        if r.animation_frames > 0 { format!(", an animation of {} frames at {} fps", r.animation_frames, a.fps) } else { String::new() }
+        if r.animation_frames > 0 {
+            format!(", an animation of {} frames at {} fps", r.animation_frames, a.fps)
+        } else {
+            String::new()
+        }
     );
     match r.additivity_erms {
         Some(e) => println!(

@@ -137,19 +137,14 @@ fn raw(v: serde_json::Value) -> Result<Box<RawValue>> {
 impl Builder {
     fn new() -> Self {
         let mut root = json::Root::default();
-        let buffer = root.push(json::Buffer {
-            byte_length: USize64(0),
-            extensions: None,
-            extras: None,
-            name: None,
-            uri: None,
-        });
+        let buffer =
+            root.push(json::Buffer { byte_length: USize64(0), extensions: None, extras: None, name: None, uri: None });
         Builder { root, bin: Vec::new(), buffer }
     }
 
     /// Appends `bytes` (4-byte aligned) as a buffer view.
     fn view(&mut self, bytes: &[u8], target: Option<json::buffer::Target>) -> json::Index<json::buffer::View> {
-        while self.bin.len() % 4 != 0 {
+        while !self.bin.len().is_multiple_of(4) {
             self.bin.push(0);
         }
         let offset = self.bin.len();
@@ -233,16 +228,17 @@ impl Builder {
 
     /// The `.glb` bytes: header, JSON chunk (space-padded), BIN chunk (zero-padded).
     fn finish(mut self) -> Result<Vec<u8>> {
-        while self.bin.len() % 4 != 0 {
+        while !self.bin.len().is_multiple_of(4) {
             self.bin.push(0);
         }
         self.root.buffers[0].byte_length = USize64::from(self.bin.len());
         let mut text = json::serialize::to_string(&self.root).map_err(|e| Error::Invalid(format!("glTF JSON: {e}")))?;
-        while text.len() % 4 != 0 {
+        while !text.len().is_multiple_of(4) {
             text.push(' ');
         }
         let total = 12 + 8 + text.len() + 8 + self.bin.len();
-        let total32 = u32::try_from(total).map_err(|_| Error::Invalid(format!("{total} bytes exceed a .glb's 4 GiB")))?;
+        let total32 =
+            u32::try_from(total).map_err(|_| Error::Invalid(format!("{total} bytes exceed a .glb's 4 GiB")))?;
         let mut out = Vec::with_capacity(total);
         out.extend_from_slice(b"glTF");
         out.extend_from_slice(&2u32.to_le_bytes());

@@ -5,8 +5,8 @@
 
 pub mod inspect;
 pub mod load;
-pub mod npy;
 pub mod normals;
+pub mod npy;
 pub mod obj;
 pub mod off;
 pub mod ply;

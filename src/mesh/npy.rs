@@ -49,12 +49,9 @@ pub fn load_npy_sequence(path: &Path, array: Option<&str>, template: &Path) -> R
 /// The bytes of `<name>.npy` inside the `.npz` archive `bytes`.
 fn npz_entry(path: &Path, bytes: &[u8], name: &str) -> Result<Vec<u8>> {
     let bad = |m: String| Error::parse(path, None, m);
-    let mut zip = zip::ZipArchive::new(Cursor::new(bytes)).map_err(|e| bad(format!("not a .npz (zip) archive: {e}")))?;
-    let names: Vec<String> = zip
-        .file_names()
-        .filter_map(|f| f.strip_suffix(".npy"))
-        .map(str::to_string)
-        .collect();
+    let mut zip =
+        zip::ZipArchive::new(Cursor::new(bytes)).map_err(|e| bad(format!("not a .npz (zip) archive: {e}")))?;
+    let names: Vec<String> = zip.file_names().filter_map(|f| f.strip_suffix(".npy")).map(str::to_string).collect();
     let mut entry = zip.by_name(&format!("{name}.npy")).map_err(|_| {
         Error::config("data.array", format!("{}: no array `{name}` (it holds: {})", path.display(), names.join(", ")))
     })?;
@@ -126,10 +123,15 @@ fn parse_frames(bytes: &[u8], what: &str, n_vertices: usize) -> Result<Vec<Vec<V
     Ok(frames)
 }
 
-/// The `.npy` image (format 1.0, little-endian float64, C order) of frames, shape F × N × 3.
-pub fn npy_image(frames: &[Vec<Vec3>]) -> Vec<u8> {
-    let n = frames.first().map_or(0, Vec::len);
-    let mut header = format!("{{'descr': '<f8', 'fortran_order': False, 'shape': ({}, {n}, 3), }}", frames.len());
+/// The header of a `.npy` (format 1.0) of `descr` (e.g. `<f8`), order and shape, padded so the
+/// data starts at a multiple of 64 bytes.
+fn npy_header(descr: &str, fortran: bool, shape: &[usize]) -> Vec<u8> {
+    let dims: Vec<String> = shape.iter().map(|d| d.to_string()).collect();
+    let mut header = format!(
+        "{{'descr': '{descr}', 'fortran_order': {}, 'shape': ({},), }}",
+        if fortran { "True" } else { "False" },
+        dims.join(", ")
+    );
     while (10 + header.len() + 1) % 64 != 0 {
         header.push(' ');
     }
@@ -137,6 +139,13 @@ pub fn npy_image(frames: &[Vec<Vec3>]) -> Vec<u8> {
     let mut out = b"\x93NUMPY\x01\x00".to_vec();
     out.extend_from_slice(&(header.len() as u16).to_le_bytes());
     out.extend_from_slice(header.as_bytes());
+    out
+}
+
+/// The `.npy` image (little-endian float64, C order) of frames, shape F × N × 3.
+pub fn npy_image(frames: &[Vec<Vec3>]) -> Vec<u8> {
+    let n = frames.first().map_or(0, Vec::len);
+    let mut out = npy_header("<f8", false, &[frames.len(), n, 3]);
     for p in frames.iter().flatten() {
         for x in p {
             out.extend_from_slice(&x.to_le_bytes());
@@ -167,21 +176,8 @@ pub fn write_npz(path: &Path, arrays: &[(&str, &[Vec<Vec3>])]) -> Result<()> {
 mod tests {
     use super::*;
 
-    /// A `.npy` image (version 1.0) of `values` with the given descr and shape.
-    pub(crate) fn npy_bytes(descr: &str, fortran: bool, shape: &[usize], data: &[u8]) -> Vec<u8> {
-        let dims: Vec<String> = shape.iter().map(|d| d.to_string()).collect();
-        let mut header = format!(
-            "{{'descr': '{descr}', 'fortran_order': {}, 'shape': ({},), }}",
-            if fortran { "True" } else { "False" },
-            dims.join(", ")
-        );
-        while (10 + header.len() + 1) % 64 != 0 {
-            header.push(' ');
-        }
-        header.push('\n');
-        let mut out = b"\x93NUMPY\x01\x00".to_vec();
-        out.extend_from_slice(&(header.len() as u16).to_le_bytes());
-        out.extend_from_slice(header.as_bytes());
+    fn npy_bytes(descr: &str, fortran: bool, shape: &[usize], data: &[u8]) -> Vec<u8> {
+        let mut out = npy_header(descr, fortran, shape);
         out.extend_from_slice(data);
         out
     }

@@ -91,6 +91,9 @@ fn consistency_of(s: &str) -> Consistency {
     if s == "bfs" { Consistency::Bfs } else { Consistency::Global }
 }
 
+/// One component's summary, extreme shape (data units) and per-vertex feature change.
+pub type Extreme = (ComponentSummary, Vec<Vec3>, Vec<f64>);
+
 /// A trained autoencoder with everything needed to go from meshes to codes and back.
 pub struct AeArtifact {
     pub header: AeHeader,
@@ -167,7 +170,7 @@ impl AeArtifact {
 
     /// Per component in rank order: its summary, the extreme shape (data units) and the
     /// per-vertex feature change from the reference shape (the heat map).
-    pub fn extremes(&self) -> Result<Vec<(ComponentSummary, Vec<Vec3>, Vec<f64>)>> {
+    pub fn extremes(&self) -> Result<Vec<Extreme>> {
         let zr = self.reference_code().to_vec();
         let mut order: Vec<ComponentSummary> = self.header.analysis.clone();
         order.sort_by_key(|c| c.rank);

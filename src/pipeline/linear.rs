@@ -12,7 +12,7 @@ use std::time::Instant;
 use serde::{Deserialize, Serialize};
 
 use super::geodesic_support::GeodesicSupport;
-use super::pose::{PoseOptions, PoseResult, model_targets};
+use super::pose::{PoseOptions, PoseResult, control_targets, model_targets};
 use crate::artifact::{self, ArrayStore};
 use crate::config::{ConsistencyName, MethodConfig, MethodKind, PcaMethod, SplocsMethod};
 use crate::error::{Error, Result};
@@ -364,8 +364,7 @@ struct LinearPointFit<'a> {
 impl PointFit for LinearPointFit<'_> {
     fn reconstruct(&self, shape: &[Vec3]) -> Result<Vec<Vec3>> {
         let a = self.artifact;
-        let targets: Vec<Vec3> = self.vertices.iter().map(|&v| shape[v]).collect();
-        let t = model_targets(&self.vertices, &targets, a.header.unit_box, Some(&a.rest.positions));
+        let t = control_targets(&self.vertices, shape, a.header.unit_box, &a.rest.positions);
         let w = self.poser.solve(&t, &vec![0.0; a.model.n_components])?;
         a.synthesize(&w)
     }

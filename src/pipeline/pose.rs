@@ -69,6 +69,13 @@ pub fn model_targets(
         .collect()
 }
 
+/// Model-space displacement targets of the control `vertices` of a whole shape (data units):
+/// [`model_targets`] of `shape`'s positions at those vertices, minus the rest positions.
+pub fn control_targets(vertices: &[usize], shape: &[Vec3], ub: crate::preprocess::UnitBox, rest: &[Vec3]) -> Vec<Vec3> {
+    let targets: Vec<Vec3> = vertices.iter().map(|&v| shape[v]).collect();
+    model_targets(vertices, &targets, ub, Some(rest))
+}
+
 /// Vertices of `rest` within Euclidean distance `radius` of vertex `v`.
 pub fn ball(rest: &[Vec3], v: usize, radius: f64) -> Vec<usize> {
     (0..rest.len()).filter(|&u| crate::mesh::dist(rest[u], rest[v]) <= radius).collect()

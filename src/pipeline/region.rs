@@ -15,7 +15,7 @@ use std::time::Instant;
 use serde::{Deserialize, Serialize};
 
 use super::linear::{rest_from_arrays, rest_to_arrays};
-use super::pose::{PoseOptions, PoseResult, model_targets, single_frame};
+use super::pose::{PoseOptions, PoseResult, control_targets, model_targets, single_frame};
 use crate::artifact::{self, ArrayStore};
 use crate::config::{MethodConfig, MethodKind, RegionPcaMethod};
 use crate::error::{Error, Result};
@@ -245,8 +245,7 @@ struct RegionPointFit<'a> {
 impl PointFit for RegionPointFit<'_> {
     fn reconstruct(&self, shape: &[Vec3]) -> Result<Vec<Vec3>> {
         let a = self.artifact;
-        let targets: Vec<Vec3> = self.vertices.iter().map(|&v| shape[v]).collect();
-        let t = model_targets(&self.vertices, &targets, a.header.unit_box, Some(&a.rest.positions));
+        let t = control_targets(&self.vertices, shape, a.header.unit_box, &a.rest.positions);
         let z = self.poser.solve(&t, &vec![0.0; a.model.n_components()])?;
         Ok(a.decode_rows(&a.model.reconstruct(&z)?)?.remove(0))
     }
