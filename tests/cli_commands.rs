@@ -1,6 +1,8 @@
 //! The command line as a user runs it: exit codes, error messages that name the file/key,
 //! and the train → encode → synthesize chain on built-in synthetic data.
 
+mod common;
+
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
@@ -101,11 +103,7 @@ fn inspect_and_geodesic() {
 
 #[test]
 fn shared_scape_inspect_counts() {
-    let scape = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/scape");
-    if !scape.exists() {
-        eprintln!("skipped: {} is absent", scape.display());
-        return;
-    }
+    let Some(scape) = common::shared_or_skip("data/scape") else { return };
     let o = meshdeco(&["inspect", scape.to_str().unwrap(), "--json"], Path::new(env!("CARGO_MANIFEST_DIR")));
     assert!(o.status.success());
     let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();

@@ -2,6 +2,8 @@
 //! reload the artefact directory, check reconstruction and posing; and on `face-poses` when the
 //! shared data are present (region vs holistic PCA with the same budget on held-out poses).
 
+mod common;
+
 use std::path::{Path, PathBuf};
 
 use meshdeco::mesh::MeshSequence;
@@ -79,11 +81,7 @@ max_regions = 8
 /// test 8–9). Skips when `../shared/data/face-poses` is absent.
 #[test]
 fn face_poses_region_vs_holistic() {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/face-poses");
-    if !dir.exists() {
-        eprintln!("skipping: {} not present", dir.display());
-        return;
-    }
+    let Some(dir) = common::shared_or_skip("data/face-poses") else { return };
     let path = dir.display().to_string();
     let k = 6;
     let toml = |kind: &str, extra: &str| {
