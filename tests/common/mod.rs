@@ -43,3 +43,50 @@ pub fn shared_or_skip(rel: &str) -> Option<PathBuf> {
     }
     None
 }
+
+/// Erms (data units × 1000, `metrics::erms`) of one constant shape standing in for every frame:
+/// the baseline a model that learns nothing reaches (the rest shape: all weights zero; the
+/// mean shape: PCA with no component).
+pub fn constant_shape_erms(
+    frames: &[Vec<meshdeco::mesh::Vec3>],
+    shape: &[meshdeco::mesh::Vec3],
+    alignment: meshdeco::metrics::erms::Alignment,
+) -> f64 {
+    let result: Vec<Vec<meshdeco::mesh::Vec3>> = frames.iter().map(|_| shape.to_vec()).collect();
+    meshdeco::metrics::erms::erms(frames, &result, alignment).unwrap()
+}
+
+/// The per-vertex mean of `frames`.
+pub fn mean_shape(frames: &[Vec<meshdeco::mesh::Vec3>]) -> Vec<meshdeco::mesh::Vec3> {
+    let n = frames.len() as f64;
+    (0..frames[0].len()).map(|v| std::array::from_fn(|c| frames.iter().map(|f| f[v][c]).sum::<f64>() / n)).collect()
+}
+
+/// The vertex positions of an OBJ file, in file order (meshdeco's reader).
+pub fn obj_vertices(path: &Path) -> Vec<meshdeco::mesh::Vec3> {
+    meshdeco::mesh::load_mesh(path).unwrap_or_else(|e| panic!("{}: {e}", path.display())).positions
+}
+
+/// One named vertex property of an ASCII PLY, in vertex order.
+pub fn ply_vertex_property(path: &Path, name: &str) -> Vec<f64> {
+    let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let (header, body) = text.split_once("end_header\n").expect("PLY header");
+    let mut n = 0;
+    let mut props = Vec::new();
+    let mut in_vertex = false;
+    for l in header.lines() {
+        let f: Vec<&str> = l.split_whitespace().collect();
+        match f.as_slice() {
+            ["element", "vertex", c] => {
+                n = c.parse().unwrap();
+                in_vertex = true;
+            }
+            ["element", ..] => in_vertex = false,
+            ["property", _, p] if in_vertex => props.push(p.to_string()),
+            _ => {}
+        }
+    }
+    let col =
+        props.iter().position(|p| p == name).unwrap_or_else(|| panic!("{}: no vertex property {name}", path.display()));
+    body.lines().take(n).map(|l| l.split_whitespace().nth(col).unwrap().parse().unwrap()).collect()
+}
