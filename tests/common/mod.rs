@@ -90,3 +90,22 @@ pub fn ply_vertex_property(path: &Path, name: &str) -> Vec<f64> {
         props.iter().position(|p| p == name).unwrap_or_else(|| panic!("{}: no vertex property {name}", path.display()));
     body.lines().take(n).map(|l| l.split_whitespace().nth(col).unwrap().parse().unwrap()).collect()
 }
+
+/// Runs the `meshdeco` binary in `cwd`.
+pub fn meshdeco(args: &[&str], cwd: &Path) -> std::process::Output {
+    std::process::Command::new(env!("CARGO_BIN_EXE_meshdeco"))
+        .args(args)
+        .current_dir(cwd)
+        .output()
+        .expect("run meshdeco")
+}
+
+/// (width, height, share of pixels that differ from the top-left (background) pixel, number of
+/// distinct colours) of a PNG: a plot or picture that drew nothing has share 0 and one colour.
+pub fn png_ink(path: &Path) -> (u32, u32, f64, usize) {
+    let img = image::open(path).unwrap_or_else(|e| panic!("{}: {e}", path.display())).to_rgb8();
+    let bg = *img.get_pixel(0, 0);
+    let ink = img.pixels().filter(|p| **p != bg).count();
+    let colours: std::collections::HashSet<[u8; 3]> = img.pixels().map(|p| p.0).collect();
+    (img.width(), img.height(), ink as f64 / (img.width() * img.height()) as f64, colours.len())
+}
