@@ -1,6 +1,8 @@
 //! Autoencoder posing: the ACAP decode adjoint against the forward map, the posing Jacobian
 //! against finite differences, and a drag on a tiny autoencoder trained in the test.
 
+mod common;
+
 use std::path::PathBuf;
 
 use meshdeco::config::Config;
@@ -113,7 +115,8 @@ fn autoencoder_drag_reduces_error_and_jacobian_matches_finite_differences() {
         let num: f64 = fd.iter().zip(&an).map(|(a, b)| (a - b).powi(2)).sum::<f64>().sqrt();
         let den: f64 = fd.iter().map(|a| a * a).sum::<f64>().sqrt();
         eprintln!("jacobian check: |fd − analytic| / |fd| = {:.2e} (|fd| = {den:.3e})", num / den);
-        assert!(num <= 2e-2 * den, "fd {fd:?} analytic {an:?}");
+        // Measured 1.4e-4 … 6.2e-4 (central differences, h = 1e-2, f32 network): bound 2e-3.
+        assert!(num <= 2e-3 * den, "jacobian: |fd − analytic| / |fd| = {:.2e}; fd {fd:?} analytic {an:?}", num / den);
     }
     // Drag v half-way towards its farthest decoded training position, keep vertex 0 in place.
     let amount = 0.5 * range;
@@ -188,6 +191,20 @@ fn training_reports_fitted_test_erms() {
     let (forward, fitted) = (o.metrics.test_erms.unwrap(), o.metrics.test_erms_fitted.unwrap());
     eprintln!("test Erms: encoder {forward:.4}, fitted {fitted:.4}");
     assert!(fitted.is_finite() && fitted <= forward, "fitted {fitted} > encoder {forward}");
+    // Against the rest shape (all weights zero) on the same test frames, centroid-aligned like
+    // the autoencoder's ACAP Erms: measured encoder 2.35, fitted 2.14, rest shape ≈ 3.88.
+    let prepared = meshdeco::preprocess::prepare(&cfg.data).unwrap();
+    let test_frames: Vec<Vec<Vec3>> = prepared.test.iter().map(|&i| prepared.sequence.frames[i].clone()).collect();
+    let rest = common::constant_shape_erms(
+        &test_frames,
+        &prepared.rest.positions,
+        meshdeco::metrics::erms::Alignment::Centroid,
+    );
+    eprintln!(
+        "bumps AE K = 6: test Erms encoder {forward:.4}, fitted {fitted:.4}, rest shape {rest:.4}; ratio {:.3}",
+        forward / rest
+    );
+    assert!(forward < 0.75 * rest, "autoencoder test Erms {forward} not below 0.75 × the rest shape's {rest}");
     let json = std::fs::read_to_string(out.join("metrics.json")).unwrap();
     assert!(json.contains("\"test_erms_fitted\""), "{json}");
     let resolved = std::fs::read_to_string(out.join("config.toml")).unwrap();

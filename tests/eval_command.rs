@@ -4,6 +4,9 @@
 //! retrains only its cells, interrupted or stale cells are never taken as finished, and bad
 //! config keys are named in the error.
 
+mod common;
+
+use meshdeco::metrics::erms::Alignment;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::Arc;
@@ -117,6 +120,21 @@ fn sweep_table_reuse_reproducibility_and_retraining() {
     // Translation-free ACAP is centroid-aligned, displacements are not.
     assert!(lines[4].contains(",acap,3,") && lines[4].contains(",centroid,"), "{}", lines[4]);
     assert!(lines[1].contains(",displacement,2,") && lines[1].contains(",none,"), "{}", lines[1]);
+    // The linear cells' test Erms against the rest shape (all weights zero) on the same test
+    // frames and with the cell's alignment. Measured ratios: pca K2 0.252, pca K4 0.043, splocs
+    // K3 (2 iterations) 0.138; bounds with ≥ 20 % margin. The autoencoder cell trains 8
+    // iterations (it is here for the cache), 1.84 × the rest shape: its Erms is bounded in
+    // tests/ae_erms_bounds.rs.
+    let prepared = meshdeco::preprocess::prepare(&cfg.datasets[0].data).unwrap();
+    let test_frames: Vec<_> = prepared.test.iter().map(|&i| prepared.sequence.frames[i].clone()).collect();
+    for (l, bound) in lines[1..4].iter().zip([0.35, 0.06, 0.2]) {
+        let f: Vec<&str> = l.split(',').collect();
+        let alignment = if l.contains(",centroid,") { Alignment::Centroid } else { Alignment::None };
+        let rest = common::constant_shape_erms(&test_frames, &prepared.rest.positions, alignment);
+        let test: f64 = f[5].parse().unwrap();
+        eprintln!("{} K {}: test Erms {test:.3}, rest shape {rest:.3}, ratio {:.3}", f[1], f[3], test / rest);
+        assert!(test < bound * rest, "{l}: test Erms {test} not below {bound} × the rest shape's {rest}");
+    }
     // More PCA components fit the training set better.
     let e = |l: &str| l.split(',').nth(4).unwrap().parse::<f64>().unwrap();
     assert!(e(lines[2]) < e(lines[1]));
@@ -133,6 +151,11 @@ fn sweep_table_reuse_reproducibility_and_retraining() {
     }
     for f in ["report.md", "erms_tube.png", "sted_tube.png", "sted_temporal_tube.png", "control_points_tube.png"] {
         assert!(a.join(f).is_file(), "{f} missing");
+        if f.ends_with(".png") {
+            let (w, h, ink, colours) = common::png_ink(&a.join(f));
+            eprintln!("{f}: {w}×{h}, {:.1} % drawn, {colours} colours", 100.0 * ink);
+            assert!(ink > 0.01 && colours > 2, "{f}: {ink} of the pixels drawn, {colours} colours");
+        }
     }
     assert!(read(&a.join("report.md")).contains("| splocs | displacement | 3 |"));
 
@@ -207,4 +230,58 @@ fn bad_keys_are_named() {
     assert!(err.contains("control_points.trails") && err.contains("bad.toml") && !err.contains("panicked"), "{err}");
     assert!(!d.join("out").exists());
     std::fs::remove_dir_all(&d).unwrap();
+}
+
+/// Stops the sweep once the autoencoder's training stage (8 iterations) has passed `at` steps,
+/// and records the steps it sees.
+struct StopDuringAe {
+    stop: Arc<AtomicBool>,
+    at: u64,
+    in_ae: bool,
+    steps: Vec<u64>,
+}
+
+impl meshdeco::pipeline::Progress for StopDuringAe {
+    fn stage(&mut self, _: &str, total: u64) {
+        self.in_ae = total == 8;
+    }
+    fn step(&mut self, i: u64, _: &str) {
+        if self.in_ae {
+            self.steps.push(i);
+            if i >= self.at {
+                self.stop.store(true, std::sync::atomic::Ordering::SeqCst);
+            }
+        }
+    }
+}
+
+/// An autoencoder cell interrupted mid-training (after its checkpoint at iteration 4) resumes
+/// from that checkpoint on the rerun (its first step is past 4) and ends with the numbers of an
+/// uninterrupted run.
+#[test]
+fn interrupted_autoencoder_cell_resumes_from_its_checkpoint() {
+    let cfg = EvalConfig::from_toml(CONFIG).unwrap();
+    let whole = tmp("ae-whole");
+    run_silent(&cfg, &whole, &EvalOptions::default()).unwrap();
+    let d = tmp("ae-resume");
+    let stop = Arc::new(AtomicBool::new(false));
+    let mut p = StopDuringAe { stop: stop.clone(), at: 6, in_ae: false, steps: Vec::new() };
+    let opts = EvalOptions { replot: false, stop: Some(stop.clone()) };
+    let e = meshdeco::eval::run(&cfg, &d, &opts, &mut meshdeco::pipeline::Silent, &mut p).unwrap_err().to_string();
+    eprintln!("interrupted after AE steps {:?}: {e}", p.steps);
+    assert!(e.contains("interrupted"), "{e}");
+    assert!(!cell_dir(&d, "tube", "ae", 3).join(CELL_FILE).exists());
+    assert!(cell_dir(&d, "tube", "pca", 2).join(CELL_FILE).exists(), "finished cells are kept");
+    let mut p = StopDuringAe { stop: Arc::new(AtomicBool::new(false)), at: u64::MAX, in_ae: false, steps: Vec::new() };
+    let o = meshdeco::eval::run(&cfg, &d, &EvalOptions::default(), &mut meshdeco::pipeline::Silent, &mut p).unwrap();
+    eprintln!("rerun: trained {}, reused {}, AE steps {:?}", o.trained, o.reused, p.steps);
+    assert_eq!((o.trained, o.reused), (1, 3));
+    let first = *p.steps.first().expect("the autoencoder cell trained");
+    assert!(first > 4, "the rerun started at step {first}, not after the checkpoint at 4: {:?}", p.steps);
+    let row = |dir: &Path| {
+        without_seconds(&read(&dir.join("results.csv"))).into_iter().find(|l| l.starts_with("tube,ae,")).unwrap()
+    };
+    assert_same_numbers(&[row(&d)], &[row(&whole)]);
+    let _ = std::fs::remove_dir_all(&d);
+    let _ = std::fs::remove_dir_all(&whole);
 }

@@ -1,8 +1,10 @@
 //! Encode → decode round trips on real data (`../shared/data`): SCAPE (rest = 1.obj),
 //! horse-gallop and cactus, plus a synthetic counterpart that always runs.
 //!
-//! Meshes are read with `meshdeco::mesh::load_sequence`. Data tests print a reason and return when the folder is absent. Run with `--nocapture` to see
+//! Meshes are read with `meshdeco::mesh::load_sequence`. Data tests fail in CI when the folder is absent and are recorded skips locally. Run with `--nocapture` to see
 //! the per-dataset Erms.
+
+mod common;
 
 use std::path::{Path, PathBuf};
 
@@ -11,13 +13,7 @@ use meshdeco::representation::roundtrip::{Alignment, roundtrip};
 use meshdeco::representation::{Representation, RepresentationKind, RepresentationOptions};
 
 fn data_dir(name: &str) -> Option<PathBuf> {
-    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data").join(name);
-    if p.is_dir() {
-        Some(p)
-    } else {
-        println!("skipping: data folder {} is absent", p.display());
-        None
-    }
+    common::shared_or_skip(&format!("data/{name}"))
 }
 
 /// Every `*.{ext}` file of `dir` in natural order, read with meshdeco's reader (which checks that

@@ -1,6 +1,8 @@
 //! Loading and inspecting the real datasets in `../shared/data` (counts from its README).
-//! Every test prints a reason and returns early when the folder is absent; the synthetic
+//! A missing folder fails in CI and is a recorded skip locally (`tests/common`); the synthetic
 //! counterparts are the unit tests of `src/mesh/*` and `tests/malformed_inputs.rs`.
+
+mod common;
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -8,13 +10,7 @@ use std::time::Instant;
 use meshdeco::mesh::{LoadedSequence, WarningKind, inspect, read_mesh, read_sequence, write_obj, write_ply};
 
 fn dataset(name: &str) -> Option<PathBuf> {
-    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data").join(name);
-    if dir.is_dir() {
-        Some(dir)
-    } else {
-        println!("skipping: {} is absent", dir.display());
-        None
-    }
+    common::shared_or_skip(&format!("data/{name}"))
 }
 
 /// Loads a dataset, printing the load time, and checks the README's counts.

@@ -3,6 +3,8 @@
 //! planted region is recovered by one component (IoU ≥ 0.7), the weight constraints, the
 //! objective's behaviour, user constraints, the triangle (W = 9) variant and PCA exactness.
 
+mod common;
+
 use meshdeco::Result;
 use meshdeco::geometry::graph_distance::EdgeGraph;
 use meshdeco::methods::support_map::{SupportDistances, TriangleSupport};
@@ -293,13 +295,8 @@ fn pca_with_rank_components_is_exact() {
 /// the synthetic tests above are its counterpart.
 #[test]
 fn real_data_train_erms_within_reference() {
-    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data");
     for (folder, reference) in [("scape", 14.18), ("horse-gallop", 5.75)] {
-        let dir = root.join(folder);
-        if !dir.is_dir() {
-            eprintln!("{} absent: skipping the {folder} reference check", dir.display());
-            continue;
-        }
+        let Some(dir) = common::shared_or_skip(&format!("data/{folder}")) else { continue };
         let spec = format!("{}/*.obj", dir.display());
         let seq = meshdeco::mesh::load_sequence(&spec).unwrap_or_else(|e| panic!("{spec}: {e}"));
         let (faces, frames) = (seq.faces, seq.frames);

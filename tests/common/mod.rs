@@ -1,0 +1,111 @@
+//! Helpers shared by the integration tests (`mod common;` in each test file).
+//!
+//! `shared_or_skip` is the one way a test reaches the external references in `../shared`
+//! (real datasets, the ACAP reference fixtures). In CI (`CI` set in the environment) a missing
+//! path is a failure: `../shared` is always beside the clone there. Locally a missing path skips
+//! the test with a reason on stderr and a line in [`skip_log`], which `.ci/run` and
+//! `scripts/skipped` count at the end of a run (`cargo test` hides a passing test's output).
+#![allow(dead_code)]
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+/// `../shared` beside the repository.
+pub fn shared_root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared")
+}
+
+/// The file that records skipped tests, one line per skip: `<test>\t<missing path>`.
+/// `$CARGO_TARGET_DIR/tmp/meshdeco-skipped-tests.txt` (Cargo's scratch folder for integration
+/// tests); `.ci/run` and `scripts/skipped` read it.
+pub fn skip_log() -> PathBuf {
+    PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("meshdeco-skipped-tests.txt")
+}
+
+/// `../shared/<rel>` when it exists. Otherwise: panics when `CI` is set (naming the path), else
+/// prints the reason, records the skip and returns `None`.
+pub fn shared_or_skip(rel: &str) -> Option<PathBuf> {
+    let p = shared_root().join(rel);
+    if p.exists() {
+        return Some(p);
+    }
+    let test = std::thread::current().name().unwrap_or("?").to_string();
+    if std::env::var_os("CI").is_some() {
+        panic!("CI is set but the external reference {} is missing (needed by {test})", p.display());
+    }
+    eprintln!("SKIPPED {test}: {} is absent", p.display());
+    let log = skip_log();
+    if let Some(dir) = log.parent() {
+        let _ = std::fs::create_dir_all(dir);
+    }
+    if let Ok(mut f) = std::fs::OpenOptions::new().create(true).append(true).open(&log) {
+        let _ = writeln!(f, "{}\t{test}\t{}", env!("CARGO_CRATE_NAME"), p.display());
+    }
+    None
+}
+
+/// Erms (data units × 1000, `metrics::erms`) of one constant shape standing in for every frame:
+/// the baseline a model that learns nothing reaches (the rest shape: all weights zero; the
+/// mean shape: PCA with no component).
+pub fn constant_shape_erms(
+    frames: &[Vec<meshdeco::mesh::Vec3>],
+    shape: &[meshdeco::mesh::Vec3],
+    alignment: meshdeco::metrics::erms::Alignment,
+) -> f64 {
+    let result: Vec<Vec<meshdeco::mesh::Vec3>> = frames.iter().map(|_| shape.to_vec()).collect();
+    meshdeco::metrics::erms::erms(frames, &result, alignment).unwrap()
+}
+
+/// The per-vertex mean of `frames`.
+pub fn mean_shape(frames: &[Vec<meshdeco::mesh::Vec3>]) -> Vec<meshdeco::mesh::Vec3> {
+    let n = frames.len() as f64;
+    (0..frames[0].len()).map(|v| std::array::from_fn(|c| frames.iter().map(|f| f[v][c]).sum::<f64>() / n)).collect()
+}
+
+/// The vertex positions of an OBJ file, in file order (meshdeco's reader).
+pub fn obj_vertices(path: &Path) -> Vec<meshdeco::mesh::Vec3> {
+    meshdeco::mesh::load_mesh(path).unwrap_or_else(|e| panic!("{}: {e}", path.display())).positions
+}
+
+/// One named vertex property of an ASCII PLY, in vertex order.
+pub fn ply_vertex_property(path: &Path, name: &str) -> Vec<f64> {
+    let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let (header, body) = text.split_once("end_header\n").expect("PLY header");
+    let mut n = 0;
+    let mut props = Vec::new();
+    let mut in_vertex = false;
+    for l in header.lines() {
+        let f: Vec<&str> = l.split_whitespace().collect();
+        match f.as_slice() {
+            ["element", "vertex", c] => {
+                n = c.parse().unwrap();
+                in_vertex = true;
+            }
+            ["element", ..] => in_vertex = false,
+            ["property", _, p] if in_vertex => props.push(p.to_string()),
+            _ => {}
+        }
+    }
+    let col =
+        props.iter().position(|p| p == name).unwrap_or_else(|| panic!("{}: no vertex property {name}", path.display()));
+    body.lines().take(n).map(|l| l.split_whitespace().nth(col).unwrap().parse().unwrap()).collect()
+}
+
+/// Runs the `meshdeco` binary in `cwd`.
+pub fn meshdeco(args: &[&str], cwd: &Path) -> std::process::Output {
+    std::process::Command::new(env!("CARGO_BIN_EXE_meshdeco"))
+        .args(args)
+        .current_dir(cwd)
+        .output()
+        .expect("run meshdeco")
+}
+
+/// (width, height, share of pixels that differ from the top-left (background) pixel, number of
+/// distinct colours) of a PNG: a plot or picture that drew nothing has share 0 and one colour.
+pub fn png_ink(path: &Path) -> (u32, u32, f64, usize) {
+    let img = image::open(path).unwrap_or_else(|e| panic!("{}: {e}", path.display())).to_rgb8();
+    let bg = *img.get_pixel(0, 0);
+    let ink = img.pixels().filter(|p| **p != bg).count();
+    let colours: std::collections::HashSet<[u8; 3]> = img.pixels().map(|p| p.0).collect();
+    (img.width(), img.height(), ink as f64 / (img.width() * img.height()) as f64, colours.len())
+}
