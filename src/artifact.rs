@@ -282,3 +282,51 @@ mod tests {
         std::fs::remove_dir_all(&d).unwrap();
     }
 }
+
+/// File name of the lock of an artefact directory being written.
+pub const LOCK_FILE: &str = ".meshdeco.lock";
+
+/// An exclusive lock on an artefact directory: one writer at a time. Held until dropped; the
+/// lock file (holding the writer's process id) is removed then.
+#[derive(Debug)]
+pub struct DirLock {
+    path: PathBuf,
+    _file: File,
+}
+
+impl DirLock {
+    /// Locks `dir` (created if missing), or errors at once — naming the directory and the
+    /// process holding it — when another process writes there.
+    pub fn acquire(dir: &Path) -> Result<Self> {
+        std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+        let path = dir.join(LOCK_FILE);
+        let mut file = std::fs::OpenOptions::new()
+            .create(true)
+            .truncate(false)
+            .read(true)
+            .write(true)
+            .open(&path)
+            .map_err(|e| Error::io(&path, e))?;
+        match file.try_lock() {
+            Ok(()) => {}
+            Err(std::fs::TryLockError::WouldBlock) => {
+                let holder = std::fs::read_to_string(&path).unwrap_or_default();
+                return Err(Error::Invalid(format!(
+                    "{} is being written by another meshdeco process (pid {}); wait for it to finish or choose another output directory",
+                    dir.display(),
+                    holder.trim()
+                )));
+            }
+            Err(std::fs::TryLockError::Error(e)) => return Err(Error::io(&path, e)),
+        }
+        file.set_len(0).map_err(|e| Error::io(&path, e))?;
+        file.write_all(std::process::id().to_string().as_bytes()).map_err(|e| Error::io(&path, e))?;
+        Ok(DirLock { path, _file: file })
+    }
+}
+
+impl Drop for DirLock {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_file(&self.path);
+    }
+}

@@ -10,7 +10,7 @@ use meshdeco::mesh::{self, TriMesh, Vec3};
 use meshdeco::methods::posing::PoseConfig;
 use meshdeco::model::{PoseOptions, check_connectivity, load_model};
 use meshdeco::pipeline::ae_pose::AePoseConfig;
-use meshdeco::pipeline::pose::{ball, displacement_share};
+use meshdeco::pipeline::pose::{ball, check_targets, displacement_share};
 
 #[derive(Debug, Args)]
 #[command(after_help = "CONSTRAINTS FILE: a JSON object mapping 0-based vertex indices (as strings) to target \
@@ -59,7 +59,7 @@ pub struct PoseArgs {
 /// Reads a constraints file: sorted (vertex, target) pairs.
 pub fn read_constraints(path: &Path, n_vertices: usize) -> Result<Vec<(usize, Vec3)>> {
     let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-    let map: BTreeMap<String, Vec<f64>> = serde_json::from_str(&text).map_err(|e| {
+    let Pairs(pairs) = serde_json::from_str(&text).map_err(|e| {
         anyhow::anyhow!(
             "{}: line {} column {}: {e} (expected a JSON object {{\"vertex index\": [x, y, z], ...}})",
             path.display(),
@@ -67,11 +67,12 @@ pub fn read_constraints(path: &Path, n_vertices: usize) -> Result<Vec<(usize, Ve
             e.column()
         )
     })?;
-    if map.is_empty() {
+    if pairs.is_empty() {
         bail!("{}: no constraint given", path.display());
     }
-    let mut out = Vec::with_capacity(map.len());
-    for (k, v) in &map {
+    let mut seen = BTreeMap::new();
+    let mut out = Vec::with_capacity(pairs.len());
+    for (k, v) in &pairs {
         let i: usize =
             k.trim().parse().map_err(|_| anyhow::anyhow!("{}: key `{k}` is not a vertex index", path.display()))?;
         if i >= n_vertices {
@@ -84,12 +85,56 @@ pub fn read_constraints(path: &Path, n_vertices: usize) -> Result<Vec<(usize, Ve
         if v.len() != 3 || v.iter().any(|x| !x.is_finite()) {
             bail!("{}: target of vertex {i} must be 3 finite numbers, got {v:?}", path.display());
         }
+        if seen.insert(i, k.clone()).is_some() {
+            bail!("{}: vertex {i} is constrained twice (key `{k}`); give each vertex once", path.display());
+        }
         out.push((i, [v[0], v[1], v[2]]));
     }
+    out.sort_by_key(|c| c.0);
     Ok(out)
 }
 
+/// A JSON object's (key, value) pairs in file order, duplicates kept (serde maps drop them).
+struct Pairs(Vec<(String, Vec<f64>)>);
+
+impl<'de> serde::Deserialize<'de> for Pairs {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> std::result::Result<Self, D::Error> {
+        struct V;
+        impl<'de> serde::de::Visitor<'de> for V {
+            type Value = Pairs;
+            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                f.write_str("a JSON object {\"vertex index\": [x, y, z], ...}")
+            }
+            fn visit_map<A: serde::de::MapAccess<'de>>(self, mut m: A) -> std::result::Result<Pairs, A::Error> {
+                let mut out = Vec::new();
+                while let Some(kv) = m.next_entry::<String, Vec<f64>>()? {
+                    out.push(kv);
+                }
+                Ok(Pairs(out))
+            }
+        }
+        d.deserialize_map(V)
+    }
+}
+
+/// Checks the numeric flags, naming the flag and the value.
+fn check_flags(a: &PoseArgs) -> Result<()> {
+    for (flag, v) in [("--gamma", a.gamma), ("--beta", a.beta)] {
+        if !(v.is_finite() && v >= 0.0) {
+            bail!("{flag} {v}: must be a finite number ≥ 0");
+        }
+    }
+    if !(a.local_radius.is_finite() && a.local_radius > 0.0) {
+        bail!("--local-radius {}: must be a positive fraction of the bounding-box diagonal", a.local_radius);
+    }
+    if a.max_iterations == 0 {
+        bail!("--max-iterations 0: must be at least 1");
+    }
+    Ok(())
+}
+
 pub fn run(a: PoseArgs) -> Result<()> {
+    check_flags(&a)?;
     let model = load_model(&a.model).with_context(|| format!("loading model {}", a.model.display()))?;
     let rest = model.rest();
     let n = rest.n_vertices();
@@ -118,9 +163,13 @@ pub fn run(a: PoseArgs) -> Result<()> {
     let w0 = model.start_weights(from.as_deref())?;
     let vertices: Vec<usize> = cons.iter().map(|c| c.0).collect();
     let targets: Vec<Vec3> = cons.iter().map(|c| c.1).collect();
+    check_targets(&rest, &vertices, &targets).with_context(|| format!("{}", a.constraints.display()))?;
     let t0 = Instant::now();
     let res = model.pose(&vertices, &targets, &w0, &opts)?;
     let secs = t0.elapsed().as_secs_f64();
+    if res.positions.iter().flatten().any(|x| !x.is_finite()) {
+        bail!("posing {} produced non-finite coordinates; nothing written", a.model.display());
+    }
     println!("{} model, {} constraint(s), solved in {:.1} ms", model.kind().name(), cons.len(), 1e3 * secs);
     let (lo, hi) = rest.bounding_box();
     let diag = mesh::dist(lo, hi);

@@ -75,6 +75,15 @@ pub fn read_mesh(path: &Path) -> Result<LoadedMesh> {
             ),
         )
     })?;
+    // Never open a FIFO or a device (reading /dev/zero never ends; a FIFO blocks).
+    let meta = std::fs::metadata(path).map_err(|e| Error::io(path, e))?;
+    if !meta.is_file() {
+        return Err(Error::Invalid(format!(
+            "{}: not a regular file ({})",
+            path.display(),
+            super::sequence::file_kind(&meta)
+        )));
+    }
     let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
     parse_mesh(&bytes, format, path)
 }

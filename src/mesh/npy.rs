@@ -206,7 +206,7 @@ mod tests {
         }
         for (descr, fortran, data) in [("<f8", false, c64), ("<f4", false, c32), ("<f8", true, fo)] {
             let frames = parse_frames(&npy_bytes(descr, fortran, &[2, 2, 3], &data), "t.npy", 2).unwrap();
-            assert_eq!(frames[1][1], [111.0, 112.0, 113.0], "{descr} fortran {fortran}");
+            assert_eq!(frames[1][1], [110.0, 111.0, 112.0], "{descr} fortran {fortran}");
             assert_eq!(frames[0][1], [10.0, 11.0, 12.0]);
         }
     }

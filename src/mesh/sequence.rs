@@ -113,6 +113,25 @@ pub fn sequence_from_meshes(files: &[PathBuf], meshes: Vec<TriMesh>) -> Result<M
     Ok(MeshSequence { faces, frames, names })
 }
 
+/// What a non-regular file is, in words (FIFO, device, socket, …).
+pub fn file_kind(meta: &std::fs::Metadata) -> &'static str {
+    use std::os::unix::fs::FileTypeExt;
+    let t = meta.file_type();
+    if t.is_fifo() {
+        "a FIFO"
+    } else if t.is_char_device() {
+        "a character device"
+    } else if t.is_block_device() {
+        "a block device"
+    } else if t.is_socket() {
+        "a socket"
+    } else if t.is_dir() {
+        "a directory"
+    } else {
+        "not a regular file"
+    }
+}
+
 /// The mesh files a `spec` stands for, in natural order (see the module docs). Errors: a
 /// directory that cannot be listed, a path that does not exist, wildcards outside the file-name
 /// part, and no matching mesh file (naming the directory or pattern).
@@ -135,6 +154,8 @@ pub fn resolve_spec(spec: &str) -> Result<Vec<PathBuf>> {
         (path.to_path_buf(), None)
     } else if path.is_file() {
         return Ok(vec![path.to_path_buf()]);
+    } else if let Ok(meta) = std::fs::metadata(path) {
+        return Err(Error::Invalid(format!("{spec}: not a regular file or directory ({})", file_kind(&meta))));
     } else {
         return Err(Error::io(path, std::io::Error::new(std::io::ErrorKind::NotFound, "no such file or directory")));
     };

@@ -76,6 +76,28 @@ pub fn control_targets(vertices: &[usize], shape: &[Vec3], ub: crate::preprocess
     model_targets(vertices, &targets, ub, Some(rest))
 }
 
+/// Errors unless every target (data units) is finite and within 1000 × the bounding-box diagonal
+/// of `rest` from its centre (a drag farther than that is a typo or an overflow, and would
+/// only produce coordinates of that size).
+pub fn check_targets(rest: &TriMesh, vertices: &[usize], targets: &[Vec3]) -> Result<()> {
+    let (lo, hi) = rest.bounding_box();
+    let diag = crate::mesh::dist(lo, hi).max(f64::MIN_POSITIVE);
+    let centre = [0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]), 0.5 * (lo[2] + hi[2])];
+    for (&v, t) in vertices.iter().zip(targets) {
+        if t.iter().any(|x| !x.is_finite()) {
+            return Err(Error::Invalid(format!("target of vertex {v} is not finite: {t:?}")));
+        }
+        // Largest coordinate offset (no squares: they overflow for targets like 1e300).
+        let d = (0..3).map(|k| (t[k] - centre[k]).abs()).fold(0.0, f64::max);
+        if d > 1e3 * diag {
+            return Err(Error::Invalid(format!(
+                "target of vertex {v} {t:?} lies {d:.3e} from the mesh's centre along an axis, more than 1000 × its bounding-box diagonal ({diag:.3e})"
+            )));
+        }
+    }
+    Ok(())
+}
+
 /// Vertices of `rest` within Euclidean distance `radius` of vertex `v`.
 pub fn ball(rest: &[Vec3], v: usize, radius: f64) -> Vec<usize> {
     (0..rest.len()).filter(|&u| crate::mesh::dist(rest[u], rest[v]) <= radius).collect()

@@ -61,6 +61,25 @@ pub fn train_prepared(
     options: &TrainOptions,
     progress: &mut dyn Progress,
 ) -> Result<TrainOutcome> {
+    // One writer per artefact directory: a second run into the same directory is refused at
+    // once. A failed run that created the directory leaves none behind when it is empty.
+    let created = !out.exists();
+    let lock = artifact::DirLock::acquire(out)?;
+    let result = fit_measure_write(cfg, prep, out, options, progress);
+    drop(lock);
+    if result.is_err() && created {
+        let _ = std::fs::remove_dir(out);
+    }
+    result
+}
+
+fn fit_measure_write(
+    cfg: &Config,
+    prep: &Prepared,
+    out: &Path,
+    options: &TrainOptions,
+    progress: &mut dyn Progress,
+) -> Result<TrainOutcome> {
     let mut ctx = FitContext { out, resume: options.resume, stop: options.stop.clone(), progress };
     let fitted = crate::model::fit(prep, &cfg.method, &mut ctx)?;
     let progress = ctx.progress;

@@ -1,0 +1,145 @@
+//! Bad input and concurrent use end in a clear error, a non-zero exit and nothing written
+//! (issue 15, cases 3, 4, 5, 9 and the duplicate-key part of 10).
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+fn meshdeco(args: &[&str], cwd: &Path) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_meshdeco")).args(args).current_dir(cwd).output().expect("run meshdeco")
+}
+
+fn tmp(tag: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("meshdeco-reliability-{tag}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn text(o: &Output) -> String {
+    format!("{}{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr))
+}
+
+fn fails_with(o: &Output, needle: &str) {
+    let t = text(o);
+    assert!(!o.status.success(), "expected a failure: {t}");
+    assert!(t.contains(needle), "`{needle}` not in: {t}");
+    assert!(!t.contains("panicked") && !t.contains("NaN") && !t.contains(" inf"), "{t}");
+}
+
+fn train_pca(d: &Path) -> PathBuf {
+    let cfg = d.join("pca.toml");
+    std::fs::write(
+        &cfg,
+        "[data]\npath = \"synthetic:bumps\"\ntrain = \"1-30\"\n[method]\nkind = \"pca\"\ncomponents = 3\n",
+    )
+    .unwrap();
+    let out = d.join("pca");
+    let o = meshdeco(&["train", "--config", cfg.to_str().unwrap(), "--out", out.to_str().unwrap()], d);
+    assert!(o.status.success(), "{}", text(&o));
+    out
+}
+
+#[test]
+fn pose_refuses_absurd_targets_bad_flags_and_duplicate_keys() {
+    let d = tmp("pose");
+    let model = train_pca(&d);
+    let m = model.to_str().unwrap();
+    let out = d.join("posed.obj");
+    let o = out.to_str().unwrap();
+    for (i, (json, flags, needle)) in [
+        (r#"{"5": [1e300, 0, 0]}"#, vec![], "1000 × its bounding-box diagonal"),
+        (r#"{"5": [0.1, 0, 0], "5": [0.2, 0, 0]}"#, vec![], "vertex 5 is constrained twice"),
+        (r#"{"5": [0.1, 0, 0], "05": [0.2, 0, 0]}"#, vec![], "vertex 5 is constrained twice"),
+        (r#"{"5": [0.1, 0, 0]}"#, vec!["--local-radius=-1"], "--local-radius -1"),
+        (r#"{"5": [0.1, 0, 0]}"#, vec!["--gamma=-1"], "--gamma -1"),
+        (r#"{"5": [0.1, 0, 0]}"#, vec!["--beta=-0.5"], "--beta -0.5"),
+        (r#"{"5": [0.1, 0, 0]}"#, vec!["--max-iterations", "0"], "--max-iterations"),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        let c = d.join(format!("c{i}.json"));
+        std::fs::write(&c, json).unwrap();
+        let mut args = vec!["pose", m, "--constraints", c.to_str().unwrap(), "--out", o];
+        args.extend(flags);
+        let r = meshdeco(&args, &d);
+        fails_with(&r, needle);
+        assert!(!out.exists(), "case {i} wrote {o}");
+        assert!(!text(&r).contains("config key"), "case {i}: a flag is reported as a config key: {}", text(&r));
+    }
+    // A sane drag still works.
+    let c = d.join("ok.json");
+    std::fs::write(&c, r#"{"5": [0.1, 0.0, 0.0]}"#).unwrap();
+    let r = meshdeco(&["pose", m, "--constraints", c.to_str().unwrap(), "--out", o], &d);
+    assert!(r.status.success() && out.exists(), "{}", text(&r));
+    std::fs::remove_dir_all(&d).unwrap();
+}
+
+#[test]
+fn a_second_writer_of_an_artefact_directory_is_refused_at_once() {
+    let d = tmp("lock");
+    let cfg = d.join("ae.toml");
+    std::fs::write(
+        &cfg,
+        "[data]\npath = \"synthetic:tube\"\ntrain = \"every:2\"\ntest = \"rest\"\n[method]\nkind = \"autoencoder\"\ncomponents = 4\niterations = 400\ncheckpoint_every = 100\nfit_test = false\n",
+    )
+    .unwrap();
+    let out = d.join("run");
+    let args = ["train", "--config", cfg.to_str().unwrap(), "--out", out.to_str().unwrap()];
+    let mut first = Command::new(env!("CARGO_BIN_EXE_meshdeco"))
+        .args(args)
+        .current_dir(&d)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Wait until the first run holds the directory (its lock file appears).
+    let lock = out.join(meshdeco::artifact::LOCK_FILE);
+    let t0 = Instant::now();
+    while !lock.exists() {
+        assert!(t0.elapsed() < Duration::from_secs(60), "the first run never locked {}", out.display());
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let t = Instant::now();
+    let second = meshdeco(&args, &d);
+    let waited = t.elapsed();
+    let first_done = first.try_wait().unwrap().is_some();
+    let status = first.wait().unwrap();
+    if !first_done {
+        // The second run was refused while the first was still training.
+        fails_with(&second, "is being written by another meshdeco process (pid");
+        assert!(text(&second).contains(&out.display().to_string()), "{}", text(&second));
+        assert!(waited < Duration::from_secs(10), "the second run waited {waited:?}");
+    }
+    assert!(status.success(), "the first run failed");
+    // The first run's log is intact: one JSON object per line, iterations 1..=400 once each.
+    let log = std::fs::read_to_string(out.join("training.jsonl")).unwrap();
+    let its: Vec<u64> = log
+        .lines()
+        .map(|l| serde_json::from_str::<serde_json::Value>(l).unwrap()["iteration"].as_u64().unwrap())
+        .collect();
+    assert_eq!(its, (1..=400).collect::<Vec<u64>>());
+    assert!(!lock.exists(), "the lock file outlived the run");
+    std::fs::remove_dir_all(&d).unwrap();
+}
+
+#[test]
+fn non_regular_files_are_named_as_such() {
+    let d = tmp("special");
+    let fifo = d.join("pipe.obj");
+    let made = Command::new("mkfifo").arg(&fifo).status().is_ok_and(|s| s.success());
+    let link = d.join("zero.obj");
+    std::os::unix::fs::symlink("/dev/zero", &link).unwrap();
+    let mut cases =
+        vec![("/dev/zero".to_string(), "character device"), (link.display().to_string(), "character device")];
+    if made {
+        cases.push((fifo.display().to_string(), "FIFO"));
+    }
+    for (path, kind) in cases {
+        let o = meshdeco(&["inspect", &path], &d);
+        fails_with(&o, "not a regular file");
+        assert!(text(&o).contains(kind) && text(&o).contains(&path), "{}", text(&o));
+    }
+    std::fs::remove_dir_all(&d).unwrap();
+}
