@@ -60,7 +60,7 @@ use crate::error::{Error, Result};
 mod method;
 pub use method::{
     AE_GEODESIC_M, AutoencoderMethod, ConsistencyName, FixedCenter, MethodConfig, MethodKind, MethodSettings,
-    PcaMethod, RegionPcaMethod, SPLOCS_GEODESIC_M, ScalingName, SplocsMethod,
+    PcaMethod, RegionPcaMethod, SPLOCS_GEODESIC_M, ScalingName, SplocsMethod, method_key,
 };
 
 /// Which frames belong to a split, as 0-based indices (after natural sort).
@@ -282,20 +282,6 @@ impl Config {
             "rigid" => Align::Rigid,
             other => return Err(Error::config("data.align", format!("`{other}`: expected none or rigid"))),
         };
-        let numpy = crate::mesh::npy::is_numpy_path(&d.path);
-        if numpy && d.template.is_none() {
-            return Err(Error::config(
-                "data.template",
-                format!("is required with a NumPy data.path (`{}`): the mesh file giving the faces", d.path),
-            ));
-        }
-        if !numpy && (d.template.is_some() || d.array.is_some()) {
-            let key = if d.template.is_some() { "data.template" } else { "data.array" };
-            return Err(Error::config(
-                key,
-                format!("applies to a NumPy data.path (.npy or .npz) only, not `{}`", d.path),
-            ));
-        }
         let data = DataConfig {
             path: d.path,
             train,
@@ -306,6 +292,7 @@ impl Config {
             array: d.array,
             template: d.template,
         };
+        data.numpy_template()?;
 
         let method = MethodConfig::from_table(&raw.method)?;
         Ok(Config { name, data, method, source: None })
@@ -452,6 +439,27 @@ impl std::fmt::Display for RestShape {
 }
 
 impl DataConfig {
+    /// The template mesh of a NumPy `path` (`None` for mesh files and synthetic data). Errors,
+    /// naming the key, when a NumPy path has no `template`, or `template` / `array` are given
+    /// for another kind of path.
+    pub fn numpy_template(&self) -> Result<Option<&Path>> {
+        let numpy = crate::mesh::npy::is_numpy_path(&self.path);
+        if numpy && self.template.is_none() {
+            return Err(Error::config(
+                "data.template",
+                format!("is required with a NumPy data.path (`{}`): the mesh file giving the faces", self.path),
+            ));
+        }
+        if !numpy && (self.template.is_some() || self.array.is_some()) {
+            let key = if self.template.is_some() { "data.template" } else { "data.array" };
+            return Err(Error::config(
+                key,
+                format!("applies to a NumPy data.path (.npy or .npz) only, not `{}`", self.path),
+            ));
+        }
+        Ok(self.template.as_deref())
+    }
+
     /// The `[data]` table with every default written out (for the artefact's config.toml).
     pub fn to_table(&self) -> toml::Table {
         let mut t = toml::Table::new();

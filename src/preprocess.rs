@@ -71,6 +71,10 @@ impl Prepared {
     pub fn train_sequence(&self) -> MeshSequence {
         self.sequence.select(&self.train)
     }
+    /// Names of the training frames (without copying their positions).
+    pub fn train_names(&self) -> Vec<String> {
+        self.train.iter().map(|&f| self.sequence.names[f].clone()).collect()
+    }
     /// Test frames as their own sequence.
     pub fn test_sequence(&self) -> MeshSequence {
         self.sequence.select(&self.test)
@@ -85,19 +89,9 @@ pub fn load_frames(path: &str) -> Result<MeshSequence> {
 /// Loads the frames of a `[data]` section: a NumPy `.npy`/`.npz` array with its template mesh
 /// (`data.template`, `data.array`), or anything [`load_frames`] reads.
 pub fn load_data(cfg: &DataConfig) -> Result<MeshSequence> {
-    if mesh::npy::is_numpy_path(&cfg.path) {
-        let template = cfg.template.as_deref().ok_or_else(|| {
-            Error::config(
-                "data.template",
-                format!("is required with a NumPy data.path (`{}`): the mesh file giving the faces", cfg.path),
-            )
-        })?;
-        mesh::npy::load_npy_sequence(Path::new(&cfg.path), cfg.array.as_deref(), template)
-    } else {
-        if let Some(a) = &cfg.array {
-            return Err(Error::config("data.array", format!("`{a}` applies to a .npz data.path only")));
-        }
-        load_frames(&cfg.path)
+    match cfg.numpy_template()? {
+        Some(template) => mesh::npy::load_npy_sequence(Path::new(&cfg.path), cfg.array.as_deref(), template),
+        None => load_frames(&cfg.path),
     }
 }
 

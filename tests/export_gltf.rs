@@ -4,25 +4,17 @@
 //! sequence written as `.npy` / `.npz` training to the same metrics as the mesh files.
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Command;
+
+mod common;
+use common::{meshdeco, output_text};
 
 use meshdeco::export::read_glb;
 use meshdeco::mesh::{self, Vec3};
 use meshdeco::model::{self, load_model};
 
-fn meshdeco(args: &[&str], cwd: &Path) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_meshdeco")).args(args).current_dir(cwd).output().expect("run meshdeco")
-}
-
 fn tmp(tag: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("meshdeco-export-{tag}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
-
-fn text(o: &Output) -> String {
-    format!("{}{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr))
+    common::fresh_dir("export", tag)
 }
 
 fn train(d: &Path, name: &str, data: &str, method: &str) -> PathBuf {
@@ -30,7 +22,7 @@ fn train(d: &Path, name: &str, data: &str, method: &str) -> PathBuf {
     std::fs::write(&cfg, format!("name = \"{name}\"\n[data]\n{data}\n[method]\n{method}\n")).unwrap();
     let out = d.join(name);
     let o = meshdeco(&["train", "--config", cfg.to_str().unwrap(), "--out", out.to_str().unwrap()], d);
-    assert!(o.status.success(), "{name}: {}", text(&o));
+    assert!(o.status.success(), "{name}: {}", output_text(&o));
     out
 }
 
@@ -87,8 +79,8 @@ fn every_kind_exports_valid_gltf_that_replays_the_model() {
         let glb = d.join(format!("{name}.glb"));
         let o =
             meshdeco(&["export", dir.to_str().unwrap(), "--out", glb.to_str().unwrap(), "--animation", "--colors"], &d);
-        assert!(o.status.success(), "{name}: {}", text(&o));
-        let out = text(&o);
+        assert!(o.status.success(), "{name}: {}", output_text(&o));
+        let out = output_text(&o);
         assert!(out.contains("additivity error"), "{out}");
         files.push(glb.clone());
 
@@ -111,7 +103,7 @@ fn every_kind_exports_valid_gltf_that_replays_the_model() {
             &["synthesize", dir.to_str().unwrap(), "--weights", &spec.join(","), "--out", synth.to_str().unwrap()],
             &d,
         );
-        assert!(o.status.success(), "{name}: {}", text(&o));
+        assert!(o.status.success(), "{name}: {}", output_text(&o));
         let want = mesh::load_mesh(&synth).unwrap().positions;
         let file_order: Vec<f64> = ranked.iter().map(|c| dials[c.index]).collect();
         let err = max_dist(&g.blend(&file_order), &want);
@@ -138,7 +130,7 @@ fn every_kind_exports_valid_gltf_that_replays_the_model() {
         let mut args = vec![script.to_string()];
         args.extend(files.iter().map(|f| f.display().to_string()));
         let o = Command::new("node").args(&args).env("NODE_PATH", dir.join("node_modules")).output().unwrap();
-        assert!(o.status.success(), "validator: {}", text(&o));
+        assert!(o.status.success(), "validator: {}", output_text(&o));
         let lines: Vec<serde_json::Value> =
             String::from_utf8_lossy(&o.stdout).lines().map(|l| serde_json::from_str(l).unwrap()).collect();
         assert_eq!(lines.len(), files.len());
@@ -182,7 +174,7 @@ fn export_refuses_bad_arguments() {
         let mut all = vec!["export", dir.to_str().unwrap()];
         all.extend(args);
         let o = meshdeco(&all, &d);
-        assert!(!o.status.success() && text(&o).contains(needle), "{}", text(&o));
+        assert!(!o.status.success() && output_text(&o).contains(needle), "{}", output_text(&o));
     }
     assert!(!d.join("x.glb").exists());
     std::fs::remove_dir_all(&d).unwrap();
@@ -231,8 +223,12 @@ fn numpy_sequences_train_like_mesh_files() {
         std::fs::write(&cfg, format!("[data]\n{data}\n[method]\n{method}\n")).unwrap();
         let out = d.join(format!("bad{i}"));
         let o = meshdeco(&["train", "--config", cfg.to_str().unwrap(), "--out", out.to_str().unwrap()], &d);
-        assert!(!o.status.success() && text(&o).contains(needle), "case {i}: `{needle}` not in {}", text(&o));
-        assert!(!text(&o).contains("panicked"), "{}", text(&o));
+        assert!(
+            !o.status.success() && output_text(&o).contains(needle),
+            "case {i}: `{needle}` not in {}",
+            output_text(&o)
+        );
+        assert!(!output_text(&o).contains("panicked"), "{}", output_text(&o));
     }
     std::fs::remove_dir_all(&d).unwrap();
 }

@@ -4,25 +4,16 @@
 //! model whose decoding matches what the commands write.
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+
+mod common;
+use common::{meshdeco, output_text};
 
 use meshdeco::config::{Config, MethodKind};
 use meshdeco::mesh;
 use meshdeco::model::{self, load_model, ranked};
 
-fn meshdeco(args: &[&str], cwd: &Path) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_meshdeco")).args(args).current_dir(cwd).output().expect("run meshdeco")
-}
-
 fn tmp(tag: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("meshdeco-model-{tag}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
-
-fn text(o: &Output) -> String {
-    format!("{}{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr))
+    common::fresh_dir("model", tag)
 }
 
 /// Trains `method` (the `[method]` body) on synthetic:bumps frames 1-30 into `d/<name>`.
@@ -35,7 +26,7 @@ fn train(d: &Path, name: &str, method: &str) -> PathBuf {
     .unwrap();
     let out = d.join(name);
     let o = meshdeco(&["train", "--config", cfg.to_str().unwrap(), "--out", out.to_str().unwrap()], d);
-    assert!(o.status.success(), "{name}: {}", text(&o));
+    assert!(o.status.success(), "{name}: {}", output_text(&o));
     out
 }
 
@@ -61,11 +52,11 @@ fn every_kind_encodes_synthesizes_and_exports_components() {
             &["encode", dir.to_str().unwrap(), "synthetic:bumps", "--frames", "31-34", "--out", enc.to_str().unwrap()],
             &d,
         );
-        assert!(o.status.success(), "{name} encode: {}", text(&o));
+        assert!(o.status.success(), "{name} encode: {}", output_text(&o));
         let frames = meshdeco::preprocess::load_frames("synthetic:bumps").unwrap().select(&[30, 31, 32, 33]);
         let e = model::encode_frames(m.as_ref(), &frames, "bumps", None).unwrap();
         let printed = format!("total Erms {:.4}", e.total_erms);
-        assert!(text(&o).contains(&printed), "{name}: `{printed}` not in {}", text(&o));
+        assert!(output_text(&o).contains(&printed), "{name}: `{printed}` not in {}", output_text(&o));
         // The written reconstruction is the decoding of the written weights.
         let rec = mesh::load_mesh(&enc.join(format!("{}.obj", frames.names[0]))).unwrap();
         let again = m.decode(&e.weights[..1]).unwrap().remove(0);
@@ -87,7 +78,7 @@ fn every_kind_encodes_synthesizes_and_exports_components() {
         let out = d.join(format!("{name}-synth.obj"));
         let o =
             meshdeco(&["synthesize", dir.to_str().unwrap(), "--weights", "1:0.7", "--out", out.to_str().unwrap()], &d);
-        assert!(o.status.success(), "{name} synthesize: {}", text(&o));
+        assert!(o.status.success(), "{name} synthesize: {}", output_text(&o));
         let mut dials = vec![0.0; k];
         dials[1] = 0.7;
         let want = model::synthesize(m.as_ref(), &dials).unwrap();
@@ -102,7 +93,7 @@ fn every_kind_encodes_synthesizes_and_exports_components() {
         // components: components.csv in rank order, one row per component.
         let comp = d.join(format!("{name}-comp"));
         let o = meshdeco(&["components", dir.to_str().unwrap(), "--out", comp.to_str().unwrap()], &d);
-        assert!(o.status.success(), "{name} components: {}", text(&o));
+        assert!(o.status.success(), "{name} components: {}", output_text(&o));
         let csv = std::fs::read_to_string(comp.join("components.csv")).unwrap();
         assert_eq!(csv.lines().count(), k + 1, "{name}: {csv}");
         let ranks: Vec<usize> = ranked(m.as_ref()).unwrap().iter().map(|c| c.rank).collect();
@@ -160,7 +151,7 @@ fn saved_config_is_the_resolved_typed_config_and_trains_again() {
             &["train", "--config", dir.join("config.toml").to_str().unwrap(), "--out", again.to_str().unwrap()],
             &d,
         );
-        assert!(o.status.success(), "{name}: {}", text(&o));
+        assert!(o.status.success(), "{name}: {}", output_text(&o));
         let a: serde_json::Value =
             serde_json::from_str(&std::fs::read_to_string(dir.join("metrics.json")).unwrap()).unwrap();
         let b: serde_json::Value =

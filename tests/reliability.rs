@@ -3,25 +3,17 @@
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
+
+mod common;
+use common::{meshdeco, output_text};
 use std::time::{Duration, Instant};
 
-fn meshdeco(args: &[&str], cwd: &Path) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_meshdeco")).args(args).current_dir(cwd).output().expect("run meshdeco")
-}
-
 fn tmp(tag: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("meshdeco-reliability-{tag}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
-
-fn text(o: &Output) -> String {
-    format!("{}{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr))
+    common::fresh_dir("reliability", tag)
 }
 
 fn fails_with(o: &Output, needle: &str) {
-    let t = text(o);
+    let t = output_text(o);
     assert!(!o.status.success(), "expected a failure: {t}");
     assert!(t.contains(needle), "`{needle}` not in: {t}");
     assert!(!t.contains("panicked") && !t.contains("NaN") && !t.contains(" inf"), "{t}");
@@ -36,7 +28,7 @@ fn train_pca(d: &Path) -> PathBuf {
     .unwrap();
     let out = d.join("pca");
     let o = meshdeco(&["train", "--config", cfg.to_str().unwrap(), "--out", out.to_str().unwrap()], d);
-    assert!(o.status.success(), "{}", text(&o));
+    assert!(o.status.success(), "{}", output_text(&o));
     out
 }
 
@@ -66,13 +58,17 @@ fn pose_refuses_absurd_targets_bad_flags_and_duplicate_keys() {
         let r = meshdeco(&args, &d);
         fails_with(&r, needle);
         assert!(!out.exists(), "case {i} wrote {o}");
-        assert!(!text(&r).contains("config key"), "case {i}: a flag is reported as a config key: {}", text(&r));
+        assert!(
+            !output_text(&r).contains("config key"),
+            "case {i}: a flag is reported as a config key: {}",
+            output_text(&r)
+        );
     }
     // A sane drag still works.
     let c = d.join("ok.json");
     std::fs::write(&c, r#"{"5": [0.1, 0.0, 0.0]}"#).unwrap();
     let r = meshdeco(&["pose", m, "--constraints", c.to_str().unwrap(), "--out", o], &d);
-    assert!(r.status.success() && out.exists(), "{}", text(&r));
+    assert!(r.status.success() && out.exists(), "{}", output_text(&r));
     std::fs::remove_dir_all(&d).unwrap();
 }
 
@@ -109,7 +105,7 @@ fn a_second_writer_of_an_artefact_directory_is_refused_at_once() {
     if !first_done {
         // The second run was refused while the first was still training.
         fails_with(&second, "is being written by another meshdeco process (pid");
-        assert!(text(&second).contains(&out.display().to_string()), "{}", text(&second));
+        assert!(output_text(&second).contains(&out.display().to_string()), "{}", output_text(&second));
         assert!(waited < Duration::from_secs(10), "the second run waited {waited:?}");
     }
     assert!(status.success(), "the first run failed");
@@ -139,7 +135,7 @@ fn non_regular_files_are_named_as_such() {
     for (path, kind) in cases {
         let o = meshdeco(&["inspect", &path], &d);
         fails_with(&o, "not a regular file");
-        assert!(text(&o).contains(kind) && text(&o).contains(&path), "{}", text(&o));
+        assert!(output_text(&o).contains(kind) && output_text(&o).contains(&path), "{}", output_text(&o));
     }
     std::fs::remove_dir_all(&d).unwrap();
 }

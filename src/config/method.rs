@@ -425,10 +425,11 @@ pub trait MethodSettings {
     }
 }
 
-/// Renames a method struct's error key `k` to `method.k` (and `d_min`/`d_max` to `support`).
-fn method_key(e: Error) -> Error {
+/// Renames a method struct's error key `k` to `method.k` (and `d_min`/`d_max`, the autoencoder
+/// network's names, to `support`, the config key); keys already under `method.` stay.
+pub fn method_key(e: Error) -> Error {
     match e {
-        Error::Config { key, message } => {
+        Error::Config { key, message } if !key.starts_with("method.") => {
             let key = match key.as_str() {
                 "d_min" | "d_max" => "support".to_string(),
                 _ => key,

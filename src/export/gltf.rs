@@ -99,19 +99,24 @@ impl Blendshapes {
 
     /// base + Σ_t dials[index_t]·delta_t.
     pub fn blend(&self, dials: &[f64]) -> Vec<Vec3> {
-        let mut out = self.base.clone();
-        for (t, d) in self.deltas.iter().enumerate() {
-            let w = dials[self.index[t]];
-            if w != 0.0 {
-                for (o, x) in out.iter_mut().zip(d) {
-                    for c in 0..3 {
-                        o[c] += w * x[c];
-                    }
+        let w: Vec<f64> = self.index.iter().map(|&k| dials[k]).collect();
+        blend(&self.base, &self.deltas, &w)
+    }
+}
+
+/// `base + Σ_t w_t·targets_t` (w in target order).
+pub fn blend(base: &[Vec3], targets: &[Vec<Vec3>], w: &[f64]) -> Vec<Vec3> {
+    let mut out = base.to_vec();
+    for (d, &wt) in targets.iter().zip(w) {
+        if wt != 0.0 {
+            for (o, x) in out.iter_mut().zip(d) {
+                for c in 0..3 {
+                    o[c] += wt * x[c];
                 }
             }
         }
-        out
     }
+    out
 }
 
 /// Additivity error of `shapes` against the model over its training frames (see the module
@@ -262,6 +267,9 @@ fn flat(points: &[Vec3]) -> Vec<f32> {
 fn support_colors(magnitudes: &[Vec<f64>], n: usize) -> Vec<f32> {
     let peaks: Vec<f64> = magnitudes.iter().map(|m| m.iter().cloned().fold(0.0, f64::max)).collect();
     let k = magnitudes.len().max(1);
+    // One hue per component, spread so that neighbouring indices get distant colours.
+    let hues: Vec<f64> = (0..k).map(|t| (t * 7 % k) as f64 / k as f64).collect();
+    let palette = crate::mesh::colormap_range(&hues, 0.0, 1.0);
     let mut out = Vec::with_capacity(3 * n);
     for v in 0..n {
         let (best, rel) = magnitudes
@@ -270,9 +278,7 @@ fn support_colors(magnitudes: &[Vec<f64>], n: usize) -> Vec<f32> {
             .map(|(m, &p)| if p > 0.0 { m[v] / p } else { 0.0 })
             .enumerate()
             .fold((0, 0.0), |a, (t, r)| if r > a.1 { (t, r) } else { a });
-        let hue = (best * 7 % k) as f64 / k as f64;
-        let c = crate::mesh::colormap_range(&[hue], 0.0, 1.0)[0];
-        for x in c {
+        for x in palette[best] {
             out.push((x as f64 / 255.0 * rel.clamp(0.0, 1.0)) as f32);
         }
     }
@@ -424,15 +430,7 @@ pub struct GlbMorphs {
 impl GlbMorphs {
     /// base + Σ_t w_t·target_t (w in file order).
     pub fn blend(&self, w: &[f64]) -> Vec<Vec3> {
-        let mut out = self.base.clone();
-        for (t, d) in self.targets.iter().enumerate() {
-            for (o, x) in out.iter_mut().zip(d) {
-                for c in 0..3 {
-                    o[c] += w[t] * x[c];
-                }
-            }
-        }
-        out
+        blend(&self.base, &self.targets, w)
     }
 
     /// The frames as a sequence with the file's faces.

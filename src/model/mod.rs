@@ -41,7 +41,8 @@ pub struct Component {
     /// in extraction order), by the feature-space distance of the extreme shape for the
     /// autoencoder (the ranking of `meshdeco components`).
     pub rank: usize,
-    /// Display name, e.g. `k03` or `rank 0 (dim 12)`.
+    /// Display name and file stem: `k03` (linear), `r02_c01` (region 2, component 1), `0_12`
+    /// (autoencoder: rank 0, latent dimension 12).
     pub name: String,
     /// Centre vertex (largest magnitude).
     pub center: usize,

@@ -14,7 +14,7 @@ use serde::{Deserialize, Serialize};
 use super::geodesic_support::GeodesicSupport;
 use super::pose::{PoseOptions, PoseResult, control_targets, model_targets};
 use crate::artifact::{self, ArrayStore};
-use crate::config::{ConsistencyName, MethodConfig, MethodKind, PcaMethod, SplocsMethod};
+use crate::config::{ConsistencyName, MethodConfig, MethodKind, PcaMethod, SplocsMethod, method_key};
 use crate::error::{Error, Result};
 use crate::mesh::{MeshSequence, TriMesh, Vec3};
 use crate::methods::pca::{Pca, PcaConfig};
@@ -198,16 +198,6 @@ fn training_features(
     Ok((representation, x, rest_row, t.elapsed().as_secs_f64()))
 }
 
-/// Renames a method struct's error key `k` to `method.k`.
-fn method_key(e: Error) -> Error {
-    match e {
-        Error::Config { key, message } if !key.starts_with("method.") => {
-            Error::config(format!("method.{key}"), message)
-        }
-        other => other,
-    }
-}
-
 fn artifact_of(
     kind: MethodKind,
     representation: Representation,
@@ -224,7 +214,7 @@ fn artifact_of(
             unit_box: prep.unit_box,
             components: model.n_components,
             constraint: model.constraint,
-            train_frames: prep.train_sequence().names,
+            train_frames: prep.train_names(),
         },
         rest: prep.rest.clone(),
         model,

@@ -17,7 +17,7 @@ use serde::{Deserialize, Serialize};
 use super::linear::{rest_from_arrays, rest_to_arrays};
 use super::pose::{PoseOptions, PoseResult, control_targets, model_targets, single_frame};
 use crate::artifact::{self, ArrayStore};
-use crate::config::{MethodConfig, MethodKind, RegionPcaMethod};
+use crate::config::{MethodConfig, MethodKind, RegionPcaMethod, method_key};
 use crate::error::{Error, Result};
 use crate::mesh::{self, MeshSequence, TriMesh, Vec3};
 use crate::methods::DataMatrix;
@@ -143,24 +143,6 @@ impl RegionArtifact {
         let enc = self.model.encoder()?;
         x.data.chunks_exact(3 * self.model.n_vertices).map(|row| enc.encode(row)).collect()
     }
-
-    /// Encode + reconstruct frames (data units).
-    pub fn reconstruct_frames(&self, frames: &MeshSequence) -> Result<Vec<Vec<Vec3>>> {
-        let mut rows = Vec::new();
-        for z in self.encode_frames(frames)? {
-            rows.extend(self.model.reconstruct(&z)?);
-        }
-        self.decode_rows(&rows)
-    }
-}
-
-fn prefix(e: Error) -> Error {
-    match e {
-        Error::Config { key, message } if !key.starts_with("method.") => {
-            Error::config(format!("method.{key}"), message)
-        }
-        other => other,
-    }
 }
 
 /// Fits region PCA (`kind = "region-pca"`): segmentation of the training displacements, one
@@ -181,12 +163,12 @@ pub fn fit(m: &RegionPcaMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> Re
     ctx.progress.stage("segmentation", 0);
     let seg = segment(&prep.rest.positions, &prep.rest.faces, &x.data, x.n_frames, &sc)?;
     ctx.progress.stage("region pca", 1);
-    let model = RegionPcaModel::fit(DataMatrix::from_features(&x)?, &seg.regions, &rc).map_err(prefix)?;
+    let model = RegionPcaModel::fit(DataMatrix::from_features(&x)?, &seg.regions, &rc).map_err(method_key)?;
     let train_seconds = t.elapsed().as_secs_f64();
     ctx.progress.step(1, &format!("{} regions", seg.n_regions()));
     ctx.progress.finish_stage();
 
-    let artifact = RegionArtifact {
+    let mut artifact = RegionArtifact {
         header: RegionHeader {
             method: MethodKind::RegionPca.name().into(),
             representation: RepresentationKind::Displacement.name().into(),
@@ -205,7 +187,6 @@ pub fn fit(m: &RegionPcaMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> Re
         representation,
         train_weights: Vec::new(),
     };
-    let mut artifact = artifact;
     let train_truth = MeshSequence {
         faces: prep.rest.faces.clone(),
         frames: super::train::frames_in_data_units(prep, &prep.train),
@@ -247,7 +228,7 @@ impl PointFit for RegionPointFit<'_> {
         let a = self.artifact;
         let t = control_targets(&self.vertices, shape, a.header.unit_box, &a.rest.positions);
         let z = self.poser.solve(&t, &vec![0.0; a.model.n_components()])?;
-        Ok(a.decode_rows(&a.model.reconstruct(&z)?)?.remove(0))
+        Ok(a.decode(&[z])?.remove(0))
     }
 }
 

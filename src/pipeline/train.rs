@@ -17,7 +17,7 @@ use super::ae_fit::DEFAULT_FIT_GAMMA;
 use super::metrics_file::{Metrics, median};
 use crate::artifact;
 use crate::config::{Config, resolved_toml};
-use crate::error::{Error, Result};
+use crate::error::Result;
 use crate::mesh::{MeshSequence, Vec3};
 use crate::metrics::erms::erms;
 use crate::model::{FitContext, Model, RefineOptions, reconstruct};
@@ -136,7 +136,6 @@ fn fit_measure_write(
     };
 
     progress.stage("writing", 0);
-    std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
     let method_table = fitted.method.to_table()?;
     artifact::write_atomic(&out.join("config.toml"), resolved_toml(&cfg.name, &cfg.data, method_table).as_bytes())?;
     model.save(out)?;

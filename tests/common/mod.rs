@@ -109,3 +109,16 @@ pub fn png_ink(path: &Path) -> (u32, u32, f64, usize) {
     let colours: std::collections::HashSet<[u8; 3]> = img.pixels().map(|p| p.0).collect();
     (img.width(), img.height(), ink as f64 / (img.width() * img.height()) as f64, colours.len())
 }
+
+/// A fresh, empty directory `<temp>/meshdeco-<prefix>-<tag>-<pid>` (removed first if present).
+pub fn fresh_dir(prefix: &str, tag: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("meshdeco-{prefix}-{tag}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+/// A command's stdout followed by its stderr, as text.
+pub fn output_text(o: &std::process::Output) -> String {
+    format!("{}{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr))
+}
