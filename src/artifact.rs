@@ -7,12 +7,16 @@
 //! <out>/model.bin        little-endian f64 arrays, concatenated, as listed in model.json
 //! <out>/weights.csv      frame × component weights of the training frames
 //! <out>/metrics.json     method, representation, components, train_erms, test_erms, …
-//! <out>/components/      per component: heat-map PLY on the rest mesh and ±1 shapes (OBJ)
+//! <out>/manifest.json    length and CRC-32 of every other top-level file, written last
+//! <out>/components/      with `[output] views = true`: heat maps and ±1 shapes per component
 //! ```
 //!
-//! Every file is written atomically ([`write_atomic_with`]: temporary file in the same directory,
-//! then rename), so
-//! an interrupted run never leaves a half-written model; non-finite numbers are refused.
+//! Writing: a run locks the directory ([`DirLock`], one writer), writes everything into a
+//! staging directory beside it and commits it at the end ([`Staging`]): one sync for the whole
+//! directory, the manifest last, nothing changed in `<out>` by a run that fails. Single files
+//! outside a staging directory are written atomically ([`write_atomic_with`]: temporary file
+//! in the same directory, sync, rename). Non-finite numbers are refused. Reading:
+//! [`verify_manifest`] checks every listed file before a model is loaded.
 
 use std::collections::BTreeMap;
 use std::fs::File;
@@ -100,18 +104,22 @@ struct HeaderFile<H> {
 /// [`Error::Io`] naming `path`. The parent directory must exist ([`write_atomic`] creates it).
 ///
 /// This is the one atomic writer of the crate; every file meshdeco writes goes through it.
+/// Inside [`deferred_sync`] (the write phase of a [`Staging`] directory) the per-file sync is
+/// skipped: the directory is synced once when it is committed.
 pub fn write_atomic_with(path: &Path, body: impl FnOnce(&mut BufWriter<File>) -> std::io::Result<()>) -> Result<()> {
     let mut tmp = path.as_os_str().to_owned();
     tmp.push(".tmp");
     let tmp = PathBuf::from(tmp);
-    let result = (|| {
+    let result = crate::timing::timed("write", || -> std::io::Result<()> {
         let file = File::create(&tmp)?;
         let mut w = BufWriter::new(file);
         body(&mut w)?;
         let file = w.into_inner().map_err(|e| e.into_error())?;
-        file.sync_all()?;
+        if !DEFER_SYNC.with(|d| d.get()) {
+            file.sync_all()?;
+        }
         std::fs::rename(&tmp, path)
-    })();
+    });
     result.map_err(|e| {
         let _ = std::fs::remove_file(&tmp);
         Error::io(path, e)
@@ -283,11 +291,189 @@ mod tests {
     }
 }
 
-/// File name of the lock of an artefact directory being written.
-pub const LOCK_FILE: &str = ".meshdeco.lock";
+thread_local! {
+    static DEFER_SYNC: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+}
 
-/// An exclusive lock on an artefact directory: one writer at a time. Held until dropped; the
-/// lock file (holding the writer's process id) is removed then.
+/// Runs `f` with the per-file sync of [`write_atomic_with`] skipped on this thread: for files
+/// written into a [`Staging`] directory, which [`Staging::commit`] syncs once as a whole.
+pub fn deferred_sync<R>(f: impl FnOnce() -> R) -> R {
+    struct Restore(bool);
+    impl Drop for Restore {
+        fn drop(&mut self) {
+            DEFER_SYNC.with(|d| d.set(self.0));
+        }
+    }
+    let _restore = Restore(DEFER_SYNC.with(|d| d.replace(true)));
+    f()
+}
+
+// ---------------------------------------------------------------------------------------------
+// Manifest: length and CRC-32 of every file of an artefact, verified on load.
+
+/// File name of an artefact directory's manifest, written last by [`Staging::commit`]: an
+/// artefact directory without it is incomplete and is not loaded.
+pub const MANIFEST_FILE: &str = "manifest.json";
+
+/// Work files of a training (the autoencoder's checkpoint and log): kept in the directory, not
+/// part of the manifest (the checkpoint carries its own checksum).
+pub const WORK_FILES: &[&str] = &["checkpoint.bin", "training.jsonl"];
+
+/// Names a training writes into an artefact directory (files and the `components/` folder): a
+/// committed run removes those of an earlier run that it did not write itself, and leaves every
+/// other entry (a user's own files) alone.
+pub const ARTEFACT_NAMES: &[&str] = &[
+    "config.toml",
+    "model.json",
+    "model.bin",
+    "autoencoder.json",
+    "autoencoder.bpk",
+    "weights.csv",
+    "metrics.json",
+    "segmentation.ply",
+    "components",
+    "checkpoint.bin",
+    "training.jsonl",
+];
+
+/// Length and checksum of one file of an artefact.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ManifestEntry {
+    /// Length in bytes.
+    pub bytes: u64,
+    /// CRC-32 (IEEE) of the content, 8 lowercase hex digits.
+    pub crc32: String,
+}
+
+/// `manifest.json`: every top-level file of an artefact directory (not the work files, not the
+/// `components/` views) with its length and checksum.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Manifest {
+    /// Version of the manifest format.
+    pub manifest_version: u32,
+    /// meshdeco version that wrote the artefact.
+    pub written_by: String,
+    /// File name → entry.
+    pub files: BTreeMap<String, ManifestEntry>,
+}
+
+/// CRC-32 of `bytes` as 8 lowercase hex digits.
+pub fn crc32_hex(bytes: &[u8]) -> String {
+    format!("{:08x}", crc32fast::hash(bytes))
+}
+
+fn manifest_listed(name: &str) -> bool {
+    name != MANIFEST_FILE && !WORK_FILES.contains(&name) && !name.ends_with(".tmp") && !name.starts_with('.')
+}
+
+/// Computes the manifest of the top-level files of `dir` (see [`Manifest`]).
+pub fn compute_manifest(dir: &Path) -> Result<Manifest> {
+    let mut files = BTreeMap::new();
+    for entry in std::fs::read_dir(dir).map_err(|e| Error::io(dir, e))? {
+        let entry = entry.map_err(|e| Error::io(dir, e))?;
+        let name = entry.file_name().to_string_lossy().into_owned();
+        let ty = entry.file_type().map_err(|e| Error::io(entry.path(), e))?;
+        if !ty.is_file() || !manifest_listed(&name) {
+            continue;
+        }
+        let path = entry.path();
+        let bytes = std::fs::read(&path).map_err(|e| Error::io(&path, e))?;
+        files.insert(name, ManifestEntry { bytes: bytes.len() as u64, crc32: crc32_hex(&bytes) });
+    }
+    Ok(Manifest { manifest_version: 1, written_by: env!("CARGO_PKG_VERSION").to_string(), files })
+}
+
+/// Checks every file listed in `dir`'s manifest: present, a regular file, of the recorded
+/// length and checksum. Errors name the file and what differs; a directory without a manifest
+/// is an incomplete (or pre-manifest) artefact.
+pub fn verify_manifest(dir: &Path) -> Result<Manifest> {
+    let path = dir.join(MANIFEST_FILE);
+    if !path.exists() {
+        if !dir.is_dir() {
+            return Err(Error::Invalid(format!("{}: no such artefact directory", dir.display())));
+        }
+        return Err(Error::Invalid(format!(
+            "{}: no {MANIFEST_FILE}: not a complete meshdeco artefact (a run that did not finish, or one written before meshdeco recorded checksums); train it again",
+            dir.display()
+        )));
+    }
+    let manifest: Manifest = read_json(&path)?;
+    for (name, entry) in &manifest.files {
+        let file = dir.join(name);
+        if name.contains(['/', '\\']) || name.starts_with('.') {
+            return Err(Error::parse(&path, None, format!("lists `{name}`, which is not a file of the artefact")));
+        }
+        let meta = std::fs::metadata(&file).map_err(|e| Error::io(&file, e))?;
+        if !meta.is_file() {
+            return Err(Error::Invalid(format!("{}: not a regular file", file.display())));
+        }
+        if meta.len() != entry.bytes {
+            return Err(Error::Invalid(format!(
+                "{}: {} bytes, but {} records {} bytes: the file was changed or damaged after training",
+                file.display(),
+                meta.len(),
+                MANIFEST_FILE,
+                entry.bytes
+            )));
+        }
+        let bytes = std::fs::read(&file).map_err(|e| Error::io(&file, e))?;
+        let crc = crc32_hex(&bytes);
+        if crc != entry.crc32 {
+            return Err(Error::Invalid(format!(
+                "{}: checksum {crc} differs from {} ({}): the file was changed or damaged after training",
+                file.display(),
+                MANIFEST_FILE,
+                entry.crc32
+            )));
+        }
+    }
+    Ok(manifest)
+}
+
+// ---------------------------------------------------------------------------------------------
+// Locks and staging: one writer per artefact directory, all-or-nothing artefacts.
+
+/// Suffix of the lock file beside an artefact directory `<parent>/.<name>` + this.
+pub const LOCK_SUFFIX: &str = ".meshdeco-lock";
+/// Suffix of the staging directory beside an artefact directory `<parent>/.<name>` + this.
+pub const STAGING_SUFFIX: &str = ".meshdeco-partial";
+
+fn sibling(out: &Path, suffix: &str) -> Result<PathBuf> {
+    let named = if out.file_name().is_some() {
+        out.to_path_buf()
+    } else {
+        std::fs::canonicalize(out).map_err(|e| Error::io(out, e))?
+    };
+    let name = named.file_name().ok_or_else(|| {
+        Error::Invalid(format!("output directory `{}` needs a name (e.g. checkpoints/run)", out.display()))
+    })?;
+    let parent = named.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let mut file = std::ffi::OsString::from(".");
+    file.push(name);
+    file.push(suffix);
+    Ok(parent.join(file))
+}
+
+/// The lock file of artefact directory `out` (beside it, hidden).
+pub fn lock_path(out: &Path) -> Result<PathBuf> {
+    sibling(out, LOCK_SUFFIX)
+}
+
+/// The staging directory of artefact directory `out` (beside it, hidden).
+pub fn staging_path(out: &Path) -> Result<PathBuf> {
+    sibling(out, STAGING_SUFFIX)
+}
+
+/// Where a resumed training of `out` finds its checkpoint: an interrupted run's (in the staging
+/// directory) before a finished run's (in `out`).
+pub fn resumable_checkpoint(out: &Path) -> Option<PathBuf> {
+    let staged = staging_path(out).ok().map(|s| s.join(WORK_FILES[0]));
+    staged.into_iter().chain([out.join(WORK_FILES[0])]).find(|p| p.is_file())
+}
+
+/// An exclusive lock on an artefact directory: one writer at a time. The lock file (holding the
+/// writer's process id) lies beside the directory ([`lock_path`]) and is removed when dropped.
 #[derive(Debug)]
 pub struct DirLock {
     path: PathBuf,
@@ -295,11 +481,13 @@ pub struct DirLock {
 }
 
 impl DirLock {
-    /// Locks `dir` (created if missing), or errors at once — naming the directory and the
-    /// process holding it — when another process writes there.
-    pub fn acquire(dir: &Path) -> Result<Self> {
-        std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
-        let path = dir.join(LOCK_FILE);
+    /// Locks artefact directory `out`, or errors at once — naming the directory and the process
+    /// holding it — when another process writes there.
+    pub fn acquire(out: &Path) -> Result<Self> {
+        let path = lock_path(out)?;
+        if let Some(parent) = path.parent() {
+            std::fs::create_dir_all(parent).map_err(|e| Error::io(parent, e))?;
+        }
         let mut file = std::fs::OpenOptions::new()
             .create(true)
             .truncate(false)
@@ -313,7 +501,7 @@ impl DirLock {
                 let holder = std::fs::read_to_string(&path).unwrap_or_default();
                 return Err(Error::Invalid(format!(
                     "{} is being written by another meshdeco process (pid {}); wait for it to finish or choose another output directory",
-                    dir.display(),
+                    out.display(),
                     holder.trim()
                 )));
             }
@@ -328,5 +516,163 @@ impl DirLock {
 impl Drop for DirLock {
     fn drop(&mut self) {
         let _ = std::fs::remove_file(&self.path);
+    }
+}
+
+/// An artefact directory being written: every file goes into a hidden staging directory beside
+/// `out` ([`staging_path`]); [`Self::commit`] writes the manifest, syncs the staging directory
+/// once, and moves its entries into `out` (manifest last). A run that fails or is dropped
+/// before committing leaves `out` as it was and removes the staging directory — unless it holds
+/// an autoencoder checkpoint, which a `--resume` continues from.
+#[derive(Debug)]
+pub struct Staging {
+    out: PathBuf,
+    dir: PathBuf,
+    committed: bool,
+    _lock: DirLock,
+}
+
+impl Staging {
+    /// Locks `out` and prepares its staging directory. With `resume`, the checkpoint of an
+    /// interrupted run (in the staging directory) or else of the finished run in `out` is
+    /// carried over; it is an error when there is none.
+    pub fn begin(out: &Path, resume: bool) -> Result<Self> {
+        if out.exists() && !out.is_dir() {
+            return Err(Error::Invalid(format!("output directory {}: exists and is not a directory", out.display())));
+        }
+        let lock = DirLock::acquire(out)?;
+        let dir = staging_path(out)?;
+        let staged_checkpoint = dir.join(WORK_FILES[0]).is_file();
+        if resume && staged_checkpoint {
+            // An interrupted run: keep its work files, drop anything else it left.
+            for entry in std::fs::read_dir(&dir).map_err(|e| Error::io(&dir, e))? {
+                let entry = entry.map_err(|e| Error::io(&dir, e))?;
+                if !WORK_FILES.contains(&entry.file_name().to_string_lossy().as_ref()) {
+                    remove_entry(&entry.path())?;
+                }
+            }
+        } else {
+            if dir.exists() {
+                std::fs::remove_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
+            }
+            std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
+            if resume {
+                let finished = out.join(WORK_FILES[0]);
+                if !finished.is_file() {
+                    let _ = std::fs::remove_dir(&dir);
+                    return Err(Error::Invalid(format!(
+                        "--resume: no checkpoint at {} (nor an interrupted run's at {})",
+                        finished.display(),
+                        dir.join(WORK_FILES[0]).display()
+                    )));
+                }
+                for name in WORK_FILES {
+                    let from = out.join(name);
+                    if from.is_file() {
+                        std::fs::copy(&from, dir.join(name)).map_err(|e| Error::io(&from, e))?;
+                    }
+                }
+            }
+        }
+        Ok(Staging { out: out.to_path_buf(), dir, committed: false, _lock: lock })
+    }
+
+    /// The staging directory: write every file of the artefact here.
+    pub fn dir(&self) -> &Path {
+        &self.dir
+    }
+
+    /// The artefact directory this run commits into.
+    pub fn out(&self) -> &Path {
+        &self.out
+    }
+
+    /// Writes the manifest, syncs the staging directory once, and moves its entries into `out`:
+    /// the old manifest first goes (so a half-replaced directory is never loaded), entries of
+    /// an earlier run that this one did not write go, the new manifest comes last.
+    pub fn commit(mut self) -> Result<()> {
+        let manifest = compute_manifest(&self.dir)?;
+        write_json(&self.dir.join(MANIFEST_FILE), &manifest)?;
+        sync_tree(&self.dir)?;
+        std::fs::create_dir_all(&self.out).map_err(|e| Error::io(&self.out, e))?;
+        let earlier = holds_artefact(&self.out);
+        let old_manifest = self.out.join(MANIFEST_FILE);
+        if old_manifest.exists() {
+            std::fs::remove_file(&old_manifest).map_err(|e| Error::io(&old_manifest, e))?;
+        }
+        let mut written = Vec::new();
+        for entry in std::fs::read_dir(&self.dir).map_err(|e| Error::io(&self.dir, e))? {
+            let entry = entry.map_err(|e| Error::io(&self.dir, e))?;
+            written.push(entry.file_name());
+        }
+        for name in ARTEFACT_NAMES {
+            let target = self.out.join(name);
+            if earlier && !written.iter().any(|w| w == name) && std::fs::symlink_metadata(&target).is_ok() {
+                remove_entry(&target)?;
+            }
+        }
+        written.sort_by_key(|n| n == MANIFEST_FILE);
+        for name in &written {
+            let (from, to) = (self.dir.join(name), self.out.join(name));
+            if to.is_dir() {
+                std::fs::remove_dir_all(&to).map_err(|e| Error::io(&to, e))?;
+            }
+            std::fs::rename(&from, &to).map_err(|e| Error::io(&to, e))?;
+        }
+        std::fs::remove_dir(&self.dir).map_err(|e| Error::io(&self.dir, e))?;
+        File::open(&self.out).and_then(|d| d.sync_all()).map_err(|e| Error::io(&self.out, e))?;
+        self.committed = true;
+        Ok(())
+    }
+}
+
+impl Drop for Staging {
+    fn drop(&mut self) {
+        if !self.committed && !self.dir.join(WORK_FILES[0]).is_file() {
+            let _ = std::fs::remove_dir_all(&self.dir);
+        }
+    }
+}
+
+/// Whether `dir` holds an artefact of an earlier run (its manifest, or a config resolved by
+/// meshdeco): only then are that run's entries which this run did not write removed.
+fn holds_artefact(dir: &Path) -> bool {
+    dir.join(MANIFEST_FILE).is_file()
+        || std::fs::read_to_string(dir.join("config.toml")).is_ok_and(|t| t.starts_with("# Resolved by meshdeco"))
+}
+
+fn remove_entry(path: &Path) -> Result<()> {
+    let meta = std::fs::symlink_metadata(path).map_err(|e| Error::io(path, e))?;
+    if meta.is_dir() { std::fs::remove_dir_all(path) } else { std::fs::remove_file(path) }
+        .map_err(|e| Error::io(path, e))
+}
+
+/// Makes everything written under `dir` durable: one `syncfs` on Linux (the file system of
+/// `dir`), a sync of each file elsewhere.
+fn sync_tree(dir: &Path) -> Result<()> {
+    #[cfg(target_os = "linux")]
+    {
+        use std::os::fd::AsRawFd;
+        let d = File::open(dir).map_err(|e| Error::io(dir, e))?;
+        // SAFETY: `syncfs` only reads the descriptor, which `d` keeps open for the call.
+        if unsafe { libc::syncfs(d.as_raw_fd()) } != 0 {
+            return Err(Error::io(dir, std::io::Error::last_os_error()));
+        }
+        Ok(())
+    }
+    #[cfg(not(target_os = "linux"))]
+    {
+        fn walk(p: &Path) -> Result<()> {
+            for entry in std::fs::read_dir(p).map_err(|e| Error::io(p, e))? {
+                let path = entry.map_err(|e| Error::io(p, e))?.path();
+                if path.is_dir() {
+                    walk(&path)?;
+                } else {
+                    File::open(&path).and_then(|f| f.sync_all()).map_err(|e| Error::io(&path, e))?;
+                }
+            }
+            Ok(())
+        }
+        walk(dir)
     }
 }

@@ -194,6 +194,19 @@ struct RawConfig {
     name: Option<String>,
     data: RawData,
     method: toml::Table,
+    #[serde(default)]
+    output: OutputConfig,
+}
+
+/// The `[output]` table: what training writes besides the model (all optional).
+#[derive(Debug, Clone, Default, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct OutputConfig {
+    /// Write the views of the model at training: per-component meshes and heat maps
+    /// (`components/`) and region PCA's `segmentation.ply`. Default false: the model files are
+    /// the artefact, and `meshdeco components` writes the views at any time.
+    #[serde(default)]
+    pub views: bool,
 }
 
 #[derive(Debug, Clone, Deserialize, Serialize)]
@@ -217,6 +230,8 @@ pub struct Config {
     pub data: DataConfig,
     /// The validated `[method]` table, typed by its `kind`.
     pub method: MethodConfig,
+    /// The `[output]` table.
+    pub output: OutputConfig,
     /// The file it came from (relative data paths are resolved against the working directory,
     /// as a user types them; `rest = <file>` likewise).
     pub source: Option<PathBuf>,
@@ -295,7 +310,7 @@ impl Config {
         data.numpy_template()?;
 
         let method = MethodConfig::from_table(&raw.method)?;
-        Ok(Config { name, data, method, source: None })
+        Ok(Config { name, data, method, output: raw.output, source: None })
     }
 
     /// The method kind.
@@ -482,11 +497,14 @@ impl DataConfig {
 }
 
 /// Renders a resolved config (name, `[data]`, and a fully specified `[method]` table) as TOML.
-pub fn resolved_toml(name: &str, data: &DataConfig, method: toml::Table) -> String {
+pub fn resolved_toml(name: &str, data: &DataConfig, method: toml::Table, output: &OutputConfig) -> String {
     let mut root = toml::Table::new();
     root.insert("name".into(), name.into());
     root.insert("data".into(), toml::Value::Table(data.to_table()));
     root.insert("method".into(), toml::Value::Table(method));
+    let mut out = toml::Table::new();
+    out.insert("views".into(), output.views.into());
+    root.insert("output".into(), toml::Value::Table(out));
     format!(
         "# Resolved by meshdeco {}: every default written out.\n{}",
         env!("CARGO_PKG_VERSION"),
@@ -511,9 +529,15 @@ mod display_tests {
         let mut m = toml::Table::new();
         m.insert("kind".into(), "pca".into());
         m.insert("components".into(), 5.into());
-        let text = resolved_toml(&c.name, &c.data, m);
+        let text = resolved_toml(&c.name, &c.data, m, &OutputConfig { views: true });
         let back = Config::from_toml(&text).unwrap();
         assert_eq!(back.data, c.data);
         assert_eq!(back.method.components(), 5);
+        assert!(back.output.views);
+        assert!(!c.output.views, "views are written only on request");
+        assert!(
+            Config::from_toml("[data]\npath = \"synthetic:tube\"\n[method]\nkind = \"pca\"\n[output]\nview = true\n")
+                .is_err()
+        );
     }
 }

@@ -109,6 +109,15 @@ pub fn prepare_sequence(mut seq: MeshSequence, cfg: &DataConfig) -> Result<Prepa
         Some(t) => t.resolve("data.test", f, Some(&train))?,
         None => Vec::new(),
     };
+    let overlap: Vec<usize> = test.iter().filter(|t| train.contains(t)).map(|&t| t + 1).collect();
+    if !overlap.is_empty() {
+        eprintln!(
+            "warning: data.test shares {} frame(s) with data.train (1-based: {}{}): test Erms on them is not a held-out error",
+            overlap.len(),
+            overlap.iter().take(10).map(|v| v.to_string()).collect::<Vec<_>>().join(", "),
+            if overlap.len() > 10 { ", …" } else { "" }
+        );
+    }
     let rest_positions = rest_shape(&seq, &cfg.rest, &train)?;
     if cfg.align == Align::Rigid {
         align_rigid(&mut seq, &rest_positions);

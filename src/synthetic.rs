@@ -22,7 +22,10 @@ use crate::rng::Rng;
 pub const PREFIX: &str = "synthetic:";
 
 /// Names of the built-in datasets.
-pub const NAMES: &[&str] = &["tube", "bumps"];
+pub const NAMES: &[&str] = &["tube", "bumps", "pieces"];
+
+/// Offset along x of the second tube of the `pieces` dataset.
+const PIECES_OFFSET: f64 = 0.5;
 
 const RINGS: usize = 61;
 const AROUND: usize = 24;
@@ -48,6 +51,7 @@ pub fn load(path: &str) -> Result<MeshSequence> {
     match name {
         "tube" => Ok(tube_sequence()),
         "bumps" => Ok(bumps_sequence()),
+        "pieces" => Ok(pieces_sequence()),
         _ => Err(Error::Invalid(format!(
             "unknown synthetic dataset `{name}` (in `{path}`); available: {}",
             NAMES.iter().map(|n| format!("synthetic:{n}")).collect::<Vec<_>>().join(", ")
@@ -69,6 +73,14 @@ pub fn planted_regions(path: &str) -> Result<Vec<PlantedRegion>> {
             .map(|(i, _)| i)
             .collect(),
     };
+    if name == "pieces" {
+        // The two pieces: the bending tube and the sliding, bumped one.
+        let n = rest.n_vertices();
+        return Ok(vec![
+            PlantedRegion { name: "piece-0".into(), vertices: (0..n).collect() },
+            PlantedRegion { name: "piece-1".into(), vertices: (n..2 * n).collect() },
+        ]);
+    }
     match name {
         "tube" => Ok(vec![
             region("joint-a", &|z, _| joint_zone(z, JOINT_A)),
@@ -209,6 +221,38 @@ fn bumps_sequence() -> MeshSequence {
     named("bumps", rest.faces, frames)
 }
 
+/// Two separate tubes (two connected pieces, 2932 vertices): the first bends at its joint A, the
+/// second, beside it at x = 0.5, carries the three bumps and slides along x by up to ±0.1 — a
+/// motion of one piece relative to the other that only a per-piece position can express.
+fn pieces_sequence() -> MeshSequence {
+    let rest = tube_mesh();
+    let n = rest.n_vertices();
+    let mut faces = rest.faces.clone();
+    faces.extend(rest.faces.iter().map(|f| f.map(|v| v + n)));
+    let second = |p: &[Vec3], dx: f64| p.iter().map(|q| [q[0] + PIECES_OFFSET + dx, q[1], q[2]]).collect::<Vec<_>>();
+    let mut rng = Rng { state: 0x7069_6563 };
+    let max_bend = 50f64.to_radians();
+    let mut frames = Vec::with_capacity(40);
+    for i in 0..40 {
+        let (a, amps, dx) = if i == 0 {
+            (0.0, Vec::new(), 0.0)
+        } else {
+            let a = max_bend * symmetric(&mut rng);
+            let amps: Vec<(f64, f64, f64)> = BUMPS.iter().map(|&(z, phi)| (z, phi, 0.06 * rng.uniform())).collect();
+            (a, amps, 0.1 * symmetric(&mut rng))
+        };
+        let (first, bumped) = if i == 0 {
+            (rest.positions.clone(), rest.positions.clone())
+        } else {
+            (deform(&rest, (a, 0.0), &[]), deform(&rest, (0.0, 0.0), &amps))
+        };
+        let mut frame = first;
+        frame.extend(second(&bumped, dx));
+        frames.push(frame);
+    }
+    named("pieces", faces, frames)
+}
+
 fn named(prefix: &str, faces: Vec<[usize; 3]>, frames: Vec<Vec<Vec3>>) -> MeshSequence {
     let names = (0..frames.len()).map(|i| format!("{prefix}{:03}", i + 1)).collect();
     MeshSequence { faces, frames, names }
@@ -248,7 +292,8 @@ mod tests {
             let b = load(name).unwrap();
             assert_eq!(a, b);
             assert!(a.frames.iter().flatten().flatten().all(|x| x.is_finite()));
-            assert_eq!(a.frames[0], tube_mesh().positions, "frame 1 is the rest shape");
+            let rest = tube_mesh().positions;
+            assert_eq!(a.frames[0][..rest.len()], rest[..], "frame 1 starts with the rest tube");
         }
         assert!(load("synthetic:nope").unwrap_err().to_string().contains("synthetic:tube"));
     }

@@ -52,7 +52,7 @@ fn bad_configs_fail_with_key_and_value() {
 fn train_encode_synthesize_chain() {
     let d = tmp("chain");
     let cfg = d.join("bumps.toml");
-    std::fs::write(&cfg, "name = \"bumps\"\n[data]\npath = \"synthetic:bumps\"\ntrain = \"1-30\"\ntest = \"rest\"\n[method]\nkind = \"splocs\"\ncomponents = 3\n").unwrap();
+    std::fs::write(&cfg, "name = \"bumps\"\n[data]\npath = \"synthetic:bumps\"\ntrain = \"1-30\"\ntest = \"rest\"\n[method]\nkind = \"splocs\"\ncomponents = 3\n[output]\nviews = true\n").unwrap();
     let o = meshdeco(&["train", "--config", "bumps.toml"], &d);
     assert!(o.status.success(), "{}", stderr(&o));
     let model = d.join("checkpoints/bumps");

@@ -91,7 +91,7 @@ fn a_second_writer_of_an_artefact_directory_is_refused_at_once() {
         .spawn()
         .unwrap();
     // Wait until the first run holds the directory (its lock file appears).
-    let lock = out.join(meshdeco::artifact::LOCK_FILE);
+    let lock = meshdeco::artifact::lock_path(&out).unwrap();
     let t0 = Instant::now();
     while !lock.exists() {
         assert!(t0.elapsed() < Duration::from_secs(60), "the first run never locked {}", out.display());

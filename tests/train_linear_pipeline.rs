@@ -34,6 +34,8 @@ path = "synthetic:bumps"
 kind = "splocs"
 components = 3
 max_iterations = 20
+[output]
+views = true
 "#,
     )
     .unwrap();

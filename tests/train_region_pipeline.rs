@@ -33,6 +33,8 @@ test = "rest"
 kind = "region-pca"
 components = 24
 max_regions = 8
+[output]
+views = true
 "#,
     )
     .unwrap();
@@ -148,9 +150,22 @@ fn face_poses_region_vs_holistic() {
     // components is exact up to round-off on 7 mean-centred poses.
     assert!(h.metrics.train_erms < 1e-6 * th.max(1.0) + 1e-3, "holistic PCA K = 6 train Erms {}", h.metrics.train_erms);
     let _ = std::fs::remove_dir_all(&out_78);
-    // Automatic segmentation (k grown until a cluster is not compact), 6 components per region.
+    // Automatic segmentation (k grown until a cluster is not compact). It finds 2 regions on
+    // these 7 poses, which hold at most 2 × 7 components: a larger budget is refused (it was
+    // shrunk silently before), the full one trains exactly.
     let out_a = out_dir("face-region-auto");
-    let cfg = toml("region-pca", "max_regions = 16").replace(&format!("components = {k}"), "components = 96");
+    let too_many = toml("region-pca", "max_regions = 16").replace(&format!("components = {k}"), "components = 96");
+    let e = meshdeco::pipeline::train(
+        &Config::from_toml(&too_many).unwrap(),
+        &out_a,
+        &meshdeco::pipeline::TrainOptions::default(),
+        &mut Silent,
+    )
+    .err()
+    .expect("96 components on 2 regions of 7 poses must be refused");
+    assert!(e.to_string().contains("14 in all"), "{e}");
+    assert!(!out_a.exists(), "a refused run left {}", out_a.display());
+    let cfg = toml("region-pca", "max_regions = 16").replace(&format!("components = {k}"), "components = 14");
     let auto = meshdeco::pipeline::train(
         &Config::from_toml(&cfg).unwrap(),
         &out_a,
@@ -166,6 +181,7 @@ fn face_poses_region_vs_holistic() {
         auto.metrics.train_erms,
         auto.metrics.test_erms.unwrap()
     );
+    assert_eq!((a.model.regions.len(), auto.metrics.components), (2, 14));
     // Every cluster of the automatic segmentation is compact on the full mesh.
     assert!(meshdeco::methods::segmentation::all_compact(&a.labels, a.model.regions.len(), &a.rest.faces));
 }

@@ -71,5 +71,15 @@ pub fn run(a: EvalArgs) -> Result<()> {
     for f in &o.files {
         println!("wrote {}", f.display());
     }
+    for f in &o.failed {
+        eprintln!("failed: {}/{}/K{}: {}", f.dataset, f.method, f.k, f.error);
+    }
+    if !o.failed.is_empty() {
+        anyhow::bail!(
+            "{} of {} cells failed (listed above, in the report and in failed_cells.csv); the others are done and a rerun retries only the failed ones",
+            o.failed.len(),
+            o.failed.len() + o.results.len()
+        );
+    }
     Ok(())
 }

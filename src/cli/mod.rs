@@ -19,6 +19,9 @@ mod train;
 #[derive(Debug, Parser)]
 #[command(name = "meshdeco", version, about, long_about = None)]
 pub struct Cli {
+    /// Print where the time went at the end (phases: load, features, fit, measure, write, …).
+    #[arg(long, short, global = true)]
+    pub verbose: bool,
     #[command(subcommand)]
     pub command: Command,
 }
@@ -56,7 +59,38 @@ pub enum Command {
 
 /// Runs one parsed command line.
 pub fn run(cli: Cli) -> Result<()> {
-    match cli.command {
+    let t = std::time::Instant::now();
+    let verbose = cli.verbose;
+    let result = dispatch(cli.command);
+    if verbose {
+        print_timings(t.elapsed().as_secs_f64());
+    }
+    result
+}
+
+/// The phase timings recorded by the library, and the rest of the wall time.
+fn print_timings(total: f64) {
+    let phases = meshdeco::timing::phases();
+    let known: f64 = phases.iter().map(|(_, s)| s).sum();
+    eprintln!("time: {total:.3} s in all");
+    for (name, s) in &phases {
+        eprintln!("  {name:<14} {s:>9.3} s  {:>5.1} %", 100.0 * s / total.max(1e-12));
+    }
+    let other = (total - known).max(0.0);
+    eprintln!("  {:<14} {other:>9.3} s  {:>5.1} %", "other", 100.0 * other / total.max(1e-12));
+    for (name, n) in meshdeco::timing::counts() {
+        eprintln!("  {name}: {n}");
+    }
+    // Reading speed of the mesh files (they are read and parsed in parallel).
+    let bytes = meshdeco::timing::counts().into_iter().find(|(n, _)| n == "mesh bytes read").map(|(_, b)| b);
+    let load = phases.iter().find(|(n, _)| n == "load meshes" || n == "load").map(|(_, s)| *s);
+    if let (Some(b), Some(s)) = (bytes, load) {
+        eprintln!("  mesh loading: {:.1} MB/s ({} bytes in {s:.3} s)", b as f64 / 1e6 / s.max(1e-9), b);
+    }
+}
+
+fn dispatch(command: Command) -> Result<()> {
+    match command {
         Command::Components(a) => apply::components(a),
         Command::Interpolate(a) => apply::interpolate(a),
         Command::Encode(a) => apply::encode(a),

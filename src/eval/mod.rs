@@ -54,7 +54,6 @@ use crate::metrics::erms::Alignment;
 use crate::metrics::locality::{SUPPORT_THRESHOLD, support_regions};
 use crate::metrics::sted::{FrameOrder, Sted, StedParams};
 use crate::model::load_model;
-use crate::pipeline::autoencoder::CHECKPOINT_FILE;
 use crate::pipeline::metrics_file::median;
 use crate::pipeline::train::{TrainOptions, TrainOutcome, frames_in_data_units, train_prepared};
 use crate::pipeline::{Progress, Silent};
@@ -64,6 +63,8 @@ use crate::preprocess::{self, Prepared};
 pub const CELL_FILE: &str = "cell.json";
 /// File name of the pending marker (the train config text of a cell being trained).
 pub const PENDING_FILE: &str = "eval_cell.toml";
+/// File of a cell whose last attempt failed (its error); removed when the cell succeeds.
+pub const FAILED_FILE: &str = "cell_failed.json";
 /// File name of a cell's cached control-point curve.
 pub const CONTROL_POINTS_FILE: &str = "control_points.json";
 
@@ -106,6 +107,21 @@ pub struct CellResult {
     pub test_erms_fitted: Option<f64>,
     pub train_frames: usize,
     pub test_frames: usize,
+    /// (edge, frame) pairs STED left out: zero-length edges of the ground truth.
+    #[serde(default)]
+    pub sted_skipped_edges: usize,
+}
+
+/// A cell whose training or measuring failed: recorded, shown in the tables and the report,
+/// retried by the next run; the cells after it still run.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FailedCell {
+    pub dataset: String,
+    pub method: String,
+    #[serde(rename = "K")]
+    pub k: usize,
+    /// The error, with its whole chain.
+    pub error: String,
 }
 
 /// Cached control-point curve of a cell.
@@ -138,6 +154,8 @@ pub struct EvalOptions {
 #[derive(Debug, Clone)]
 pub struct EvalOutcome {
     pub results: Vec<CellResult>,
+    /// Cells that failed (the run went on with the others).
+    pub failed: Vec<FailedCell>,
     pub control_points: Vec<ControlPointRow>,
     /// Cells trained in this run.
     pub trained: usize,
@@ -172,7 +190,8 @@ impl DatasetData {
     fn load(d: &EvalDataset) -> Result<Self> {
         let prep = preprocess::prepare(&d.data)?;
         let test = frames_in_data_units(&prep, &prep.test);
-        let sted = Sted::new(prep.rest.n_vertices(), &prep.rest.faces, StedParams::default())?;
+        let names = prep.test.iter().map(|&f| prep.sequence.names.get(f).cloned().unwrap_or_default()).collect();
+        let sted = Sted::new(prep.rest.n_vertices(), &prep.rest.faces, StedParams::default())?.with_frame_names(names);
         Ok(DatasetData { prep, test, sted })
     }
 }
@@ -241,6 +260,7 @@ fn measure(cell: &Cell, cfg: &EvalConfig, ds: &DatasetData, trained: &TrainOutco
         test_erms_fitted: metrics.test_erms_fitted.map(|x| check_finite("fitted test Erms", &name, x)).transpose()?,
         train_frames: ds.prep.train.len(),
         test_frames: ds.test.len(),
+        sted_skipped_edges: sted.skipped_edges,
     })
 }
 
@@ -280,7 +300,7 @@ fn train_cell(
     artifact::write_atomic(&pending, cell.config_text.as_bytes())?;
     let c = &cell.config;
     // Only the autoencoder writes checkpoints.
-    let resume = same_pending && dir.join(CHECKPOINT_FILE).is_file();
+    let resume = same_pending && artifact::resumable_checkpoint(dir).is_some();
     let fresh = TrainOptions { resume: false, stop: opts.stop.clone() };
     if resume {
         match train_prepared(c, prep, dir, &TrainOptions { resume: true, stop: opts.stop.clone() }, inner) {
@@ -318,6 +338,7 @@ pub fn run(
     let cells = cfg.cells()?;
     let mut data: Vec<Option<DatasetData>> = cfg.datasets.iter().map(|_| None).collect();
     let mut results = Vec::with_capacity(cells.len());
+    let mut failed = Vec::new();
     let (mut trained, mut reused) = (0, 0);
     sweep.stage("eval", cells.len() as u64);
     for (i, cell) in cells.iter().enumerate() {
@@ -340,10 +361,25 @@ pub fn run(
         if stopped(opts) {
             return Err(interrupted());
         }
-        let ds = DatasetData::cached(&mut data[cell.dataset], d)?;
-        let outcome = train_cell(cell, &ds.prep, &dir, opts, inner)
-            .map_err(|e| if stopped(opts) { interrupted() } else { Error::Invalid(format!("cell {label}: {e}")) })?;
-        let r = measure(cell, cfg, ds, &outcome)?;
+        let attempt = DatasetData::cached(&mut data[cell.dataset], d).and_then(|ds| {
+            let outcome = train_cell(cell, &ds.prep, &dir, opts, inner)?;
+            measure(cell, cfg, ds, &outcome)
+        });
+        let r = match attempt {
+            Ok(r) => r,
+            Err(_) if stopped(opts) => return Err(interrupted()),
+            Err(e) => {
+                // Record the failure in the cell and go on with the next cell.
+                let f =
+                    FailedCell { dataset: d.name.clone(), method: m.label.clone(), k: cell.k, error: e.to_string() };
+                std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
+                artifact::write_json(&dir.join(FAILED_FILE), &f)?;
+                sweep.step(i as u64 + 1, &format!("{label} failed: {e}"));
+                failed.push(f);
+                continue;
+            }
+        };
+        let _ = std::fs::remove_file(dir.join(FAILED_FILE));
         artifact::write_json(&dir.join(CELL_FILE), &r)?;
         // Use the values as stored (JSON text round trip), so a first run and a rerun that
         // reuses the cell write identical tables.
@@ -407,8 +443,8 @@ pub fn run(
         sweep.finish_stage();
     }
 
-    let files = report::write_all(cfg, out, &results, &cp_rows)?;
-    Ok(EvalOutcome { results, control_points: cp_rows, trained, reused, files })
+    let files = report::write_all(cfg, out, &results, &failed, &cp_rows)?;
+    Ok(EvalOutcome { results, failed, control_points: cp_rows, trained, reused, files })
 }
 
 /// [`run`] without progress reporting.

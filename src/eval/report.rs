@@ -7,7 +7,7 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use super::plots::{Series, line_plot};
-use super::{CellResult, ControlPointRow, EvalConfig};
+use super::{CellResult, ControlPointRow, EvalConfig, FailedCell};
 use crate::artifact::write_atomic;
 use crate::error::Result;
 
@@ -71,12 +71,36 @@ fn fo(x: Option<f64>, digits: usize) -> String {
 
 /// Writes results.csv, control_points.csv (when there are rows), the plots and report.md into
 /// `out`; returns the paths written.
-pub fn write_all(cfg: &EvalConfig, out: &Path, results: &[CellResult], cp: &[ControlPointRow]) -> Result<Vec<PathBuf>> {
+pub fn write_all(
+    cfg: &EvalConfig,
+    out: &Path,
+    results: &[CellResult],
+    failed: &[FailedCell],
+    cp: &[ControlPointRow],
+) -> Result<Vec<PathBuf>> {
     std::fs::create_dir_all(out).map_err(|e| crate::Error::io(out, e))?;
     let mut files = Vec::new();
     let p = out.join("results.csv");
     write_atomic(&p, results_csv(results).as_bytes())?;
     files.push(p);
+    let p = out.join("failed_cells.csv");
+    if failed.is_empty() {
+        let _ = std::fs::remove_file(&p);
+    } else {
+        let mut csv = String::from("dataset,method,K,error\n");
+        for r in failed {
+            let _ = writeln!(
+                csv,
+                "{},{},{},\"{}\"",
+                r.dataset,
+                r.method,
+                r.k,
+                r.error.replace('"', "\"\"").replace('\n', " ")
+            );
+        }
+        write_atomic(&p, csv.as_bytes())?;
+        files.push(p);
+    }
     if !cp.is_empty() {
         let p = out.join("control_points.csv");
         write_atomic(&p, control_points_csv(cp).as_bytes())?;
@@ -92,6 +116,10 @@ pub fn write_all(cfg: &EvalConfig, out: &Path, results: &[CellResult], cp: &[Con
          energy share, the support size (elements above 1 % of the peak) and the number of connected support \
          regions. Seconds: fit time.\n\n",
     );
+    if !failed.is_empty() {
+        let _ =
+            writeln!(md, "**{} cell(s) failed** (marked in the tables; errors in `failed_cells.csv`).\n", failed.len());
+    }
     for d in &cfg.datasets {
         let rows: Vec<&CellResult> = results.iter().filter(|r| r.dataset == d.name).collect();
         let _ = writeln!(
@@ -124,6 +152,15 @@ pub fn write_all(cfg: &EvalConfig, out: &Path, results: &[CellResult], cp: &[Con
                 fo(r.support_size, 0),
                 fo(r.support_regions, 1),
                 f(r.seconds, 1)
+            );
+        }
+        for r in failed.iter().filter(|r| r.dataset == d.name) {
+            let _ = writeln!(
+                md,
+                "| {} | — | {} | **failed** | {} | | | | | | | | |",
+                r.method,
+                r.k,
+                r.error.replace('|', "\\|").replace('\n', " ")
             );
         }
         md.push('\n');

@@ -85,6 +85,7 @@ pub fn read_mesh(path: &Path) -> Result<LoadedMesh> {
         )));
     }
     let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    crate::timing::count("mesh bytes read", bytes.len() as u64);
     parse_mesh(&bytes, format, path)
 }
 

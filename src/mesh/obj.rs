@@ -21,7 +21,7 @@
 use std::path::Path;
 
 use super::TriMesh;
-use super::load::{FaceCollector, LoadedMesh, finite_coordinate, numbered_lines, show, tokens};
+use super::load::{FaceCollector, LoadedMesh, finite_coordinate, numbered_lines, parse_f64, show, tokens};
 use crate::error::{Error, Result};
 
 /// Statements that do not affect positions or triangles and are skipped without a warning.
@@ -35,6 +35,8 @@ pub fn parse_obj(bytes: &[u8], path: &Path) -> Result<LoadedMesh> {
     let mut polygon: Vec<usize> = Vec::with_capacity(8);
     // (count, first line, statement) of skipped statements, for the warnings.
     let mut skipped: Vec<(usize, usize, String)> = Vec::new();
+    // (count, first line) of `v` lines with unexpected data after the position.
+    let mut trailing: (usize, Option<usize>) = (0, None);
 
     for (line_no, line) in numbered_lines(bytes) {
         let line = line.split(|&b| b == b'#').next().unwrap_or(line);
@@ -55,6 +57,17 @@ pub fn parse_obj(bytes: &[u8], path: &Path) -> Result<LoadedMesh> {
                         Error::parse(path, Some(line_no), format!("vertex has {axis} coordinates, expected 3"))
                     })?;
                     *slot = finite_coordinate(t, axis).map_err(|m| Error::parse(path, Some(line_no), m))?;
+                }
+                // After x y z, OBJ allows a weight w or a colour r g b (numbers); anything else
+                // is reported (and ignored).
+                let (mut extra, mut numeric) = (0, true);
+                for t in tok {
+                    extra += 1;
+                    numeric &= parse_f64(t).is_some_and(f64::is_finite);
+                }
+                if !(numeric && matches!(extra, 0 | 1 | 3)) {
+                    trailing.0 += 1;
+                    trailing.1.get_or_insert(line_no);
                 }
                 positions.push(p);
             }
@@ -92,6 +105,11 @@ pub fn parse_obj(bytes: &[u8], path: &Path) -> Result<LoadedMesh> {
     }
     let p = path.display();
     let mut warnings: Vec<String> = faces.polygon_warning(|l| format!("{p}:{l}")).into_iter().collect();
+    if let (n, Some(first)) = trailing {
+        warnings.push(format!(
+            "{p}:{first}: {n} 'v' line(s) carry data after x y z that is neither a weight w nor a colour r g b; it is ignored"
+        ));
+    }
     for (count, line, name) in skipped {
         let what = match name.as_str() {
             "l" => "line elements ('l')".to_string(),
@@ -170,6 +188,16 @@ mod tests {
         assert_eq!(m.warnings.len(), 2);
         assert!(m.warnings[0].contains("t.obj:5: 1 line elements"), "{:?}", m.warnings);
         assert!(m.warnings[1].contains("t.obj:6: 2 'bogus' statements"), "{:?}", m.warnings);
+    }
+
+    #[test]
+    fn trailing_data_on_vertex_lines_is_reported_unless_a_weight_or_colour() {
+        let ok = parse("v 0 0 0 1\nv 1 0 0 0.5 0.5 0.5\nv 0 1 0\nf 1 2 3\n").unwrap();
+        assert!(ok.warnings.is_empty(), "{:?}", ok.warnings);
+        let m = parse("v 0 0 0 junk\nv 1 0 0 1 2\nv 0 1 0\nf 1 2 3\n").unwrap();
+        assert_eq!(m.mesh.positions[1], [1.0, 0.0, 0.0]);
+        assert_eq!(m.warnings.len(), 1, "{:?}", m.warnings);
+        assert!(m.warnings[0].starts_with("t.obj:1: 2 'v' line(s) carry data after x y z"), "{:?}", m.warnings);
     }
 
     fn err(s: &str) -> String {

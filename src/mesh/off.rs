@@ -61,11 +61,23 @@ pub fn parse_off(bytes: &[u8], path: &Path) -> Result<LoadedMesh> {
     let eof = |what: &str, i: usize, n: usize| {
         Error::parse(path, None, format!("unexpected end of file: {what} {} of {n} is missing", i + 1))
     };
+    // What the header's prefixes promise after each position: ST texture (2), C colour (3 or 4),
+    // N normal (3). Lines that do not match are reported once (the data is ignored either way).
+    let prefix = &keyword[..keyword.len() - 3];
+    let promised =
+        3 + if prefix.contains(&b'N') { 3 } else { 0 } + if prefix.windows(2).any(|w| w == b"ST") { 2 } else { 0 };
+    let colour = prefix.contains(&b'C');
+    let mut odd_vertices: (usize, Option<usize>) = (0, None);
     let mut positions = Vec::with_capacity(n_vertices.min(1 << 24));
     for i in 0..n_vertices {
         let (no, tok) = lines.next().ok_or_else(|| eof("vertex", i, n_vertices))?;
         if tok.len() < 3 {
             return Err(Error::parse(path, Some(no), format!("vertex has {} coordinates, expected 3", tok.len())));
+        }
+        let fits = if colour { tok.len() == promised + 3 || tok.len() == promised + 4 } else { tok.len() == promised };
+        if !fits {
+            odd_vertices.0 += 1;
+            odd_vertices.1.get_or_insert(no);
         }
         let mut p = [0.0; 3];
         for axis in 0..3 {
@@ -75,6 +87,7 @@ pub fn parse_off(bytes: &[u8], path: &Path) -> Result<LoadedMesh> {
     }
     let mut faces = FaceCollector::default();
     let mut polygon = Vec::with_capacity(8);
+    let mut odd_faces: (usize, Option<usize>) = (0, None);
     for i in 0..n_faces {
         let (no, tok) = lines.next().ok_or_else(|| eof("face", i, n_faces))?;
         let err = |m: String| Error::parse(path, Some(no), m);
@@ -84,6 +97,12 @@ pub fn parse_off(bytes: &[u8], path: &Path) -> Result<LoadedMesh> {
             .ok_or_else(|| err(format!("face size '{}' is not a non-negative integer", show(tok[0]))))?;
         if tok.len() < 1 + n {
             return Err(err(format!("face declares {n} vertices but lists {}", tok.len() - 1)));
+        }
+        // After the indices: nothing, a colour index, or an RGB(A) colour.
+        let rest = &tok[1 + n..];
+        if !(matches!(rest.len(), 0 | 1 | 3 | 4) && rest.iter().all(|t| super::load::parse_f64(t).is_some())) {
+            odd_faces.0 += 1;
+            odd_faces.1.get_or_insert(no);
         }
         polygon.clear();
         for t in &tok[1..=n] {
@@ -105,6 +124,18 @@ pub fn parse_off(bytes: &[u8], path: &Path) -> Result<LoadedMesh> {
     if let Some((no, _)) = lines.next() {
         warnings.push(format!("{p}:{no}: content after the last face ignored"));
     }
+    if let (n, Some(first)) = odd_vertices {
+        warnings.push(format!(
+            "{p}:{first}: {n} vertex line(s) do not hold what the '{}' header promises ({promised} numbers{}); extra data is ignored",
+            show(keyword),
+            if colour { " and a colour" } else { "" }
+        ));
+    }
+    if let (n, Some(first)) = odd_faces {
+        warnings.push(format!(
+            "{p}:{first}: {n} face line(s) carry data after their indices that is not a colour; it is ignored"
+        ));
+    }
     Ok(LoadedMesh { mesh: TriMesh::new(positions, faces.faces), warnings })
 }
 
@@ -114,6 +145,27 @@ mod tests {
 
     fn parse(s: &str) -> Result<LoadedMesh> {
         parse_off(s.as_bytes(), Path::new("t.off"))
+    }
+
+    #[test]
+    fn headers_promising_more_data_and_junk_after_faces_are_reported() {
+        // NOFF promises a normal after each position; this file has none.
+        let m = parse("NOFF\n3 1\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n").unwrap();
+        assert_eq!(m.warnings.len(), 1, "{:?}", m.warnings);
+        assert!(
+            m.warnings[0].starts_with("t.off:3: 3 vertex line(s) do not hold what the 'NOFF' header"),
+            "{:?}",
+            m.warnings
+        );
+        // COFF without colours, and junk after a face's indices.
+        let m = parse("COFF\n3 1\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2 x y\n").unwrap();
+        assert_eq!(m.warnings.len(), 2, "{:?}", m.warnings);
+        assert!(
+            m.warnings[1].starts_with("t.off:6: 1 face line(s) carry data after their indices"),
+            "{:?}",
+            m.warnings
+        );
+        assert_eq!(m.mesh.faces, vec![[0, 1, 2]]);
     }
 
     #[test]

@@ -58,6 +58,10 @@ pub fn load_sequence(spec: &str) -> Result<MeshSequence> {
 
 /// Loads and validates a sequence without printing anything; see [`load_sequence`].
 pub fn read_sequence(spec: &str) -> Result<LoadedSequence> {
+    crate::timing::timed("load meshes", || read_sequence_untimed(spec))
+}
+
+fn read_sequence_untimed(spec: &str) -> Result<LoadedSequence> {
     let files = resolve_spec(spec)?;
     let loaded: Vec<Result<super::LoadedMesh>> = files.par_iter().map(|p| read_mesh(p)).collect();
     let mut meshes = Vec::with_capacity(files.len());

@@ -5,8 +5,9 @@
 //! positions, any length units). Region i models the sub-vector of its N_i vertices as
 //! `μ_i + B_iᵀ c_i` with mean μ_i (3N_i) and orthonormal basis B_i (P_i × 3N_i, row-major rows =
 //! components). Components per region: the **total budget** K is split evenly, P_i = ⌊K/M⌋ plus
-//! one for the first K mod M regions, each capped at min(F, 3N_i) (so the total can fall below K
-//! on tiny regions; [`RegionPcaModel::n_components`] gives the actual total).
+//! one for the first K mod M regions, each capped at min(F, 3N_i); what the caps leave over goes
+//! to the regions with room left, so the total is exactly K. A K above Σ_i min(F, 3N_i) is
+//! refused (naming that capacity).
 //!
 //! Encoding (Eq. 6/7, including the means the paper's notation folds away): ζ = [c_1; …; c_M]
 //! minimises `Σ_i ‖x_i − μ_i − B_iᵀc_i‖² + β Σ_{i<j} Σ_{v shared by i, j} ‖(μ_i + B_iᵀc_i)_v −
@@ -112,6 +113,40 @@ impl RegionPcaModel {
             return Err(Error::Invalid(format!("vertex {v} belongs to no region")));
         }
         let f = x.n_rows();
+        // Each region can give at most min(F, 3·N_r) components: refuse a budget beyond that
+        // rather than train fewer components than the config says.
+        let caps: Vec<usize> = regions
+            .iter()
+            .map(|r| {
+                let mut v = r.clone();
+                v.sort_unstable();
+                v.dedup();
+                f.min(3 * v.len()).max(1)
+            })
+            .collect();
+        let capacity: usize = caps.iter().sum();
+        if config.components > capacity {
+            return Err(Error::config(
+                "components",
+                format!(
+                    "components ({}) exceeds what region PCA can give on these data: {m} regions with at most min(training frames {f}, 3 × region size) components each, {capacity} in all; lower it to ≤ {capacity}",
+                    config.components
+                ),
+            ));
+        }
+        // K split evenly (the first K mod M regions one more), each capped at its capacity; what
+        // the caps leave over goes, one at a time, to the regions with room left.
+        let mut counts: Vec<usize> =
+            (0..m).map(|i| (config.components / m + usize::from(i < config.components % m)).min(caps[i])).collect();
+        let mut left = config.components - counts.iter().sum::<usize>();
+        while left > 0 {
+            for i in 0..m {
+                if left > 0 && counts[i] < caps[i] {
+                    counts[i] += 1;
+                    left -= 1;
+                }
+            }
+        }
         let mut out = Vec::with_capacity(m);
         for (i, r) in regions.iter().enumerate() {
             let mut verts = r.clone();
@@ -125,8 +160,8 @@ impl RegionPcaModel {
                     sub.extend_from_slice(&xr[3 * v..3 * v + 3]);
                 }
             }
-            let want = config.components / m + usize::from(i < config.components % m);
-            let p = want.min(f).min(3 * ni).max(1);
+            let p = counts[i];
+            debug_assert!(p <= f.min(3 * ni).max(1));
             let lm = Pca::fit(
                 DataMatrix::new(&sub, f, ni, 3)?,
                 &PcaConfig { components: p, centering: PcaCentering::Mean },

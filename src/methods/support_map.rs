@@ -206,7 +206,9 @@ impl SupportCache {
                     d.len()
                 )));
             }
-            if let Some(i) = d.iter().position(|v| !v.is_finite() || *v < 0.0) {
+            // +∞ is the distance to another connected piece of the mesh: outside every support
+            // (ramp 1). NaN and negative values are errors.
+            if let Some(i) = d.iter().position(|v| v.is_nan() || *v < 0.0) {
                 return Err(Error::Numerical(format!(
                     "support distances for centres {set:?}: element {i} has distance {}",
                     d[i]

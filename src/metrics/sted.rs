@@ -98,6 +98,9 @@ pub struct StedReport {
     pub combined: f64,
     /// The parameters used.
     pub params: StedParams,
+    /// (edge, frame) pairs left out of the spatial part because the ground-truth edge has length
+    /// 0 there (coincident vertices): its relative change is undefined.
+    pub skipped_edges: usize,
 }
 
 /// STED evaluator for one connectivity: precomputes the edges and every vertex's
@@ -111,6 +114,8 @@ pub struct Sted {
     nbhd_offsets: Vec<usize>,
     /// Concatenated neighbourhoods (edge indices into `edges`, sorted, unique).
     nbhd: Vec<usize>,
+    /// Names of the frames (file stems) for messages; positions when empty.
+    frame_names: Vec<String>,
 }
 
 impl Sted {
@@ -181,7 +186,7 @@ impl Sted {
             nbhd.truncate(kept);
             nbhd_offsets.push(nbhd.len());
         }
-        Ok(Sted { params, n_vertices, edges, nbhd_offsets, nbhd })
+        Ok(Sted { params, n_vertices, edges, nbhd_offsets, nbhd, frame_names: Vec::new() })
     }
 
     /// The parameters.
@@ -199,17 +204,33 @@ impl Sted {
         &self.nbhd[self.nbhd_offsets[v]..self.nbhd_offsets[v + 1]]
     }
 
+    /// Names the frames of the sequences measured next (e.g. their file stems), so that errors
+    /// name `95` rather than position 84 of a test split.
+    pub fn with_frame_names(mut self, names: Vec<String>) -> Self {
+        self.frame_names = names;
+        self
+    }
+
+    fn frame_label(&self, frame: usize) -> String {
+        match self.frame_names.get(frame) {
+            Some(n) => format!("`{n}` (position {frame})"),
+            None => frame.to_string(),
+        }
+    }
+
     fn check_frame(&self, what: &str, frame: usize, p: &[Vec3]) -> Result<()> {
         if p.len() != self.n_vertices {
             return Err(Error::Invalid(format!(
-                "{what} frame {frame} has {} vertices, the mesh {}",
+                "{what} frame {} has {} vertices, the mesh {}",
+                self.frame_label(frame),
                 p.len(),
                 self.n_vertices
             )));
         }
         if let Some(v) = p.iter().position(|q| q.iter().any(|x| !x.is_finite())) {
             return Err(Error::Invalid(format!(
-                "{what} frame {frame}: vertex {v} has a non-finite coordinate {:?}",
+                "{what} frame {}: vertex {v} has a non-finite coordinate {:?}",
+                self.frame_label(frame),
                 p[v]
             )));
         }
@@ -230,31 +251,34 @@ impl Sted {
         Ok(())
     }
 
-    /// Ground-truth edge lengths and signed relative edge changes `(l' − l)/l` of one frame pair.
-    /// Errors on a zero-length ground-truth edge.
-    fn edge_changes(&self, frame: usize, truth: &[Vec3], result: &[Vec3]) -> Result<(Vec<f64>, Vec<f64>)> {
+    /// Ground-truth edge lengths and signed relative edge changes `(l' − l)/l` of one frame
+    /// pair, and how many edges were skipped: an edge of length 0 in the ground truth has an
+    /// undefined relative change and gets weight 0 (length 0, change 0).
+    fn edge_changes(&self, truth: &[Vec3], result: &[Vec3]) -> (Vec<f64>, Vec<f64>, usize) {
         let mut lengths = Vec::with_capacity(self.edges.len());
         let mut changes = Vec::with_capacity(self.edges.len());
+        let mut skipped = 0;
         for &[i, j] in &self.edges {
             let l = crate::mesh::dist(truth[i], truth[j]);
-            if l <= 0.0 {
-                return Err(Error::Numerical(format!(
-                    "ground-truth frame {frame}: edge ({i}, {j}) has length 0; relative edge change undefined"
-                )));
+            if l > 0.0 {
+                lengths.push(l);
+                changes.push((crate::mesh::dist(result[i], result[j]) - l) / l);
+            } else {
+                skipped += 1;
+                lengths.push(0.0);
+                changes.push(0.0);
             }
-            lengths.push(l);
-            changes.push((crate::mesh::dist(result[i], result[j]) - l) / l);
         }
-        Ok((lengths, changes))
+        (lengths, changes, skipped)
     }
 
     /// Local deviation `dev(v)` of every vertex for one frame pair (module docs); 0 for vertices
-    /// with an empty neighbourhood. Errors on mismatched sizes, non-finite input or a
-    /// zero-length ground-truth edge.
+    /// with an empty neighbourhood or only zero-length ground-truth edges. Errors on mismatched
+    /// sizes or non-finite input.
     pub fn spatial_per_vertex(&self, truth: &[Vec3], result: &[Vec3]) -> Result<Vec<f64>> {
         self.check_frame("ground-truth", 0, truth)?;
         self.check_frame("result", 0, result)?;
-        let (lengths, changes) = self.edge_changes(0, truth, result)?;
+        let (lengths, changes, _) = self.edge_changes(truth, result);
         Ok(self.local_deviations(&lengths, &changes))
     }
 
@@ -269,6 +293,9 @@ impl Sted {
                 for &e in nb {
                     sw += lengths[e];
                     swd += lengths[e] * changes[e];
+                }
+                if sw <= 0.0 {
+                    return 0.0;
                 }
                 let mean = swd / sw;
                 let var: f64 = nb.iter().map(|&e| lengths[e] * (changes[e] - mean).powi(2)).sum::<f64>() / sw;
@@ -294,17 +321,24 @@ impl Sted {
     /// Spatial part `STED_s` of a sequence pair (F ≥ 1 frames, either order): the mean local
     /// deviation over all frames and measured vertices.
     pub fn spatial(&self, truth: &[Vec<Vec3>], result: &[Vec<Vec3>]) -> Result<f64> {
+        Ok(self.spatial_counted(truth, result)?.0)
+    }
+
+    /// [`Sted::spatial`] and the number of (edge, frame) pairs skipped for a zero-length
+    /// ground-truth edge.
+    pub fn spatial_counted(&self, truth: &[Vec<Vec3>], result: &[Vec<Vec3>]) -> Result<(f64, usize)> {
         self.check_pair(truth, result)?;
         let m = self.n_measured();
         if m == 0 {
-            return Ok(0.0);
+            return Ok((0.0, 0));
         }
-        let mut sum = 0.0;
-        for (f, (t, r)) in truth.iter().zip(result).enumerate() {
-            let (lengths, changes) = self.edge_changes(f, t, r)?;
+        let (mut sum, mut skipped) = (0.0, 0);
+        for (t, r) in truth.iter().zip(result) {
+            let (lengths, changes, s) = self.edge_changes(t, r);
+            skipped += s;
             sum += self.local_deviations(&lengths, &changes).iter().sum::<f64>();
         }
-        Ok(sum / (m * truth.len()) as f64)
+        Ok((sum / (m * truth.len()) as f64, skipped))
     }
 
     /// Temporal part `STED_t` of a time sequence pair (F ≥ 2 frames; module docs). Errors on
@@ -342,7 +376,7 @@ impl Sted {
 
     /// Spatial and (for a time sequence of ≥ 2 frames) temporal part and their combination.
     pub fn evaluate(&self, truth: &[Vec<Vec3>], result: &[Vec<Vec3>], order: FrameOrder) -> Result<StedReport> {
-        let spatial = self.spatial(truth, result)?;
+        let (spatial, skipped_edges) = self.spatial_counted(truth, result)?;
         let temporal = match order {
             FrameOrder::Sequence if truth.len() >= 2 => Some(self.temporal(truth, result)?),
             _ => None,
@@ -351,7 +385,7 @@ impl Sted {
             Some(t) => (spatial * spatial + self.params.c * self.params.c * t * t).sqrt(),
             None => spatial,
         };
-        Ok(StedReport { spatial, temporal, combined, params: self.params })
+        Ok(StedReport { spatial, temporal, combined, params: self.params, skipped_edges })
     }
 }
 
@@ -415,8 +449,8 @@ mod tests {
         assert!(Sted::new(3, &faces, StedParams::default()).is_err());
         let s = Sted::new(4, &faces, StedParams::default()).unwrap();
         let p = vec![vec![[0.0; 3]; 4]];
-        // Zero-length ground-truth edges.
-        assert!(s.spatial(&p, &p).is_err());
+        // Zero-length ground-truth edges (all 5 of them) are skipped and counted, not an error.
+        assert_eq!(s.spatial_counted(&p, &p).unwrap(), (0.0, 5));
         let q = vec![vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [f64::NAN, 0.0, 0.0]]];
         assert!(s.spatial(&q, &q).is_err());
         let ok = vec![vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [1.0, -1.0, 0.0]]];

@@ -62,17 +62,113 @@ pub fn fit(prep: &Prepared, method: &MethodConfig, ctx: &mut FitContext<'_>) -> 
             method.kind().name()
         )));
     }
-    match method {
+    check_training_data(prep, method)?;
+    let fitted = match method {
         MethodConfig::Pca(m) => linear::fit_pca(m, prep, ctx),
         MethodConfig::Splocs(m) => linear::fit_splocs(m, prep, ctx),
         MethodConfig::RegionPca(m) => region::fit(m, prep, ctx),
         MethodConfig::Autoencoder(m) => autoencoder::fit(m, prep, ctx),
+    }?;
+    warn_zero_components(fitted.model.as_ref())?;
+    Ok(fitted)
+}
+
+/// Relative size below which a training set "does not deform" and a component "is zero".
+const ZERO_RELATIVE: f64 = 1e-9;
+
+/// The rules every method shares (README, "How many components"), checked before fitting:
+/// - the training frames must deform: some vertex of some training frame lies farther than
+///   1e-9 × the rest shape's bounding-box diagonal from its mean over the training frames
+///   (identical frames give zero-variance components in PCA and nothing to fit elsewhere);
+/// - K is bounded by what the method can give content: PCA min(frames, 3N) (checked by PCA),
+///   region PCA Σ over regions of min(frames, 3N_r) (checked after segmentation), SPLOCS the
+///   number of elements it localizes on, the autoencoder the number of vertices (each
+///   component has its own centre). Sparse methods may use more components than training
+///   frames (the papers: K = 50 on 36 SCAPE shapes); that is said as a warning.
+fn check_training_data(prep: &Prepared, method: &MethodConfig) -> Result<()> {
+    let f = prep.train.len();
+    let n = prep.rest.n_vertices();
+    let (lo, hi) = prep.rest.bounding_box();
+    let diag = crate::mesh::dist(lo, hi);
+    let mut mean = vec![[0.0f64; 3]; n];
+    for &t in &prep.train {
+        for (m, p) in mean.iter_mut().zip(&prep.sequence.frames[t]) {
+            for c in 0..3 {
+                m[c] += p[c] / f.max(1) as f64;
+            }
+        }
     }
+    let mut dev = 0.0f64;
+    for &t in &prep.train {
+        for (m, p) in mean.iter().zip(&prep.sequence.frames[t]) {
+            dev = dev.max(crate::mesh::dist(*m, *p));
+        }
+    }
+    if f < 2 || dev <= ZERO_RELATIVE * diag.max(f64::MIN_POSITIVE) {
+        return Err(Error::config(
+            "data.train",
+            format!(
+                "the {f} training frame(s) do not deform (largest distance of a vertex from its mean over them: {dev:.3e}; bounding-box diagonal {diag:.3e}): there is nothing to learn; select at least two different frames"
+            ),
+        ));
+    }
+    let k = method.components();
+    let kind = method.kind();
+    let cap = match kind {
+        MethodKind::Splocs => match method.settings().representation() {
+            crate::representation::RepresentationKind::TriangleGradient => prep.rest.faces.len(),
+            _ => n,
+        },
+        MethodKind::Autoencoder => n,
+        MethodKind::Pca | MethodKind::RegionPca => usize::MAX,
+    };
+    if k > cap {
+        return Err(Error::config(
+            "method.components",
+            format!(
+                "components ({k}) exceeds the {cap} elements a {} component can be centred on; lower it",
+                kind.name()
+            ),
+        ));
+    }
+    if matches!(kind, MethodKind::Splocs | MethodKind::Autoencoder) && k > f {
+        eprintln!(
+            "warning: method.components ({k}) exceeds the {f} training frames: {} components are localized, so more of them than frames can carry content (the papers use K = 50 on 36 shapes), but components the data cannot support come out zero (reported after training)",
+            kind.name()
+        );
+    }
+    Ok(())
+}
+
+/// After fitting: names the components that came out zero (largest per-vertex magnitude below
+/// 1e-9 × the largest of all components), which the data could not support.
+fn warn_zero_components(model: &dyn Model) -> Result<()> {
+    let comps = model.components()?;
+    let peaks: Vec<f64> = comps.iter().map(|c| c.magnitudes.iter().cloned().fold(0.0, f64::max)).collect();
+    let top = peaks.iter().cloned().fold(0.0, f64::max);
+    let zero: Vec<usize> =
+        comps.iter().zip(&peaks).filter(|(_, p)| **p <= ZERO_RELATIVE * top).map(|(c, _)| c.index).collect();
+    if !zero.is_empty() {
+        eprintln!(
+            "warning: {} of {} components are zero (indices {:?}): the training data support fewer components with this method; consider a smaller method.components",
+            zero.len(),
+            comps.len(),
+            zero
+        );
+    }
+    Ok(())
 }
 
 /// Loads the trained model in `dir` (an artefact directory or its `model.json`), by the
-/// `method` field of its header.
+/// `method` field of its header, after verifying every file against `manifest.json`.
 pub fn load_model(dir: &Path) -> Result<Box<dyn Model>> {
+    crate::timing::timed("load model", || load_verified(dir))
+}
+
+fn load_verified(dir: &Path) -> Result<Box<dyn Model>> {
+    // Every file of the artefact is checked against the manifest (length, checksum) before
+    // anything is read from it: a damaged or edited file is named, never half-used.
+    artifact::verify_manifest(&artifact::model_dir(dir))?;
     let json = artifact::model_dir(dir).join("model.json");
     let v: serde_json::Value = artifact::read_json(&json)?;
     let method = v.get("method").and_then(|m| m.as_str()).unwrap_or("");

@@ -9,7 +9,11 @@
 //! u64 m            number of optimizer records
 //! m × (u64 n, n bytes)  optimizer records (burnpack, Burn's ModuleOptimizer): the layers' Adam,
 //!                  then one per row block of C
+//! u32              CRC-32 of every byte before it (format version 2)
 //! ```
+//!
+//! The checksum is verified before anything else is read: a damaged checkpoint is named, never
+//! resumed from.
 
 use std::io::Write;
 use std::path::Path;
@@ -22,7 +26,7 @@ use crate::artifact::write_atomic_with;
 use crate::error::{Error, Result};
 
 const MAGIC: &[u8; 8] = b"MDAECKPT";
-const VERSION: u32 = 1;
+const VERSION: u32 = 2;
 
 /// Metadata of a checkpoint.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -71,6 +75,8 @@ impl Checkpoint {
             out.extend_from_slice(&(part.len() as u64).to_le_bytes());
             out.extend_from_slice(part);
         }
+        let crc = crc32fast::hash(&out);
+        out.extend_from_slice(&crc.to_le_bytes());
         write_atomic_with(path, |w| w.write_all(&out))
     }
 
@@ -85,6 +91,18 @@ impl Checkpoint {
         if version != VERSION {
             return Err(corrupt(&format!("format version {version}, this build reads {VERSION}")));
         }
+        if bytes.len() < 16 {
+            return Err(corrupt("truncated"));
+        }
+        let (body, trailer) = bytes.split_at(bytes.len() - 4);
+        let stored = u32::from_le_bytes(trailer.try_into().unwrap());
+        let actual = crc32fast::hash(body);
+        if stored != actual {
+            return Err(corrupt(&format!(
+                "checksum {actual:08x} differs from the recorded {stored:08x} (damaged or truncated)"
+            )));
+        }
+        let bytes = body;
         let mut pos = 12;
         let mut take = |len_only: bool| -> Result<Vec<u8>> {
             if bytes.len() < pos + 8 {
@@ -95,7 +113,7 @@ impl Checkpoint {
             if len_only {
                 return Ok(n.to_le_bytes().to_vec());
             }
-            if bytes.len() < pos + n {
+            if pos.checked_add(n).is_none_or(|end| end > bytes.len()) {
                 return Err(corrupt("truncated"));
             }
             let v = bytes[pos..pos + n].to_vec();

@@ -5,8 +5,10 @@
 //!
 //! Artefact directory (every method): `config.toml` (the resolved config: every default written
 //! out; it trains again as is), the model files ([`Model::save`]), `weights.csv` (training
-//! weights, where stored), `metrics.json` ([`Metrics`]) and the method's views
-//! ([`Model::write_views`]: `components/`, `segmentation.ply`).
+//! weights, where stored), `metrics.json` ([`Metrics`]), `manifest.json` (length and checksum of
+//! each file, written last) and, with `[output] views = true`, the method's views
+//! ([`Model::write_views`]: `components/`, `segmentation.ply`). Everything is written into a
+//! staging directory and committed at the end ([`artifact::Staging`]).
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -44,7 +46,7 @@ pub struct TrainOutcome {
 /// Loads and prepares `cfg.data`, then [`train_prepared`].
 pub fn train(cfg: &Config, out: &Path, options: &TrainOptions, progress: &mut dyn Progress) -> Result<TrainOutcome> {
     progress.stage("loading", 0);
-    let prep = preprocess::prepare(&cfg.data)?;
+    let prep = crate::timing::timed("load", || preprocess::prepare(&cfg.data))?;
     train_prepared(cfg, &prep, out, options, progress)
 }
 
@@ -61,16 +63,16 @@ pub fn train_prepared(
     options: &TrainOptions,
     progress: &mut dyn Progress,
 ) -> Result<TrainOutcome> {
-    // One writer per artefact directory: a second run into the same directory is refused at
-    // once. A failed run that created the directory leaves none behind when it is empty.
-    let created = !out.exists();
-    let lock = artifact::DirLock::acquire(out)?;
-    let result = fit_measure_write(cfg, prep, out, options, progress);
-    drop(lock);
-    if result.is_err() && created {
-        let _ = std::fs::remove_dir(out);
-    }
-    result
+    // One writer per artefact directory (a second run into the same directory is refused at
+    // once); everything is written into a staging directory beside `out` and moved into `out`
+    // only when complete, so a failed run leaves `out` as it was (see `artifact::Staging`).
+    let staging = artifact::Staging::begin(out, options.resume)?;
+    let scope = crate::timing::scope();
+    let mut outcome = fit_measure_write(cfg, prep, staging.dir(), options, progress)?;
+    drop(scope);
+    crate::timing::timed("write", || staging.commit())?;
+    outcome.out_dir = out.to_path_buf();
+    Ok(outcome)
 }
 
 fn fit_measure_write(
@@ -81,10 +83,14 @@ fn fit_measure_write(
     progress: &mut dyn Progress,
 ) -> Result<TrainOutcome> {
     let mut ctx = FitContext { out, resume: options.resume, stop: options.stop.clone(), progress };
+    let t = std::time::Instant::now();
     let fitted = crate::model::fit(prep, &cfg.method, &mut ctx)?;
     let progress = ctx.progress;
     let model = fitted.model;
     let stats = fitted.stats;
+    crate::timing::record("features", stats.representation_seconds);
+    crate::timing::record("fit", (t.elapsed().as_secs_f64() - stats.representation_seconds).max(0.0));
+    let t = std::time::Instant::now();
 
     progress.stage("measuring", 0);
     let alignment = model.alignment();
@@ -135,16 +141,27 @@ fn fit_measure_write(
         locality: stats.locality,
     };
 
+    crate::timing::record("measure", t.elapsed().as_secs_f64());
+
     progress.stage("writing", 0);
+    let t = std::time::Instant::now();
     let method_table = fitted.method.to_table()?;
-    artifact::write_atomic(&out.join("config.toml"), resolved_toml(&cfg.name, &cfg.data, method_table).as_bytes())?;
-    model.save(out)?;
-    if let Some(w) = model.train_weights() {
-        let flat: Vec<f64> = w.iter().flatten().copied().collect();
-        artifact::write_weights_csv(&out.join("weights.csv"), model.train_frames(), &flat, model.n_components())?;
-    }
-    artifact::write_json(&out.join("metrics.json"), &metrics)?;
-    model.write_views(out)?;
+    // Files of the staging directory are synced once, when it is committed.
+    artifact::deferred_sync(|| -> Result<()> {
+        let text = resolved_toml(&cfg.name, &cfg.data, method_table, &cfg.output);
+        artifact::write_atomic(&out.join("config.toml"), text.as_bytes())?;
+        model.save(out)?;
+        if let Some(w) = model.train_weights() {
+            let flat: Vec<f64> = w.iter().flatten().copied().collect();
+            artifact::write_weights_csv(&out.join("weights.csv"), model.train_frames(), &flat, model.n_components())?;
+        }
+        artifact::write_json(&out.join("metrics.json"), &metrics)?;
+        if cfg.output.views {
+            model.write_views(out)?;
+        }
+        Ok(())
+    })?;
+    crate::timing::record("write", t.elapsed().as_secs_f64());
     progress.finish_stage();
     Ok(TrainOutcome { out_dir: out.to_path_buf(), metrics, model, test_reconstruction })
 }

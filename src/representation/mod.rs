@@ -181,6 +181,15 @@ impl Representation {
                 rest.n_vertices()
             )));
         }
+        if kind != RepresentationKind::Displacement {
+            let (_, pieces) = Topology::new(rest.n_vertices(), &rest.faces).components();
+            if pieces > 1 {
+                return Err(Error::Invalid(format!(
+                    "the mesh has {pieces} separate connected pieces; the {} representation does not yet carry each piece's position, so decoding would put every piece back at its rest position and lose how the pieces move relative to each other. Use representation = \"displacement\" (pca, splocs) or region-pca on this mesh",
+                    kind.name()
+                )));
+            }
+        }
         let codec = match kind {
             RepresentationKind::Displacement => Codec::Displacement(Displacement::new(&rest.positions)?),
             RepresentationKind::TriangleGradient => {

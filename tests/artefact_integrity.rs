@@ -1,0 +1,408 @@
+//! Artefacts refuse to be misread, failed runs leave nothing behind, one rule for the number of
+//! components, multi-piece meshes, STED on collapsed edges, eval past a failed cell (issue 15,
+//! cases 1, 2, 6, 7, 8, 11–14), and a bounded fuzz of artefact loading.
+
+use std::path::{Path, PathBuf};
+use std::process::Output;
+
+mod common;
+use common::{meshdeco, output_text};
+
+fn tmp(tag: &str) -> PathBuf {
+    common::fresh_dir("integrity", tag)
+}
+
+fn fails_with(o: &Output, needle: &str) {
+    let t = output_text(o);
+    assert!(!o.status.success(), "expected a failure containing `{needle}`: {t}");
+    assert!(o.status.code() == Some(1), "exit status {:?} (an abort or a panic?): {t}", o.status);
+    assert!(t.contains(needle), "`{needle}` not in: {t}");
+    assert!(!t.contains("panicked") && !t.contains("NaN"), "{t}");
+}
+
+fn train(d: &Path, name: &str, toml: &str) -> PathBuf {
+    let cfg = d.join(format!("{name}.toml"));
+    std::fs::write(&cfg, toml).unwrap();
+    let out = d.join(name);
+    let o = meshdeco(&["train", "--config", cfg.to_str().unwrap(), "--out", out.to_str().unwrap()], d);
+    assert!(o.status.success(), "{}", output_text(&o));
+    out
+}
+
+const PCA: &str =
+    "[data]\npath = \"synthetic:bumps\"\ntrain = \"1-30\"\ntest = \"rest\"\n[method]\nkind = \"pca\"\ncomponents = 3\n";
+const SPLOCS: &str = "[data]\npath = \"synthetic:bumps\"\ntrain = \"1-30\"\ntest = \"rest\"\n[method]\nkind = \"splocs\"\ncomponents = 3\nmax_iterations = 5\n";
+const REGION: &str = "[data]\npath = \"synthetic:bumps\"\ntrain = \"1-30\"\ntest = \"rest\"\n[method]\nkind = \"region-pca\"\ncomponents = 8\nmax_regions = 4\n";
+const AE: &str = "[data]\npath = \"synthetic:tube\"\ntrain = \"every:4\"\ntest = \"rest\"\n[method]\nkind = \"autoencoder\"\ncomponents = 3\niterations = 30\ncheckpoint_every = 10\nfit_test = false\n";
+
+/// The commands that load a model, each with its arguments after the model path.
+fn loading_commands(d: &Path) -> Vec<Vec<String>> {
+    let c = d.join("drag.json");
+    std::fs::write(&c, r#"{"5": [0.01, 0.0, 0.0]}"#).unwrap();
+    let s = |v: &[&str]| v.iter().map(|x| x.to_string()).collect::<Vec<_>>();
+    vec![
+        s(&["synthesize", "@", "--weights", "0:1", "--out", "s.obj"]),
+        s(&["encode", "@", "synthetic:bumps", "--out", "enc"]),
+        s(&["components", "@", "--out", "comps"]),
+        s(&["pose", "@", "--constraints", c.to_str().unwrap(), "--out", "p.obj"]),
+        s(&["export", "@", "--out", "m.glb"]),
+    ]
+}
+
+fn run_on(cmd: &[String], model: &Path, d: &Path) -> Output {
+    let args: Vec<String> =
+        cmd.iter().map(|a| if a == "@" { model.to_str().unwrap().to_string() } else { a.clone() }).collect();
+    let refs: Vec<&str> = args.iter().map(String::as_str).collect();
+    meshdeco(&refs, d)
+}
+
+#[test]
+fn damaged_artefacts_are_named_and_nothing_is_written() {
+    let d = tmp("damaged");
+    let pca = train(&d, "pca", PCA);
+    let ae = train(&d, "ae", AE);
+    for m in [&pca, &ae] {
+        assert!(m.join("manifest.json").is_file(), "no manifest in {}", m.display());
+        assert!(!m.join("components").exists(), "views are written only on request");
+    }
+    let cmds = loading_commands(&d);
+    // Case 2: 16 bytes flipped in the middle of model.bin; 80 bytes appended.
+    let bin = pca.join("model.bin");
+    let good = std::fs::read(&bin).unwrap();
+    let mut bad = good.clone();
+    let mid = bad.len() / 2;
+    for b in &mut bad[mid..mid + 16] {
+        *b ^= 0xA5;
+    }
+    for (what, bytes, needle) in
+        [("flipped", bad, "checksum"), ("extended", [good.clone(), vec![0; 80]].concat(), "bytes")]
+    {
+        std::fs::write(&bin, &bytes).unwrap();
+        for cmd in &cmds {
+            let o = run_on(cmd, &pca, &d);
+            fails_with(&o, "model.bin");
+            assert!(output_text(&o).contains(needle), "{what}, {cmd:?}: {}", output_text(&o));
+        }
+    }
+    std::fs::write(&bin, &good).unwrap();
+    // Case 1: autoencoder.json asks for 1e12 components.
+    let json = ae.join("autoencoder.json");
+    let text = std::fs::read_to_string(&json).unwrap();
+    let mut v: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let slot = v.pointer_mut("/config/components").expect("config.components in autoencoder.json");
+    *slot = serde_json::json!(1e12);
+    std::fs::write(&json, serde_json::to_string(&v).unwrap()).unwrap();
+    for cmd in &cmds {
+        fails_with(&run_on(cmd, &ae, &d), "autoencoder.json");
+    }
+    std::fs::write(&json, &text).unwrap();
+    // Flipped bytes in the weights file of the autoencoder.
+    let bpk = ae.join("autoencoder.bpk");
+    let good = std::fs::read(&bpk).unwrap();
+    let mut bad = good.clone();
+    let mid = bad.len() / 2;
+    bad[mid] ^= 0x10;
+    std::fs::write(&bpk, &bad).unwrap();
+    fails_with(&run_on(&cmds[0], &ae, &d), "autoencoder.bpk");
+    std::fs::write(&bpk, &good).unwrap();
+    // A finished checkpoint with one flipped byte is not resumed from.
+    let ck = ae.join("checkpoint.bin");
+    let good = std::fs::read(&ck).unwrap();
+    let mut bad = good.clone();
+    let mid = bad.len() / 2;
+    bad[mid] ^= 0x01;
+    std::fs::write(&ck, &bad).unwrap();
+    let cfg = d.join("ae.toml");
+    let o = meshdeco(&["train", "--config", cfg.to_str().unwrap(), "--out", ae.to_str().unwrap(), "--resume"], &d);
+    fails_with(&o, "checkpoint.bin");
+    assert!(output_text(&o).contains("checksum"), "{}", output_text(&o));
+    std::fs::write(&ck, &good).unwrap();
+    // A directory without its manifest is an incomplete artefact.
+    std::fs::rename(pca.join("manifest.json"), d.join("manifest.json")).unwrap();
+    fails_with(&run_on(&cmds[0], &pca, &d), "not a complete meshdeco artefact");
+    std::fs::rename(d.join("manifest.json"), pca.join("manifest.json")).unwrap();
+    // Nothing was written by any refused command; the repaired models work again.
+    for f in ["s.obj", "enc", "comps", "p.obj", "m.glb"] {
+        assert!(!d.join(f).exists(), "a refused command wrote {f}");
+    }
+    for m in [&pca, &ae] {
+        let o = run_on(&cmds[0], m, &d);
+        assert!(o.status.success(), "{}", output_text(&o));
+    }
+    std::fs::remove_dir_all(&d).unwrap();
+}
+
+#[test]
+fn a_failed_run_leaves_no_partial_artefact_and_keeps_the_old_one() {
+    let d = tmp("failed-run");
+    // Eight identical frames: refused (nothing to learn), before anything is written.
+    let frames = d.join("same");
+    std::fs::create_dir_all(&frames).unwrap();
+    let obj = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0.5\nf 1 2 3\nf 2 4 3\n";
+    for i in 0..8 {
+        std::fs::write(frames.join(format!("f{i}.obj")), obj).unwrap();
+    }
+    for kind in ["pca", "splocs", "region-pca"] {
+        let cfg = d.join(format!("same-{kind}.toml"));
+        std::fs::write(
+            &cfg,
+            format!("[data]\npath = \"{}\"\n[method]\nkind = \"{kind}\"\ncomponents = 2\n", frames.display()),
+        )
+        .unwrap();
+        let out = d.join(format!("same-{kind}"));
+        let o = meshdeco(&["train", "--config", cfg.to_str().unwrap(), "--out", out.to_str().unwrap()], &d);
+        fails_with(&o, "do not deform");
+        assert!(output_text(&o).contains("data.train"), "{}", output_text(&o));
+        assert!(!out.exists(), "{kind}: a failed run left {}", out.display());
+    }
+    // A retrain that fails keeps the earlier artefact exactly as it was.
+    let pca = train(&d, "pca", PCA);
+    let before: Vec<(PathBuf, Vec<u8>)> = std::fs::read_dir(&pca)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .map(|p| (p.clone(), std::fs::read(&p).unwrap()))
+        .collect();
+    let cfg = d.join("pca-bad.toml");
+    std::fs::write(&cfg, PCA.replace("components = 3", "components = 500")).unwrap();
+    let o = meshdeco(&["train", "--config", cfg.to_str().unwrap(), "--out", pca.to_str().unwrap()], &d);
+    fails_with(&o, "components");
+    for (p, bytes) in &before {
+        assert_eq!(&std::fs::read(p).unwrap(), bytes, "{} changed", p.display());
+    }
+    let hidden: Vec<String> = std::fs::read_dir(&d)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| n.starts_with('.'))
+        .collect();
+    assert!(hidden.is_empty(), "left behind: {hidden:?}");
+    // A user's own file in the artefact directory survives a retrain; stale views go.
+    std::fs::write(pca.join("notes.txt"), "mine").unwrap();
+    let views = d.join("pca-views.toml");
+    std::fs::write(&views, format!("{PCA}[output]\nviews = true\n")).unwrap();
+    let o = meshdeco(&["train", "--config", views.to_str().unwrap(), "--out", pca.to_str().unwrap()], &d);
+    assert!(o.status.success(), "{}", output_text(&o));
+    assert!(pca.join("components/k00_plus.obj").is_file());
+    let o = meshdeco(&["train", "--config", d.join("pca.toml").to_str().unwrap(), "--out", pca.to_str().unwrap()], &d);
+    assert!(o.status.success(), "{}", output_text(&o));
+    assert!(!pca.join("components").exists(), "stale views of the earlier run survived");
+    assert_eq!(std::fs::read_to_string(pca.join("notes.txt")).unwrap(), "mine");
+    std::fs::remove_dir_all(&d).unwrap();
+}
+
+#[test]
+fn one_rule_for_the_number_of_components() {
+    let d = tmp("k-rule");
+    // Region PCA: a budget beyond what the regions can hold is refused, not shrunk silently.
+    let cfg = d.join("region.toml");
+    std::fs::write(
+        &cfg,
+        "[data]\npath = \"synthetic:bumps\"\ntrain = \"1-7\"\n[method]\nkind = \"region-pca\"\ncomponents = 1000\n",
+    )
+    .unwrap();
+    let out = d.join("region");
+    let o = meshdeco(&["train", "--config", cfg.to_str().unwrap(), "--out", out.to_str().unwrap()], &d);
+    fails_with(&o, "components");
+    assert!(output_text(&o).contains("1000") && output_text(&o).contains("in all"), "{}", output_text(&o));
+    assert!(!out.exists());
+    // Region PCA within its capacity trains exactly K components.
+    let out = train(&d, "region-ok", &std::fs::read_to_string(&cfg).unwrap().replace("1000", "30"));
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("metrics.json")).unwrap()).unwrap();
+    assert_eq!(m["components"], 30);
+    // SPLOCS and the autoencoder: more components than elements are refused; more than frames
+    // is said.
+    for (kind, extra) in [("splocs", ""), ("autoencoder", "iterations = 5\nfit_test = false\n")] {
+        let cfg = d.join(format!("{kind}.toml"));
+        std::fs::write(
+            &cfg,
+            format!("[data]\npath = \"synthetic:bumps\"\ntrain = \"1-8\"\n[method]\nkind = \"{kind}\"\ncomponents = 2000\n{extra}"),
+        )
+        .unwrap();
+        let out = d.join(kind);
+        let o = meshdeco(&["train", "--config", cfg.to_str().unwrap(), "--out", out.to_str().unwrap()], &d);
+        fails_with(&o, "method.components");
+        assert!(!out.exists());
+        std::fs::write(&cfg, std::fs::read_to_string(&cfg).unwrap().replace("2000", "12")).unwrap();
+        let o = meshdeco(&["train", "--config", cfg.to_str().unwrap(), "--out", out.to_str().unwrap()], &d);
+        assert!(o.status.success(), "{}", output_text(&o));
+        assert!(output_text(&o).contains("exceeds the 8 training frames"), "{kind}: {}", output_text(&o));
+    }
+    std::fs::remove_dir_all(&d).unwrap();
+}
+
+#[test]
+fn multi_piece_meshes_train_per_piece_or_are_refused_by_name() {
+    let d = tmp("pieces");
+    let seq = meshdeco::synthetic::load("synthetic:pieces").unwrap();
+    let topo = meshdeco::mesh::Topology::new(seq.frames[0].len(), &seq.faces);
+    assert_eq!(topo.components().1, 2);
+    let n = seq.frames[0].len() / 2;
+    // Displacement-based methods train, and each component stays on one piece.
+    for (name, method) in [
+        ("pca", "kind = \"pca\"\ncomponents = 4\n"),
+        ("splocs", "kind = \"splocs\"\ncomponents = 4\nmax_iterations = 10\n"),
+        ("region", "kind = \"region-pca\"\ncomponents = 12\nmax_regions = 6\n"),
+    ] {
+        let out = train(
+            &d,
+            name,
+            &format!("[data]\npath = \"synthetic:pieces\"\ntrain = \"1-30\"\ntest = \"rest\"\n[method]\n{method}"),
+        );
+        let m: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join("metrics.json")).unwrap()).unwrap();
+        assert!(m["test_erms"].as_f64().unwrap().is_finite());
+        if name == "splocs" {
+            let o = meshdeco(&["components", out.to_str().unwrap(), "--out", "c-splocs"], &d);
+            assert!(o.status.success(), "{}", output_text(&o));
+            for k in 0..4 {
+                let mag = common::ply_vertex_property(&d.join(format!("c-splocs/k{k:02}_magnitude.ply")), "magnitude");
+                let (a, b): (f64, f64) = (mag[..n].iter().sum(), mag[n..].iter().sum());
+                let share = a.max(b) / (a + b).max(1e-300);
+                assert!(share > 0.99, "component {k} spreads over both pieces ({share:.3})");
+            }
+        }
+    }
+    // Translation-free representations are refused by name (not a silent garbage model).
+    for (what, args) in [
+        ("acap", vec!["roundtrip", "synthetic:pieces", "--representation", "acap"]),
+        ("triangle-gradient", vec!["roundtrip", "synthetic:pieces", "--representation", "triangle-gradient"]),
+    ] {
+        let o = meshdeco(&args, &d);
+        fails_with(&o, "separate connected pieces");
+        assert!(output_text(&o).contains(what), "{}", output_text(&o));
+    }
+    let cfg = d.join("ae.toml");
+    std::fs::write(&cfg, "[data]\npath = \"synthetic:pieces\"\n[method]\nkind = \"autoencoder\"\ncomponents = 4\n")
+        .unwrap();
+    let o = meshdeco(&["train", "--config", cfg.to_str().unwrap(), "--out", d.join("ae").to_str().unwrap()], &d);
+    fails_with(&o, "separate connected pieces");
+    assert!(!d.join("ae").exists());
+    std::fs::remove_dir_all(&d).unwrap();
+}
+
+#[test]
+fn sted_skips_collapsed_edges_and_eval_goes_past_a_failed_cell() {
+    use meshdeco::metrics::{FrameOrder, Sted, StedParams};
+    let seq = meshdeco::synthetic::load("synthetic:tube").unwrap();
+    let mut truth: Vec<_> = seq.frames[..5].to_vec();
+    // Frame 2 collapses the edge (0, 1): two coincident vertices.
+    truth[2][1] = truth[2][0];
+    let result: Vec<_> = truth.iter().map(|f| f.iter().map(|p| [p[0] * 1.01, p[1], p[2]]).collect()).collect();
+    let sted = Sted::new(truth[0].len(), &seq.faces, StedParams::default()).unwrap();
+    let r = sted.evaluate(&truth, &result, FrameOrder::Sequence).unwrap();
+    assert!(r.spatial.is_finite() && r.temporal.unwrap().is_finite(), "{r:?}");
+    assert!(r.skipped_edges >= 1, "{r:?}");
+
+    // An eval whose second method fails on every cell: the first method's cells still run, the
+    // failure is in the report, and the command exits non-zero at the end.
+    let d = tmp("eval-failed");
+    let cfg = d.join("eval.toml");
+    std::fs::write(
+        &cfg,
+        "name = \"f\"\n[[dataset]]\nname = \"tube\"\npath = \"synthetic:tube\"\ntrain = \"every:2\"\ntest = \"rest\"\n\
+         [[method]]\nlabel = \"region\"\nkind = \"region-pca\"\ncomponents = [5000]\n\
+         [[method]]\nlabel = \"pca\"\nkind = \"pca\"\ncomponents = [3]\n",
+    )
+    .unwrap();
+    let o = meshdeco(&["eval", "--config", cfg.to_str().unwrap(), "--out", "out"], &d);
+    let t = output_text(&o);
+    assert!(!o.status.success() && t.contains("1 of 2 cells failed"), "{t}");
+    let csv = std::fs::read_to_string(d.join("out/results.csv")).unwrap();
+    assert!(csv.lines().count() == 2 && csv.contains("pca"), "{csv}");
+    let report = std::fs::read_to_string(d.join("out/report.md")).unwrap();
+    assert!(report.contains("**failed**") && report.contains("5000"), "{report}");
+    assert!(std::fs::read_to_string(d.join("out/failed_cells.csv")).unwrap().contains("region"));
+    std::fs::remove_dir_all(&d).unwrap();
+}
+
+/// Bounded fuzz of artefact loading: every file of trained pca, splocs, region-pca and
+/// autoencoder directories is mutated (bit flips, truncation, extension, JSON field changes)
+/// and every model-loading command runs on it: no panic or abort, no exit 0 on a mutated model
+/// file, no NaN in any output.
+#[test]
+fn fuzzed_artefacts_never_panic_pass_or_print_nan() {
+    let d = tmp("fuzz");
+    let models = [train(&d, "pca", PCA), train(&d, "splocs", SPLOCS), train(&d, "region", REGION), train(&d, "ae", AE)];
+    let cmds = loading_commands(&d);
+    let mut rng = 0x9E37_79B9_7F4A_7C15u64;
+    let mut next = move || {
+        rng ^= rng << 13;
+        rng ^= rng >> 7;
+        rng ^= rng << 17;
+        rng
+    };
+    let (mut runs, mut refused) = (0, 0);
+    for model in &models {
+        let mut files: Vec<PathBuf> = std::fs::read_dir(model)
+            .unwrap()
+            .map(|e| e.unwrap().path())
+            .filter(|p| p.is_file())
+            .filter(|p| p.file_name().is_some_and(|n| n != "training.jsonl" && n != "checkpoint.bin"))
+            .collect();
+        files.sort();
+        for file in files {
+            let good = std::fs::read(&file).unwrap();
+            // Every top-level file is in the manifest (or is the manifest): each mutation is refused.
+            let is_model_file = true;
+            for mutation in 0..4 {
+                let mut bad = good.clone();
+                match mutation {
+                    0 => {
+                        let i = next() as usize % bad.len().max(1);
+                        bad[i] ^= 1 << (next() % 8);
+                    }
+                    1 => bad.truncate(next() as usize % bad.len().max(1)),
+                    2 => bad.extend_from_slice(b"\0\0\0\0garbage"),
+                    _ => {
+                        // A JSON number changed to a huge one, or a byte changed elsewhere.
+                        let text = String::from_utf8_lossy(&good).into_owned();
+                        match text.find(|c: char| c.is_ascii_digit()) {
+                            Some(i) if file.extension().is_some_and(|e| e == "json") => {
+                                bad = format!("{}1e12{}", &text[..i], &text[i + 1..]).into_bytes();
+                            }
+                            _ => {
+                                let i = next() as usize % bad.len().max(1);
+                                bad[i] = bad[i].wrapping_add(1);
+                            }
+                        }
+                    }
+                }
+                if bad == good {
+                    continue;
+                }
+                std::fs::write(&file, &bad).unwrap();
+                for cmd in &cmds {
+                    let o = run_on(cmd, model, &d);
+                    runs += 1;
+                    let t = output_text(&o);
+                    assert!(
+                        matches!(o.status.code(), Some(0) | Some(1)),
+                        "{} mutation {mutation}, {cmd:?}: status {:?}: {t}",
+                        file.display(),
+                        o.status
+                    );
+                    assert!(!t.contains("panicked") && !t.contains("NaN"), "{}: {t}", file.display());
+                    if is_model_file {
+                        assert!(!o.status.success(), "{} mutation {mutation} passed {cmd:?}: {t}", file.display());
+                        refused += 1;
+                    }
+                    for out in ["s.obj", "p.obj"] {
+                        let p = d.join(out);
+                        if let Ok(text) = std::fs::read_to_string(&p) {
+                            assert!(!text.contains("NaN") && !text.contains("inf"), "{out} after {}", file.display());
+                        }
+                        let _ = std::fs::remove_file(&p);
+                    }
+                    for out in ["enc", "comps"] {
+                        let _ = std::fs::remove_dir_all(d.join(out));
+                    }
+                    let _ = std::fs::remove_file(d.join("m.glb"));
+                }
+                std::fs::write(&file, &good).unwrap();
+            }
+        }
+    }
+    eprintln!("artefact fuzz: {runs} runs, {refused} refused mutated model files");
+    assert!(runs >= 300 && refused == runs, "{runs} runs, {refused} refused");
+    std::fs::remove_dir_all(&d).unwrap();
+}
