@@ -14,6 +14,8 @@
 //! [method]
 //! kind = "autoencoder"            # autoencoder | splocs | pca | region-pca
 //! components = 50
+//! [output]                        # optional
+//! views = false                   # also write components/ and segmentation.ply at training
 //! ```
 //!
 //! The `[method]` table is typed ([`MethodConfig`], `src/config/method.rs`): one struct per

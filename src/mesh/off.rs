@@ -15,14 +15,24 @@ use super::load::{FaceCollector, LoadedMesh, finite_coordinate, numbered_lines, 
 use crate::error::{Error, Result};
 
 /// Parses OFF content; `path` is used in messages only.
-pub fn parse_off(bytes: &[u8], path: &Path) -> Result<LoadedMesh> {
-    // Non-empty lines with comments removed, as token lists.
-    let mut lines = numbered_lines(bytes).filter_map(|(no, line)| {
-        let line = line.split(|&b| b == b'#').next().unwrap_or(line);
-        let tok: Vec<&[u8]> = tokens(line).collect();
-        (!tok.is_empty()).then_some((no, tok))
-    });
-    let (head_no, head) = lines.next().ok_or_else(|| Error::parse(path, None, "empty file (no 'OFF' header)"))?;
+pub fn parse_off<'a>(bytes: &'a [u8], path: &Path) -> Result<LoadedMesh> {
+    // Non-empty lines with comments removed, as token lists. The vertex and face lines reuse
+    // one token buffer (no allocation per line).
+    fn next_tokens<'a>(raw: &mut impl Iterator<Item = (usize, &'a [u8])>, tok: &mut Vec<&'a [u8]>) -> Option<usize> {
+        loop {
+            let (no, line) = raw.next()?;
+            let line = line.split(|&b| b == b'#').next().unwrap_or(line);
+            tok.clear();
+            tok.extend(tokens(line));
+            if !tok.is_empty() {
+                return Some(no);
+            }
+        }
+    }
+    let mut raw = numbered_lines(bytes);
+    let mut next_line = |tok: &mut Vec<&'a [u8]>| next_tokens(&mut raw, tok);
+    let mut head = Vec::new();
+    let head_no = next_line(&mut head).ok_or_else(|| Error::parse(path, None, "empty file (no 'OFF' header)"))?;
     let keyword = head[0];
     let is_off = keyword.ends_with(b"OFF")
         && keyword[..keyword.len() - 3].iter().all(|b| matches!(b, b'S' | b'T' | b'C' | b'N'));
@@ -40,7 +50,10 @@ pub fn parse_off(bytes: &[u8], path: &Path) -> Result<LoadedMesh> {
     let (counts_no, counts) = if head.len() > 1 {
         (head_no, head[1..].to_vec())
     } else {
-        lines.next().ok_or_else(|| Error::parse(path, None, "unexpected end of file: no vertex/face counts"))?
+        let mut c = Vec::new();
+        let no = next_line(&mut c)
+            .ok_or_else(|| Error::parse(path, None, "unexpected end of file: no vertex/face counts"))?;
+        (no, c)
     };
     let count = |i: usize, what: &str| -> Result<usize> {
         let t = counts.get(i).ok_or_else(|| Error::parse(path, Some(counts_no), format!("missing {what} count")))?;
@@ -68,9 +81,10 @@ pub fn parse_off(bytes: &[u8], path: &Path) -> Result<LoadedMesh> {
         3 + if prefix.contains(&b'N') { 3 } else { 0 } + if prefix.windows(2).any(|w| w == b"ST") { 2 } else { 0 };
     let colour = prefix.contains(&b'C');
     let mut odd_vertices: (usize, Option<usize>) = (0, None);
+    let mut tok: Vec<&[u8]> = Vec::with_capacity(16);
     let mut positions = Vec::with_capacity(n_vertices.min(1 << 24));
     for i in 0..n_vertices {
-        let (no, tok) = lines.next().ok_or_else(|| eof("vertex", i, n_vertices))?;
+        let no = next_line(&mut tok).ok_or_else(|| eof("vertex", i, n_vertices))?;
         if tok.len() < 3 {
             return Err(Error::parse(path, Some(no), format!("vertex has {} coordinates, expected 3", tok.len())));
         }
@@ -89,7 +103,7 @@ pub fn parse_off(bytes: &[u8], path: &Path) -> Result<LoadedMesh> {
     let mut polygon = Vec::with_capacity(8);
     let mut odd_faces: (usize, Option<usize>) = (0, None);
     for i in 0..n_faces {
-        let (no, tok) = lines.next().ok_or_else(|| eof("face", i, n_faces))?;
+        let no = next_line(&mut tok).ok_or_else(|| eof("face", i, n_faces))?;
         let err = |m: String| Error::parse(path, Some(no), m);
         let n: usize = std::str::from_utf8(tok[0])
             .ok()
@@ -121,7 +135,7 @@ pub fn parse_off(bytes: &[u8], path: &Path) -> Result<LoadedMesh> {
     }
     let p = path.display();
     let mut warnings: Vec<String> = faces.polygon_warning(|l| format!("{p}:{l}")).into_iter().collect();
-    if let Some((no, _)) = lines.next() {
+    if let Some(no) = next_line(&mut tok) {
         warnings.push(format!("{p}:{no}: content after the last face ignored"));
     }
     if let (n, Some(first)) = odd_vertices {

@@ -140,19 +140,18 @@ fn check_training_data(prep: &Prepared, method: &MethodConfig) -> Result<()> {
     Ok(())
 }
 
-/// After fitting: names the components that came out zero (largest per-vertex magnitude below
-/// 1e-9 × the largest of all components), which the data could not support.
+/// After fitting: names the components that came out zero (largest element norm below 1e-9 ×
+/// the largest of all components), which the data could not support.
 fn warn_zero_components(model: &dyn Model) -> Result<()> {
-    let comps = model.components()?;
-    let peaks: Vec<f64> = comps.iter().map(|c| c.magnitudes.iter().cloned().fold(0.0, f64::max)).collect();
+    let (norms, _) = model.element_norms();
+    let peaks: Vec<f64> = norms.iter().map(|c| c.iter().cloned().fold(0.0, f64::max)).collect();
     let top = peaks.iter().cloned().fold(0.0, f64::max);
-    let zero: Vec<usize> =
-        comps.iter().zip(&peaks).filter(|(_, p)| **p <= ZERO_RELATIVE * top).map(|(c, _)| c.index).collect();
+    let zero: Vec<usize> = (0..peaks.len()).filter(|&k| peaks[k] <= ZERO_RELATIVE * top).collect();
     if !zero.is_empty() {
         eprintln!(
             "warning: {} of {} components are zero (indices {:?}): the training data support fewer components with this method; consider a smaller method.components",
             zero.len(),
-            comps.len(),
+            peaks.len(),
             zero
         );
     }
