@@ -117,7 +117,93 @@ pub(crate) fn show(token: &[u8]) -> String {
 /// Parses a floating-point token (`None` when it is not a number; `nan`/`inf` parse and are
 /// rejected by [`finite_coordinate`]).
 pub(crate) fn parse_f64(token: &[u8]) -> Option<f64> {
-    std::str::from_utf8(token).ok()?.parse::<f64>().ok()
+    fast_decimal(token).or_else(|| std::str::from_utf8(token).ok()?.parse::<f64>().ok())
+}
+
+/// Exact powers of ten representable in an f64 (10^0 … 10^22).
+const POW10: [f64; 23] = [
+    1e0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9, 1e10, 1e11, 1e12, 1e13, 1e14, 1e15, 1e16, 1e17, 1e18, 1e19, 1e20,
+    1e21, 1e22,
+];
+
+/// Clinger's fast path for the numbers mesh files are made of: `[+-]digits[.digits][e[+-]digits]`
+/// with at most 15 significant digits and a decimal exponent within ±22. The mantissa is then
+/// exact in an f64 and so is the power of ten, and one correctly rounded multiplication or
+/// division gives the correctly rounded result — the same bits as `str::parse`. Anything else
+/// (more digits, large exponents, `nan`, `inf`, junk) returns `None` and takes the general path.
+fn fast_decimal(t: &[u8]) -> Option<f64> {
+    let (neg, mut i) = match t.first()? {
+        b'-' => (true, 1),
+        b'+' => (false, 1),
+        _ => (false, 0),
+    };
+    let (mut mant, mut digits, mut exp, mut any) = (0u64, 0u32, 0i32, false);
+    let mut take = |i: &mut usize, after_point: bool| {
+        while let Some(&b) = t.get(*i) {
+            if !b.is_ascii_digit() {
+                break;
+            }
+            any = true;
+            if mant != 0 || b != b'0' {
+                digits += 1;
+            }
+            mant = mant.wrapping_mul(10) + u64::from(b - b'0');
+            if after_point {
+                exp -= 1;
+            }
+            *i += 1;
+        }
+    };
+    take(&mut i, false);
+    if t.get(i) == Some(&b'.') {
+        i += 1;
+        take(&mut i, true);
+    }
+    if !any || digits > 15 {
+        return None;
+    }
+    if let Some(&b) = t.get(i)
+        && (b | 0x20) == b'e'
+    {
+        i += 1;
+        let eneg = match t.get(i) {
+            Some(b'-') => {
+                i += 1;
+                true
+            }
+            Some(b'+') => {
+                i += 1;
+                false
+            }
+            _ => false,
+        };
+        let start = i;
+        let mut e: i32 = 0;
+        while let Some(&b) = t.get(i) {
+            if !b.is_ascii_digit() || e > 1000 {
+                break;
+            }
+            e = e * 10 + i32::from(b - b'0');
+            i += 1;
+        }
+        if i == start || e > 1000 {
+            return None;
+        }
+        exp += if eneg { -e } else { e };
+    }
+    if i != t.len() {
+        return None;
+    }
+    let v = if mant == 0 {
+        0.0
+    } else if (0..=22).contains(&exp) {
+        mant as f64 * POW10[exp as usize]
+    } else if (-22..0).contains(&exp) {
+        mant as f64 / POW10[(-exp) as usize]
+    } else {
+        return None;
+    };
+    Some(if neg { -v } else { v })
 }
 
 /// Parses a coordinate token and rejects non-numbers and non-finite values with a message
@@ -204,6 +290,54 @@ mod tests {
         assert_eq!(MeshFormat::from_path(Path::new("x.off")), Some(MeshFormat::Off));
         assert_eq!(MeshFormat::from_path(Path::new("x.stl")), None);
         assert_eq!(MeshFormat::from_path(Path::new("obj")), None);
+    }
+
+    #[test]
+    fn fast_decimal_gives_the_bits_of_str_parse() {
+        // Deterministic mix of the forms mesh files hold (and some that take the slow path).
+        let mut state = 0x2545_F491_4F6C_DD1Du64;
+        let mut next = move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            state
+        };
+        let mut fast = 0;
+        for _ in 0..200_000 {
+            let r = next();
+            let int = r % 10u64.pow((r >> 8) as u32 % 8);
+            let frac_digits = (r >> 16) as usize % 12;
+            let frac = next() % 10u64.pow(frac_digits as u32);
+            let sign = ["", "-", "+"][(r >> 24) as usize % 3];
+            let exp = match (r >> 28) % 4 {
+                0 => String::new(),
+                1 => format!("e{}", (r >> 32) % 30),
+                2 => format!("E-{}", (r >> 32) % 30),
+                _ => format!("e+{}", (r >> 32) % 5),
+            };
+            let text = if frac_digits == 0 {
+                format!("{sign}{int}{exp}")
+            } else {
+                format!("{sign}{int}.{frac:0frac_digits$}{exp}")
+            };
+            let want: f64 = text.parse().unwrap();
+            let got = parse_f64(text.as_bytes()).unwrap();
+            assert_eq!(got.to_bits(), want.to_bits(), "{text}");
+            fast += usize::from(fast_decimal(text.as_bytes()).is_some());
+        }
+        assert!(fast > 100_000, "the fast path took only {fast} of 200000");
+        for junk in ["", "-", ".", "1.2.3", "1e", "1e+", "e5", "1x", "nan", "inf", "0x10", "--1"] {
+            assert_eq!(
+                parse_f64(junk.as_bytes()).map(f64::to_bits),
+                junk.parse::<f64>().ok().map(f64::to_bits),
+                "{junk}"
+            );
+            if junk != "nan" && junk != "inf" {
+                assert!(fast_decimal(junk.as_bytes()).is_none(), "{junk}");
+            }
+        }
+        assert_eq!(parse_f64(b"-0.0").unwrap().to_bits(), (-0.0f64).to_bits());
+        assert_eq!(parse_f64(b"12345678901234567890").unwrap(), 12345678901234567890.0);
     }
 
     #[test]

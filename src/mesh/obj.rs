@@ -121,14 +121,26 @@ pub fn parse_obj(bytes: &[u8], path: &Path) -> Result<LoadedMesh> {
     Ok(LoadedMesh { mesh: TriMesh::new(positions, faces.faces), warnings })
 }
 
+/// `[-]digits` with at most 18 digits (no overflow), else `None` (the general parser decides).
+fn digits_i64(t: &[u8]) -> Option<i64> {
+    let (neg, d) = match t.first()? {
+        b'-' => (true, &t[1..]),
+        _ => (false, t),
+    };
+    if d.is_empty() || d.len() > 18 || !d.iter().all(u8::is_ascii_digit) {
+        return None;
+    }
+    let v = d.iter().fold(0i64, |v, &b| v * 10 + i64::from(b - b'0'));
+    Some(if neg { -v } else { v })
+}
+
 /// Resolves one face vertex reference (`i`, `i/t`, `i//n`, `i/t/n`) to a 0-based index.
 /// `defined` is the number of vertices defined before this line (for negative indices). The
 /// upper bound of positive indices is checked after the whole file is read.
 fn resolve_index(token: &[u8], defined: usize) -> std::result::Result<usize, String> {
     let head = token.split(|&b| b == b'/').next().unwrap_or(token);
-    let value: i64 = std::str::from_utf8(head)
-        .ok()
-        .and_then(|s| s.parse().ok())
+    let value: i64 = digits_i64(head)
+        .or_else(|| std::str::from_utf8(head).ok().and_then(|s| s.parse().ok()))
         .ok_or_else(|| format!("face vertex '{}' is not an integer index", show(token)))?;
     match value {
         0 => Err("face vertex index 0 (OBJ indices start at 1)".to_string()),
