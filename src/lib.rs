@@ -22,6 +22,7 @@ pub mod preprocess;
 pub mod representation;
 pub mod rng;
 pub mod synthetic;
+pub mod view;
 
 pub use error::{Error, Result};
 pub mod eval;

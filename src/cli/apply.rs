@@ -40,8 +40,12 @@ pub struct SynthesizeArgs {
     pub model: PathBuf,
     /// Component weights as `index:weight` pairs, e.g. "3:0.8,7:-1.2" (0-based component
     /// indices; unlisted components get weight 0). Autoencoder: z_i = Z_r,i + (Z_h,i − Z_r,i)·w_i.
-    #[arg(long, short, allow_hyphen_values = true)]
-    pub weights: String,
+    #[arg(long, short, allow_hyphen_values = true, required_unless_present = "weights_file")]
+    pub weights: Option<String>,
+    /// The same weights from a JSON file: `{"dials": [w0, w1, …]}` (all K) or `{"dials":
+    /// {"3": 0.8}}` (unlisted: 0), as saved by `meshdeco view` ("weights .json").
+    #[arg(long, value_name = "FILE", conflicts_with = "weights")]
+    pub weights_file: Option<PathBuf>,
     /// Output mesh (.obj, .ply or .off).
     #[arg(long, short)]
     pub out: PathBuf,
@@ -112,7 +116,15 @@ pub fn encode(a: EncodeArgs) -> Result<()> {
 
 pub fn synthesize(a: SynthesizeArgs) -> Result<()> {
     let m = load_model(&a.model).with_context(|| format!("loading model {}", a.model.display()))?;
-    let dials = model::parse_dials("--weights", &a.weights, m.n_components())?;
+    let dials = match (&a.weights, &a.weights_file) {
+        (Some(w), _) => model::parse_dials("--weights", w, m.n_components())?,
+        (None, Some(f)) => {
+            let text =
+                std::fs::read_to_string(f).with_context(|| format!("--weights-file: reading {}", f.display()))?;
+            model::parse_dials_json(&f.display().to_string(), &text, m.n_components())?
+        }
+        (None, None) => anyhow::bail!("give --weights or --weights-file"),
+    };
     let p = model::synthesize(m.as_ref(), &dials)?;
     mesh::write_mesh(&a.out, &TriMesh::new(p, m.rest().faces))?;
     println!("wrote {}", a.out.display());

@@ -44,6 +44,31 @@ impl View {
     }
 }
 
+/// The automatic framing of a shape: its up axis is the axis of largest bounding-box extent
+/// (a standing body, a face, a tube lying along z), the camera looks along the axis of smallest
+/// extent (a face's depth, a body's front-to-back). Ties prefer y, z, x for up and z, x, y for
+/// the view, so a shape already given y-up and z-facing keeps that framing.
+/// Returns `(up axis, view axis)` (0 = x, 1 = y, 2 = z); the camera sits on the + side of the
+/// view axis, the + side of the up axis points up.
+pub fn auto_axes(positions: &[Vec3]) -> (usize, usize) {
+    let (lo, hi) = super::bounding_box(positions);
+    let e: Vec<f64> = (0..3).map(|k| if positions.is_empty() { 0.0 } else { hi[k] - lo[k] }).collect();
+    let tol = 1e-6 * e.iter().cloned().fold(0.0, f64::max);
+    let mut up = 1;
+    for k in [2, 0] {
+        if e[k] > e[up] + tol {
+            up = k;
+        }
+    }
+    let mut view = usize::MAX;
+    for k in [2, 0, 1] {
+        if k != up && (view == usize::MAX || e[k] < e[view] - tol) {
+            view = k;
+        }
+    }
+    (up, view)
+}
+
 /// Picture settings.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RenderOptions {
