@@ -68,10 +68,7 @@ fn view_api_serves_decode_pose_heat_frames_and_export() {
     assert!(header(&h, "x-compute-ms").unwrap().parse::<f64>().unwrap() >= 0.0);
     let shape = parse_shape(&body);
     assert_eq!(shape.dials[1], 0.7);
-    let o = meshdeco(
-        &["synthesize", model.to_str().unwrap(), "--weights", "1:0.7,3:-0.4", "--out", "synth.obj"],
-        &d,
-    );
+    let o = meshdeco(&["synthesize", model.to_str().unwrap(), "--weights", "1:0.7,3:-0.4", "--out", "synth.obj"], &d);
     assert!(o.status.success(), "{}", output_text(&o));
     let synth = obj_positions(&d.join("synth.obj"));
     let diff = max_diff(&shape.positions, &synth);
@@ -89,10 +86,8 @@ fn view_api_serves_decode_pose_heat_frames_and_export() {
     let (s, _, wjson) = v.post("/api/export", &json!({ "format": "json", "dials": { "1": 0.7, "3": -0.4 } }));
     assert_eq!(s, 200);
     std::fs::write(d.join("weights.json"), &wjson).unwrap();
-    let o = meshdeco(
-        &["synthesize", model.to_str().unwrap(), "--weights-file", "weights.json", "--out", "back.obj"],
-        &d,
-    );
+    let o =
+        meshdeco(&["synthesize", model.to_str().unwrap(), "--weights-file", "weights.json", "--out", "back.obj"], &d);
     assert!(o.status.success(), "{}", output_text(&o));
     assert!(max_diff(&obj_positions(&d.join("back.obj")), &synth) < 1e-12);
     let (s, _, obj) = v.post("/api/export", &json!({ "format": "obj", "dials": { "1": 0.7, "3": -0.4 } }));
@@ -175,14 +170,50 @@ fn view_api_refuses_bad_requests_and_keeps_serving() {
         ("POST", "/api/decode", br#"{}"#.to_vec(), 400, "missing `dials`"),
         ("GET", "/api/heat/4", vec![], 400, "unknown component `4`"),
         ("GET", "/api/heat/x", vec![], 400, "unknown component `x`"),
-        ("POST", "/api/pose", br#"{"constraints": [{"vertex": 1466, "target": [0, 0, 0]}]}"#.to_vec(), 400, "vertex 1466 out of range"),
-        ("POST", "/api/pose", br#"{"constraints": [{"vertex": 3, "target": [0, "inf", 0]}]}"#.to_vec(), 400, "target[1] must be a number"),
-        ("POST", "/api/pose", br#"{"constraints": [{"vertex": 3, "target": [0, 1e300, 0]}]}"#.to_vec(), 400, "vertex 3"),
+        (
+            "POST",
+            "/api/pose",
+            br#"{"constraints": [{"vertex": 1466, "target": [0, 0, 0]}]}"#.to_vec(),
+            400,
+            "vertex 1466 out of range",
+        ),
+        (
+            "POST",
+            "/api/pose",
+            br#"{"constraints": [{"vertex": 3, "target": [0, "inf", 0]}]}"#.to_vec(),
+            400,
+            "target[1] must be a number",
+        ),
+        (
+            "POST",
+            "/api/pose",
+            br#"{"constraints": [{"vertex": 3, "target": [0, 1e300, 0]}]}"#.to_vec(),
+            400,
+            "vertex 3",
+        ),
         ("POST", "/api/pose", br#"{"constraints": [{"vertex": 3, "target": [0, 0]}]}"#.to_vec(), 400, "[x, y, z]"),
         ("POST", "/api/pose", br#"{"constraints": []}"#.to_vec(), 400, "empty"),
-        ("POST", "/api/pose", br#"{"constraints": [{"vertex": 3, "target": [0, 0, 0]}, {"vertex": 3, "target": [0, 0, 0]}]}"#.to_vec(), 400, "twice"),
-        ("POST", "/api/pose", br#"{"constraints": [{"vertex": 3, "target": [0, 0, 0]}], "gamma": -1}"#.to_vec(), 400, "`gamma`"),
-        ("POST", "/api/pose", br#"{"constraints": [{"vertex": 3, "target": [0, 0, 0]}], "start": [0]}"#.to_vec(), 400, "`start` has 1"),
+        (
+            "POST",
+            "/api/pose",
+            br#"{"constraints": [{"vertex": 3, "target": [0, 0, 0]}, {"vertex": 3, "target": [0, 0, 0]}]}"#.to_vec(),
+            400,
+            "twice",
+        ),
+        (
+            "POST",
+            "/api/pose",
+            br#"{"constraints": [{"vertex": 3, "target": [0, 0, 0]}], "gamma": -1}"#.to_vec(),
+            400,
+            "`gamma`",
+        ),
+        (
+            "POST",
+            "/api/pose",
+            br#"{"constraints": [{"vertex": 3, "target": [0, 0, 0]}], "start": [0]}"#.to_vec(),
+            400,
+            "`start` has 1",
+        ),
         ("GET", "/api/frame/0", vec![], 400, "--data"),
         ("POST", "/api/export", br#"{"format": "stl", "dials": {}}"#.to_vec(), 400, "stl"),
         ("GET", "/api/decode", vec![], 405, "POST"),
@@ -200,10 +231,7 @@ fn view_api_refuses_bad_requests_and_keeps_serving() {
         good();
     }
     // A body over the limit is refused before it is read.
-    let huge = format!(
-        "POST /api/decode HTTP/1.1\r\nContent-Length: {}\r\n\r\n",
-        meshdeco::view::http::MAX_BODY + 1
-    );
+    let huge = format!("POST /api/decode HTTP/1.1\r\nContent-Length: {}\r\n\r\n", meshdeco::view::http::MAX_BODY + 1);
     let mut s = std::net::TcpStream::connect(&v.addr).unwrap();
     use std::io::{Read, Write};
     s.write_all(huge.as_bytes()).unwrap();

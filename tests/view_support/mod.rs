@@ -2,6 +2,8 @@
 //! model, start the viewer binary on a free port, speak HTTP to it, parse its binary shapes.
 #![allow(dead_code)]
 
+pub mod cdp;
+
 use std::io::{BufRead, BufReader, Read, Write};
 use std::net::TcpStream;
 use std::path::{Path, PathBuf};
@@ -96,8 +98,27 @@ pub fn http(addr: &str, method: &str, path: &str, body: &[u8]) -> (u16, Vec<(Str
     );
     s.write_all(head.as_bytes()).unwrap();
     s.write_all(body).unwrap();
+    // Read the head, then Content-Length bytes (some servers keep the connection open).
     let mut raw = Vec::new();
-    s.read_to_end(&mut raw).unwrap();
+    let mut buf = [0u8; 65536];
+    loop {
+        let n = s.read(&mut buf).unwrap();
+        raw.extend_from_slice(&buf[..n]);
+        if let Some(split) = raw.windows(4).position(|w| w == b"\r\n\r\n") {
+            let (_, headers, _) = parse_response(&raw);
+            if let Some(len) = header(&headers, "content-length").and_then(|l| l.parse::<usize>().ok()) {
+                while raw.len() < split + 4 + len {
+                    let n = s.read(&mut buf).unwrap();
+                    assert!(n > 0, "connection closed before the body's end");
+                    raw.extend_from_slice(&buf[..n]);
+                }
+                break;
+            }
+        }
+        if n == 0 {
+            break;
+        }
+    }
     parse_response(&raw)
 }
 
