@@ -313,3 +313,42 @@ fn view_api_decodes_an_autoencoder_like_synthesize() {
     let desc: Value = serde_json::from_slice(&body).unwrap();
     assert_eq!(desc["kind"], "autoencoder");
 }
+
+/// `meshdeco components` writes overview.png: one block (rest, extreme, heat map) per ranked
+/// component, the tube standing up (automatic up axis), heat maps in colour.
+#[test]
+fn components_overview_png_shows_every_component() {
+    let d = fresh_dir("view-api", "overview");
+    let model = train(&d, "pca", "synthetic:tube", "kind = \"pca\"\ncomponents = 5");
+    let o = meshdeco(&["components", model.to_str().unwrap(), "--out", "comps", "--cell", "100", "--per-row", "3"], &d);
+    assert!(o.status.success(), "{}", output_text(&o));
+    let png = d.join("comps/overview.png");
+    let (w, h, ink, colours) = common::png_ink(&png);
+    // 3 blocks per row of 3 × 100 px + 12 px gaps; 2 rows of 100 + 20 (label) + 6 px.
+    assert_eq!((w, h), (3 * 312 + 12, 2 * 126 + 12));
+    assert!(ink > 0.05, "overview is {:.1} % ink", 100.0 * ink);
+    assert!(colours > 50, "overview has {colours} colours: no heat map");
+    // Each picture: the tube stands up (taller than wide) and the extreme differs from the rest.
+    let img = image::open(&png).unwrap().to_rgb8();
+    let cell = |bx: u32, by: u32, j: u32| -> Vec<[u8; 3]> {
+        let (x0, y0) = (12 + bx * 312 + j * 100, 6 + by * 126 + 20);
+        (0..100).flat_map(|y| (0..100).map(move |x| (x, y))).map(|(x, y)| img.get_pixel(x0 + x, y0 + y).0).collect()
+    };
+    let extent = |c: &[[u8; 3]]| {
+        let on: Vec<(usize, usize)> =
+            (0..10000).filter(|&i| c[i] != [255, 255, 255]).map(|i| (i % 100, i / 100)).collect();
+        let w = on.iter().map(|p| p.0).max().unwrap() - on.iter().map(|p| p.0).min().unwrap();
+        let h = on.iter().map(|p| p.1).max().unwrap() - on.iter().map(|p| p.1).min().unwrap();
+        (w, h)
+    };
+    for (bx, by) in [(0, 0), (1, 0), (2, 0), (0, 1), (1, 1)] {
+        let rest = cell(bx, by, 0);
+        let (w, h) = extent(&rest);
+        assert!(h > 2 * w, "block ({bx}, {by}): rest picture {w}×{h}, not standing up");
+        assert_ne!(rest, cell(bx, by, 1), "block ({bx}, {by}): the extreme equals the rest");
+        let heat = cell(bx, by, 2);
+        assert!(heat.iter().any(|p| p[0] != p[1] || p[1] != p[2]), "block ({bx}, {by}): heat map without colour");
+    }
+    // The sixth slot of the grid stays empty.
+    assert!(cell(2, 1, 0).iter().all(|p| *p == [255, 255, 255]));
+}

@@ -58,9 +58,16 @@ pub struct ComponentsArgs {
     /// Output directory: per component its shapes and heat map, and `components.csv` (ranked).
     /// Autoencoder: `<rank>_<dim>.obj` extreme shapes and `<rank>_<dim>_change.ply` heat maps of
     /// per-vertex feature change; linear and region models: `<name>_minus.obj`,
-    /// `<name>_plus.obj` (weight −1 and +1) and `<name>_magnitude.ply`.
+    /// `<name>_plus.obj` (weight −1 and +1) and `<name>_magnitude.ply`. Every model:
+    /// `overview.png`, per ranked component its rest shape, extreme shape and heat map.
     #[arg(long, short)]
     pub out: PathBuf,
+    /// Side in pixels of one picture of overview.png.
+    #[arg(long, default_value_t = 150)]
+    pub cell: usize,
+    /// Components per row of overview.png.
+    #[arg(long, default_value_t = 4)]
+    pub per_row: usize,
 }
 
 #[derive(Debug, Args)]
@@ -134,7 +141,14 @@ pub fn synthesize(a: SynthesizeArgs) -> Result<()> {
 pub fn components(a: ComponentsArgs) -> Result<()> {
     let m = load_model(&a.model).with_context(|| format!("loading model {}", a.model.display()))?;
     m.write_components(&a.out)?;
-    println!("wrote {} components (ranked, components.csv) to {}", m.n_components(), a.out.display());
+    let overview = a.out.join("overview.png");
+    meshdeco::view::overview::write_overview(
+        m.as_ref(),
+        &overview,
+        &meshdeco::view::overview::OverviewOptions { cell: a.cell, per_row: a.per_row },
+    )
+    .with_context(|| format!("--cell {} --per-row {}", a.cell, a.per_row))?;
+    println!("wrote {} components (ranked, components.csv, overview.png) to {}", m.n_components(), a.out.display());
     Ok(())
 }
 

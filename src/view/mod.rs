@@ -19,6 +19,7 @@
 //!   embedded with `include_str!`; nothing is fetched at run time.
 
 pub mod http;
+pub mod overview;
 
 use std::net::{SocketAddr, TcpListener};
 use std::path::{Path, PathBuf};
