@@ -71,22 +71,36 @@ fn view_in_headless_chromium_draws_dials_poses_and_recovers() {
     open_page(&mut b, &v);
     assert_eq!(b.eval("meshdeco.S.lastError"), "", "page error at start");
 
-    // 1. The mesh is drawn: pixels at projected vertices differ from the background, which
-    // fills the canvas's corner.
+    // 1. The mesh is drawn: pixels inside its projected area differ from the background (which
+    // fills the canvas's corner). Sample points: centroids of projected triangles of at least
+    // 8 px² (so the point lies inside the triangle's pixels, front or behind another part).
     let img = b.screenshot();
     let bg = *img.get_pixel(3, 3);
     let pts = b.eval(
-        "Array.from({length: 200}, (_, i) => meshdeco.screenOf(meshdeco.vertex(Math.floor(i * meshdeco.S.n / 200))))",
+        "(() => { const S = meshdeco.S, F = S.faces, out = []; \
+         for (let f = 0; f < F.length / 3 && out.length < 200; f += 7) { \
+           const p = [0, 1, 2].map(j => meshdeco.screenOf(meshdeco.vertex(F[3 * f + j]))); \
+           const area = Math.abs((p[1][0] - p[0][0]) * (p[2][1] - p[0][1]) - (p[1][1] - p[0][1]) * (p[2][0] - p[0][0])) / 2; \
+           if (area >= 8) out.push([(p[0][0] + p[1][0] + p[2][0]) / 3, (p[0][1] + p[1][1] + p[2][1]) / 3]); } \
+         return out; })()",
     );
+    let pts = pts.as_array().unwrap();
+    assert!(pts.len() >= 100, "only {} sizeable triangles on screen", pts.len());
     let mut inked = 0;
-    for p in pts.as_array().unwrap() {
-        let (x, y) = (f(&p[0]).round() as u32, f(&p[1]).round() as u32);
-        assert!(x < img.width() && y < img.height(), "vertex projected off screen at ({x}, {y})");
+    for p in pts {
+        let (x, y) = (f(&p[0]).floor() as u32, f(&p[1]).floor() as u32);
+        assert!(x < img.width() && y < img.height(), "triangle projected off screen at ({x}, {y})");
         if *img.get_pixel(x, y) != bg {
             inked += 1;
         }
     }
-    assert!(inked >= 190, "only {inked} of 200 projected vertices differ from the background {bg:?}");
+    assert!(
+        inked * 100 >= 98 * pts.len(),
+        "only {inked} of {} points inside projected triangles differ from the background {bg:?}",
+        pts.len()
+    );
+    // Outside the mesh's projected box the canvas shows the background.
+    assert_eq!(*img.get_pixel(img.width() / 20, img.height() / 2), bg);
 
     // 2. Slider k dragged with the mouse to some w: the shape equals `synthesize --weights k:w`.
     let k = 1;
@@ -174,6 +188,11 @@ fn view_in_headless_chromium_draws_dials_poses_and_recovers() {
     );
     let drags = b.eval("meshdeco.latencies().filter(l => l.kind === 'drag').length");
     assert!(f(&drags) >= 1.0 && f(&drags) <= 15.0, "{drags} pose solves for 15 moves");
+    assert_eq!(
+        f(&b.eval("meshdeco.latencies().filter(l => l.kind === 'release').length")),
+        1.0,
+        "one full solve on release"
+    );
 
     // 4. A bad request gets a 400 with a message; the next good one (a user's click) succeeds.
     let bad = b.eval(
@@ -215,7 +234,7 @@ fn stats(mut v: Vec<f64>) -> (f64, f64) {
 fn latency_report(b: &mut Browser, name: &str) -> String {
     let lat = b.eval("meshdeco.latencies()");
     let mut out = String::new();
-    for kind in ["slider", "drag"] {
+    for kind in ["slider", "drag", "release"] {
         let rows: Vec<&Value> = lat.as_array().unwrap().iter().filter(|l| l["kind"] == kind).collect();
         if rows.is_empty() {
             continue;

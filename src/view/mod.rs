@@ -204,7 +204,7 @@ fn dial_ranges(model: &dyn Model) -> Result<(Vec<[f64; 2]>, bool)> {
         (0..k)
             .map(|i| {
                 let span = hi[i] - lo[i];
-                if !(span > 1e-12) { [-1.0, 1.0] } else { [lo[i] - 0.1 * span, hi[i] + 0.1 * span] }
+                if span > 1e-12 { [lo[i] - 0.1 * span, hi[i] + 0.1 * span] } else { [-1.0, 1.0] }
             })
             .collect(),
         trained,

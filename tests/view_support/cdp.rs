@@ -154,6 +154,8 @@ impl Browser {
         let browser_ws = loop {
             let mut line = String::new();
             if err.read_line(&mut line).unwrap() == 0 {
+                let _ = child.kill();
+                let _ = child.wait();
                 panic!("{} exited before DevTools listened", chromium.display());
             }
             if let Some(u) = line.split("DevTools listening on ").nth(1) {

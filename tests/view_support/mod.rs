@@ -35,6 +35,8 @@ pub struct Viewer {
 
 impl Viewer {
     /// Starts `meshdeco view <args> --port 0` and waits for its `serving http://…` line.
+    // The child is waited for by `Drop` once it is a `Viewer`, and before the panic otherwise.
+    #[allow(clippy::zombie_processes)]
     pub fn start(args: &[&str]) -> Viewer {
         let mut child = Command::new(env!("CARGO_BIN_EXE_meshdeco"))
             .arg("view")
@@ -51,6 +53,7 @@ impl Viewer {
             if out.read_line(&mut line).unwrap() == 0 {
                 let mut err = String::new();
                 child.stderr.take().unwrap().read_to_string(&mut err).unwrap();
+                let _ = child.wait();
                 panic!("meshdeco view exited before serving:\n{banner}{err}");
             }
             banner.push_str(&line);

@@ -4,7 +4,7 @@
 
 const $ = (id) => document.getElementById(id);
 const canvas = $('gl');
-const gl = canvas.getContext('webgl2', { antialias: true });
+const gl = canvas.getContext('webgl2', { antialias: false });
 
 // ---------- state ----------
 const S = {
@@ -403,13 +403,18 @@ function showPins() {
 function poseParams() {
   return { gamma: Math.pow(10, parseFloat($('gamma').value)), beta: Math.pow(10, parseFloat($('beta').value)) };
 }
-function requestPose(t0) {
+// While the pointer moves, solvers with iterations (the autoencoder's Gauss–Newton) run at most
+// DRAG_ITERATIONS, warm-started from the previous solve; the release solves once more in full.
+const DRAG_ITERATIONS = 8;
+function requestPose(t0, final) {
   const cons = [];
   for (const [v, t] of S.pins) if (!S.drag || v !== S.drag.v) cons.push({ vertex: v, target: t });
   if (S.drag) cons.push({ vertex: S.drag.v, target: S.drag.target });
   if (!cons.length) return;
   const p = poseParams();
-  submit({ url: '/api/pose', body: { constraints: cons, start: Array.from(S.weights), gamma: p.gamma, beta: p.beta }, kind: 'drag', t0 });
+  const body = { constraints: cons, start: Array.from(S.weights), gamma: p.gamma, beta: p.beta };
+  if (!final) body.max_iterations = DRAG_ITERATIONS;
+  submit({ url: '/api/pose', body, kind: final ? 'release' : 'drag', t0 });
 }
 
 // ---------- pointer input ----------
@@ -452,9 +457,11 @@ canvas.addEventListener('pointermove', (e) => {
 });
 function endPointer() {
   if (ptr && ptr.mode === 'pose' && S.drag) {
-    if (S.drag.target !== S.drag.start) { S.pins.set(S.drag.v, S.drag.target); showPins(); }
+    const moved = S.drag.target !== S.drag.start;
+    if (moved) { S.pins.set(S.drag.v, S.drag.target); showPins(); }
     S.lastDrag = { v: S.drag.v, start: S.drag.start, target: S.drag.target };
     S.drag = null; redraw();
+    if (moved) requestPose(performance.now(), true);
   }
   ptr = null;
 }
