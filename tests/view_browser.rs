@@ -316,8 +316,10 @@ fn view_screenshots_and_latency() {
         let v = Viewer::start(&[&region]);
         let mut b = Browser::launch(&chromium, 1280, 800);
         open_page(&mut b, &v);
-        select_overlay(&mut b, "displacement");
-        drag_surface(&mut b, 0.56, 0.62, 25.0, 30.0, 30);
+        // β = 1e-6: the README's value for local edits on face-poses (β = 1 spreads a drag).
+        b.eval("(() => { const s = document.getElementById('beta'); s.value = -6; s.dispatchEvent(new Event('input')); return true; })()");
+        select_overlay(&mut b, "segmentation");
+        drag_surface(&mut b, 0.42, 0.45, -25.0, -30.0, 30);
         save(&mut b, "view-face-region-drag.png");
         table += &latency_report(&mut b, "face-poses region-pca");
     }
