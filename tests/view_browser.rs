@@ -4,7 +4,7 @@
 //! background); dragging slider k to w gives vertex positions equal to `meshdeco synthesize
 //! --weights k:w` to 1e-5; a drag on the surface lands the grabbed vertex within 5 % of the drag
 //! distance (in 3-D and on screen) and the sliders follow; a bad request gets a 400 and the next
-//! good one succeeds; undo restores the shape.
+//! good one succeeds; undo restores the shape; the frames panel shows a frame's reconstruction.
 //!
 //! Without Chromium the test is skipped with a printed reason; with `CI` set it must run.
 //!
@@ -66,7 +66,7 @@ fn view_in_headless_chromium_draws_dials_poses_and_recovers() {
     let Some(chromium) = chromium_or_skip() else { return };
     let d = fresh_dir("view-browser", "pca");
     let model = train(&d, "pca", "synthetic:tube", "kind = \"pca\"\ncomponents = 8");
-    let v = Viewer::start(&[model.to_str().unwrap()]);
+    let v = Viewer::start(&[model.to_str().unwrap(), "--data", "synthetic:tube"]);
     let mut b = Browser::launch(&chromium, 1200, 800);
     open_page(&mut b, &v);
     assert_eq!(b.eval("meshdeco.S.lastError"), "", "page error at start");
@@ -217,6 +217,19 @@ fn view_in_headless_chromium_draws_dials_poses_and_recovers() {
     let restored = positions(&mut b);
     assert!(view_support::max_diff(&restored, &before) < 1e-6, "undo did not restore the shape before the drag");
     assert_eq!(f(&b.eval("meshdeco.S.pins.size")), 0.0);
+
+    // 6. Frames: the "next" button shows frame 1's reconstruction, its Erms and its error map.
+    let next = b.centre("#next");
+    b.click(next.0, next.1);
+    settle(&mut b);
+    assert_eq!(b.eval("document.getElementById('frame-i').value"), "1");
+    let info = b.eval("document.getElementById('frame-info').textContent");
+    assert!(info.as_str().unwrap().contains("Erms"), "frame info: {info}");
+    let (s, _, body) = v.request("GET", "/api/frame/1", b"");
+    assert_eq!(s, 200);
+    let rec = view_support::parse_shape(&body).positions;
+    assert!(view_support::max_diff(&positions(&mut b), &rec) < 1e-6, "the page shows frame 1's reconstruction");
+    assert_eq!(f(&b.eval("meshdeco.S.frameErr.length")), rec.len() as f64);
 
     let lat = b.eval("meshdeco.latencies()");
     eprintln!("latencies (ms): {lat}");
