@@ -245,6 +245,23 @@ fn view_api_refuses_bad_requests_and_keeps_serving() {
     let mut raw = Vec::new();
     s.read_to_end(&mut raw).unwrap();
     assert_eq!(String::from_utf8_lossy(&raw).matches("HTTP/1.1 200 OK").count(), 2);
+    // `Expect: 100-continue` (curl, larger bodies) is answered before the body is sent.
+    let body = br#"{"dials": {"0": 0.25}}"#;
+    let mut s = std::net::TcpStream::connect(&v.addr).unwrap();
+    s.set_read_timeout(Some(std::time::Duration::from_secs(30))).unwrap();
+    write!(
+        s,
+        "POST /api/decode HTTP/1.1\r\nContent-Length: {}\r\nExpect: 100-continue\r\nConnection: close\r\n\r\n",
+        body.len()
+    )
+    .unwrap();
+    let mut first = [0u8; 25];
+    s.read_exact(&mut first).unwrap();
+    assert_eq!(&first, b"HTTP/1.1 100 Continue\r\n\r\n");
+    s.write_all(body).unwrap();
+    let mut raw = Vec::new();
+    s.read_to_end(&mut raw).unwrap();
+    assert_eq!(view_support::parse_response(&raw).0, 200);
 }
 
 #[test]

@@ -109,6 +109,7 @@ fn read_request(r: &mut BufReader<TcpStream>) -> Result<(Request, bool), ReadErr
     };
     let mut length: Option<usize> = None;
     let mut keep_alive = version == "HTTP/1.1";
+    let mut expect_continue = false;
     for l in lines {
         let Some((name, value)) = l.split_once(':') else { continue };
         let value = value.trim();
@@ -128,6 +129,7 @@ fn read_request(r: &mut BufReader<TcpStream>) -> Result<(Request, bool), ReadErr
                     "chunked request bodies are not accepted: send Content-Length",
                 )));
             }
+            "expect" => expect_continue = value.eq_ignore_ascii_case("100-continue"),
             "connection" => {
                 let v = value.to_ascii_lowercase();
                 if v.contains("close") {
@@ -145,6 +147,10 @@ fn read_request(r: &mut BufReader<TcpStream>) -> Result<(Request, bool), ReadErr
             413,
             format!("request body of {length} bytes is larger than the limit of {MAX_BODY}"),
         )));
+    }
+    if expect_continue && length > 0 {
+        // curl asks before sending larger bodies; answer at once instead of letting it wait.
+        let _ = r.get_mut().write_all(b"HTTP/1.1 100 Continue\r\n\r\n");
     }
     let mut body = vec![0u8; length];
     if r.read_exact(&mut body).is_err() {
