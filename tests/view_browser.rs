@@ -316,6 +316,11 @@ fn view_screenshots_and_latency() {
         let v = Viewer::start(&[&ae]);
         let mut b = Browser::launch(&chromium, 1280, 800);
         open_page(&mut b, &v);
+        // The automatic framing looks at SCAPE's back (front and back are not told apart):
+        // orbit half a turn by dragging the background (0.008 rad per pixel).
+        let p = b.eval("(() => { const r = document.getElementById('gl').getBoundingClientRect(); return [r.left + 0.05 * r.width, r.top + 0.5 * r.height]; })()");
+        let (x, y) = (f(&p[0]), f(&p[1]));
+        b.drag((x, y), (x + std::f64::consts::PI / 0.008, y), 20);
         // Select the first-ranked component (its heat map), dial it.
         let name = b.centre(".comp .name");
         b.click(name.0, name.1);
