@@ -23,6 +23,7 @@ pub mod representation;
 pub mod rng;
 pub mod synthetic;
 pub mod timing;
+pub mod view;
 
 pub use error::{Error, Result};
 pub mod eval;

@@ -40,8 +40,12 @@ pub struct SynthesizeArgs {
     pub model: PathBuf,
     /// Component weights as `index:weight` pairs, e.g. "3:0.8,7:-1.2" (0-based component
     /// indices; unlisted components get weight 0). Autoencoder: z_i = Z_r,i + (Z_h,i − Z_r,i)·w_i.
-    #[arg(long, short, allow_hyphen_values = true)]
-    pub weights: String,
+    #[arg(long, short, allow_hyphen_values = true, required_unless_present = "weights_file")]
+    pub weights: Option<String>,
+    /// The same weights from a JSON file: `{"dials": [w0, w1, …]}` (all K) or `{"dials":
+    /// {"3": 0.8}}` (unlisted: 0), as saved by `meshdeco view` ("weights .json").
+    #[arg(long, value_name = "FILE", conflicts_with = "weights")]
+    pub weights_file: Option<PathBuf>,
     /// Output mesh (.obj, .ply or .off).
     #[arg(long, short)]
     pub out: PathBuf,
@@ -54,9 +58,16 @@ pub struct ComponentsArgs {
     /// Output directory: per component its shapes and heat map, and `components.csv` (ranked).
     /// Autoencoder: `<rank>_<dim>.obj` extreme shapes and `<rank>_<dim>_change.ply` heat maps of
     /// per-vertex feature change; linear and region models: `<name>_minus.obj`,
-    /// `<name>_plus.obj` (weight −1 and +1) and `<name>_magnitude.ply`.
+    /// `<name>_plus.obj` (weight −1 and +1) and `<name>_magnitude.ply`. Every model:
+    /// `overview.png`, per ranked component its rest shape, extreme shape and heat map.
     #[arg(long, short)]
     pub out: PathBuf,
+    /// Side in pixels of one picture of overview.png.
+    #[arg(long, default_value_t = 150)]
+    pub cell: usize,
+    /// Components per row of overview.png.
+    #[arg(long, default_value_t = 4)]
+    pub per_row: usize,
 }
 
 #[derive(Debug, Args)]
@@ -112,7 +123,15 @@ pub fn encode(a: EncodeArgs) -> Result<()> {
 
 pub fn synthesize(a: SynthesizeArgs) -> Result<()> {
     let m = load_model(&a.model).with_context(|| format!("loading model {}", a.model.display()))?;
-    let dials = model::parse_dials("--weights", &a.weights, m.n_components())?;
+    let dials = match (&a.weights, &a.weights_file) {
+        (Some(w), _) => model::parse_dials("--weights", w, m.n_components())?,
+        (None, Some(f)) => {
+            let text =
+                std::fs::read_to_string(f).with_context(|| format!("--weights-file: reading {}", f.display()))?;
+            model::parse_dials_json(&f.display().to_string(), &text, m.n_components())?
+        }
+        (None, None) => anyhow::bail!("give --weights or --weights-file"),
+    };
     let p = model::synthesize(m.as_ref(), &dials)?;
     mesh::write_mesh(&a.out, &TriMesh::new(p, m.rest().faces))?;
     println!("wrote {}", a.out.display());
@@ -122,7 +141,14 @@ pub fn synthesize(a: SynthesizeArgs) -> Result<()> {
 pub fn components(a: ComponentsArgs) -> Result<()> {
     let m = load_model(&a.model).with_context(|| format!("loading model {}", a.model.display()))?;
     m.write_components(&a.out)?;
-    println!("wrote {} components (ranked, components.csv) to {}", m.n_components(), a.out.display());
+    let overview = a.out.join("overview.png");
+    meshdeco::view::overview::write_overview(
+        m.as_ref(),
+        &overview,
+        &meshdeco::view::overview::OverviewOptions { cell: a.cell, per_row: a.per_row },
+    )
+    .with_context(|| format!("--cell {} --per-row {}", a.cell, a.per_row))?;
+    println!("wrote {} components (ranked, components.csv, overview.png) to {}", m.n_components(), a.out.display());
     Ok(())
 }
 

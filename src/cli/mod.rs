@@ -14,6 +14,7 @@ mod pose;
 mod progress;
 mod render;
 mod train;
+mod view;
 
 /// Sparse, localized deformation components from meshes that share one connectivity.
 #[derive(Debug, Parser)]
@@ -55,6 +56,8 @@ pub enum Command {
     Pose(pose::PoseArgs),
     /// Picture of a mesh as PNG (z-buffer, Lambert shading × vertex colours of a PLY).
     Render(render::RenderArgs),
+    /// Interactive viewer in the browser: component sliders, drag posing, heat maps, frames.
+    View(view::ViewArgs),
 }
 
 /// Runs one parsed command line.
@@ -104,5 +107,6 @@ fn dispatch(command: Command) -> Result<()> {
         Command::Eval(a) => eval::run(a),
         Command::Pose(a) => pose::run(a),
         Command::Render(a) => render::run(a),
+        Command::View(a) => view::run(a),
     }
 }

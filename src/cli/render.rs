@@ -13,8 +13,10 @@ pub struct RenderArgs {
     /// Output PNG, written atomically.
     #[arg(long, short)]
     pub out: PathBuf,
-    /// View direction: front (from +z), side (from +x), top (from +y).
-    #[arg(long, default_value = "front")]
+    /// View direction: auto (the up axis is the bounding box's longest, the camera looks along
+    /// its shortest, so a body lying along z stands up and a face looks at you), front (from
+    /// +z, y up), side (from +x, y up), top (from +y).
+    #[arg(long, default_value = "auto")]
     pub view: String,
     /// Image size WxH in pixels.
     #[arg(long, default_value = "800x800")]
@@ -22,14 +24,16 @@ pub struct RenderArgs {
 }
 
 pub fn run(a: RenderArgs) -> Result<()> {
-    let view =
-        render::View::parse(&a.view).with_context(|| format!("--view: `{}` is not one of front, side, top", a.view))?;
+    let m = mesh::load_mesh(&a.mesh)?;
+    let view = match a.view.as_str() {
+        "auto" => render::View::auto(&m.positions),
+        v => render::View::parse(v).with_context(|| format!("--view: `{v}` is not one of auto, front, side, top"))?,
+    };
     let (w, h) = a
         .size
         .split_once(['x', 'X'])
         .and_then(|(w, h)| Some((w.trim().parse::<usize>().ok()?, h.trim().parse::<usize>().ok()?)))
         .with_context(|| format!("--size: `{}` is not WxH (e.g. 800x600)", a.size))?;
-    let m = mesh::load_mesh(&a.mesh)?;
     let is_ply = a.mesh.extension().and_then(|e| e.to_str()).is_some_and(|e| e.eq_ignore_ascii_case("ply"));
     let colors = if is_ply { render::vertex_colors_from_ply(&a.mesh)? } else { None };
     let opts = render::RenderOptions { width: w, height: h, view, ..Default::default() };

@@ -21,6 +21,9 @@ pub enum View {
     Side,
     /// Camera on +y looking down; screen right = +x, up = −z.
     Top,
+    /// Camera on the + side of axis `view`, the + side of axis `up` pointing up, screen right =
+    /// e_up × e_view ([`View::auto`] chooses the axes from the shape, see [`auto_axes`]).
+    Axes { up: usize, view: usize },
 }
 
 impl View {
@@ -34,14 +37,53 @@ impl View {
         }
     }
 
+    /// The automatic view of a shape ([`auto_axes`]).
+    pub fn auto(positions: &[Vec3]) -> View {
+        let (up, view) = auto_axes(positions);
+        View::Axes { up, view }
+    }
+
     /// (screen x, screen y, depth towards the camera) of a point.
     fn project(self, p: Vec3) -> Vec3 {
         match self {
             View::Front => [p[0], p[1], p[2]],
             View::Side => [-p[2], p[1], p[0]],
             View::Top => [p[0], -p[2], p[1]],
+            View::Axes { up, view } => {
+                let (u, v) = (up.min(2), view.min(2));
+                // right = e_up × e_view: the remaining axis with the sign of the permutation.
+                let r = 3 - u - v;
+                let sign = if (u + 1) % 3 == v { 1.0 } else { -1.0 };
+                // e_u × e_v = +e_r when (u, v, r) is cyclic, i.e. v = u + 1 (mod 3).
+                [sign * p[r], p[u], p[v]]
+            }
         }
     }
+}
+
+/// The automatic framing of a shape: its up axis is the axis of largest bounding-box extent
+/// (a standing body, a face, a tube lying along z), the camera looks along the axis of smallest
+/// extent (a face's depth, a body's front-to-back). Ties prefer y, z, x for up and z, x, y for
+/// the view, so a shape already given y-up and z-facing keeps that framing.
+/// Returns `(up axis, view axis)` (0 = x, 1 = y, 2 = z); the camera sits on the + side of the
+/// view axis, the + side of the up axis points up.
+pub fn auto_axes(positions: &[Vec3]) -> (usize, usize) {
+    let (lo, hi) = super::bounding_box(positions);
+    let e: Vec<f64> = (0..3).map(|k| if positions.is_empty() { 0.0 } else { hi[k] - lo[k] }).collect();
+    let tol = 1e-6 * e.iter().cloned().fold(0.0, f64::max);
+    let mut up = 1;
+    for k in [2, 0] {
+        if e[k] > e[up] + tol {
+            up = k;
+        }
+    }
+    let mut view = usize::MAX;
+    for k in [2, 0, 1] {
+        if k != up && (view == usize::MAX || e[k] < e[view] - tol) {
+            view = k;
+        }
+    }
+    (up, view)
 }
 
 /// Picture settings.
@@ -56,11 +98,21 @@ pub struct RenderOptions {
     pub background: [u8; 3],
     /// Colour of vertices when none are given.
     pub base_color: [u8; 3],
+    /// The box (min, max corner, data units) fitted into the image; `None`: the mesh's own
+    /// bounding box. Pictures of several shapes share one framing by passing the same box.
+    pub bounds: Option<(Vec3, Vec3)>,
 }
 
 impl Default for RenderOptions {
     fn default() -> Self {
-        RenderOptions { width: 800, height: 800, view: View::Front, background: [255; 3], base_color: [200; 3] }
+        RenderOptions {
+            width: 800,
+            height: 800,
+            view: View::Front,
+            background: [255; 3],
+            base_color: [200; 3],
+            bounds: None,
+        }
     }
 }
 
@@ -94,7 +146,19 @@ pub fn render(mesh: &TriMesh, colors: Option<&[[u8; 3]]>, opts: &RenderOptions) 
         .collect();
     // Fit the projected bounding box into the image with a 5 % margin, square pixels.
     let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
-    for p in &q {
+    let corners: Vec<Vec3> = match opts.bounds {
+        Some((a, b)) => (0..8)
+            .map(|i| {
+                opts.view.project([
+                    if i & 1 == 0 { a[0] } else { b[0] },
+                    if i & 2 == 0 { a[1] } else { b[1] },
+                    if i & 4 == 0 { a[2] } else { b[2] },
+                ])
+            })
+            .collect(),
+        None => Vec::new(),
+    };
+    for p in if corners.is_empty() { &q } else { &corners } {
         for k in 0..2 {
             lo[k] = lo[k].min(p[k]);
             hi[k] = hi[k].max(p[k]);
@@ -216,5 +280,32 @@ mod tests {
         assert!(px(30, 22)[0] > px(32 + 20, 24)[0]);
         assert!(render(&m, Some(&[[0; 3]; 3]), &opts).is_err());
         assert!(render(&m, None, &RenderOptions { width: 2, ..opts }).is_err());
+    }
+
+    #[test]
+    fn axes_views_match_the_named_ones_and_auto_stands_a_long_shape_up() {
+        assert_eq!(View::Axes { up: 1, view: 2 }.project([1.0, 2.0, 3.0]), View::Front.project([1.0, 2.0, 3.0]));
+        assert_eq!(View::Axes { up: 1, view: 0 }.project([1.0, 2.0, 3.0]), View::Side.project([1.0, 2.0, 3.0]));
+        // A shape lying along z (the synthetic tube: long in z, round in x and y) stands up, seen
+        // from +x; a flat shape facing z (a face) keeps y up and z towards the camera.
+        let tube = crate::synthetic::tube_mesh();
+        assert_eq!(auto_axes(&tube.positions), (2, 0));
+        let face: Vec<Vec3> = vec![[0.0, 0.0, 0.0], [0.8, 1.0, 0.1], [-0.8, -1.0, 0.3]];
+        assert_eq!(auto_axes(&face), (1, 2));
+        // Rendered automatically, the tube's picture is taller than wide.
+        let opts = RenderOptions { width: 100, height: 100, view: View::auto(&tube.positions), ..Default::default() };
+        let img = render(&tube, None, &opts).unwrap();
+        let (mut xs, mut ys) = (Vec::new(), Vec::new());
+        for y in 0..100 {
+            for x in 0..100 {
+                if img[3 * (y * 100 + x)..3 * (y * 100 + x) + 3] != [255, 255, 255] {
+                    xs.push(x);
+                    ys.push(y);
+                }
+            }
+        }
+        let w = xs.iter().max().unwrap() - xs.iter().min().unwrap();
+        let h = ys.iter().max().unwrap() - ys.iter().min().unwrap();
+        assert!(h > 3 * w, "auto view of the tube: {w}×{h} pixels of ink");
     }
 }

@@ -285,6 +285,49 @@ pub fn parse_dials(flag: &str, s: &str, k: usize) -> Result<Vec<f64>> {
     Ok(w)
 }
 
+/// Parses synthesis dials from JSON text `{"dials": [w0, …]}` (all `k`) or `{"dials": {"i": w}}`
+/// (unlisted: 0), as `meshdeco view` saves them. Errors name `source` and the bad entry.
+pub fn parse_dials_json(source: &str, text: &str, k: usize) -> Result<Vec<f64>> {
+    let v: serde_json::Value = serde_json::from_str(text)
+        .map_err(|e| Error::Invalid(format!("{source}: line {} column {}: {e}", e.line(), e.column())))?;
+    let num = |x: &serde_json::Value, what: String| -> Result<f64> {
+        match x.as_f64() {
+            Some(f) if f.is_finite() => Ok(f),
+            _ => Err(Error::Invalid(format!("{source}: {what} is not a finite number ({x})"))),
+        }
+    };
+    match v.get("dials") {
+        Some(serde_json::Value::Array(a)) => {
+            if a.len() != k {
+                return Err(Error::Invalid(format!(
+                    "{source}: `dials` has {} numbers, the model has {k} components",
+                    a.len()
+                )));
+            }
+            a.iter().enumerate().map(|(i, x)| num(x, format!("dials[{i}]"))).collect()
+        }
+        Some(serde_json::Value::Object(o)) => {
+            let mut w = vec![0.0; k];
+            for (key, x) in o {
+                let i: usize = key.trim().parse().map_err(|_| {
+                    Error::Invalid(format!("{source}: key `{key}` of `dials` is not a component index"))
+                })?;
+                if i >= k {
+                    return Err(Error::Invalid(format!(
+                        "{source}: component {i} does not exist (the model has {k} components, 0..{})",
+                        k.saturating_sub(1)
+                    )));
+                }
+                w[i] = num(x, format!("dials[\"{key}\"]"))?;
+            }
+            Ok(w)
+        }
+        _ => Err(Error::Invalid(format!(
+            "{source}: expected a JSON object with `dials`: an array of {k} numbers or {{\"index\": weight}}"
+        ))),
+    }
+}
+
 /// Index of the largest value (0 when empty).
 pub fn argmax(values: &[f64]) -> usize {
     values.iter().enumerate().max_by(|a, b| a.1.total_cmp(b.1)).map(|(i, _)| i).unwrap_or(0)

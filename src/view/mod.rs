@@ -1,0 +1,650 @@
+//! `meshdeco view`: a local HTTP server with an interactive viewer page and a small API under
+//! `/api/`, written once against [`crate::model::Model`] (no method-specific code here).
+//!
+//! - **Threads.** The model is loaded and used on one *model thread* (a trained model need not
+//!   be `Send`, and solves are serialised anyway); each connection gets its own thread that
+//!   parses and validates a request, hands the model work to the model thread as a closure and
+//!   writes the answer ([`http`]). Everything that does not change (description, faces, rest
+//!   positions, heat maps, segmentation) is computed once at start and answered without the
+//!   model thread.
+//! - **Binary geometry.** Shapes travel as little-endian arrays ([`shape_bytes`]): a `u32` vertex
+//!   count N and weight count K, K `f64` weights (the model's own coordinates), K `f64` dials
+//!   (the `meshdeco synthesize --weights` values), then N×3 `f32` positions (data units).
+//! - **Safety.** Only the model directory and the `--data` frames named on the command line are
+//!   read, both at start; no request names a file, and nothing is written (downloads are
+//!   response bodies). Bodies are bounded ([`http::MAX_BODY`]); bad input gets a 400 with a
+//!   message naming the field and value, and the server keeps serving. A panic inside a model
+//!   call is caught and answered with a 500.
+//! - **Assets.** The page (`web/index.html`, `web/app.js`: hand-written WebGL2, no library) is
+//!   embedded with `include_str!`; nothing is fetched at run time.
+
+pub mod http;
+pub mod overview;
+
+use std::net::{SocketAddr, TcpListener};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::mpsc::{Sender, channel};
+use std::time::Instant;
+
+use serde_json::{Value, json};
+
+use crate::error::{Error, Result};
+use crate::mesh::{MeshSequence, TriMesh, Vec3};
+use crate::metrics::erms::Alignment;
+use crate::model::{self, Model, PoseOptions, load_model};
+use http::{Request, Response};
+
+/// The page.
+pub const INDEX_HTML: &str = include_str!("web/index.html");
+/// The page's script (WebGL2 viewer, panels, API client).
+pub const APP_JS: &str = include_str!("web/app.js");
+
+/// Default posing hyperparameters offered by the page (those of `meshdeco pose`).
+pub const DEFAULT_GAMMA: f64 = 0.025;
+pub const DEFAULT_BETA: f64 = 1.0;
+pub const DEFAULT_MAX_ITERATIONS: usize = 30;
+
+/// What `meshdeco view` serves.
+#[derive(Debug, Clone)]
+pub struct ViewOptions {
+    /// Model directory (or its model.json).
+    pub model: PathBuf,
+    /// Frames to step through (any path `meshdeco encode` accepts), optional.
+    pub data: Option<String>,
+    /// Address to listen on (port 0: any free port).
+    pub addr: SocketAddr,
+}
+
+/// Work for the model thread.
+type Job = Box<dyn FnOnce(&Session) -> Response + Send>;
+
+/// What the model thread owns.
+struct Session {
+    model: Box<dyn Model>,
+    frames: Option<MeshSequence>,
+    data_name: String,
+}
+
+/// Everything that does not change while serving, computed at start.
+struct Shared {
+    description: Vec<u8>,
+    rest: TriMesh,
+    rest_bytes: Vec<u8>,
+    faces_bytes: Vec<u8>,
+    heat: Vec<Vec<u8>>,
+    segmentation: Vec<u8>,
+    k: usize,
+    n_frames: usize,
+    summary: String,
+}
+
+/// A started viewer: the model is loaded and the address bound; [`Viewer::serve`] answers.
+pub struct Viewer {
+    listener: TcpListener,
+    shared: Arc<Shared>,
+    jobs: Sender<Job>,
+}
+
+impl Viewer {
+    /// Loads the model (and frames) on the model thread, computes the static answers and binds
+    /// `options.addr`.
+    pub fn start(options: &ViewOptions) -> Result<Viewer> {
+        let (jobs, job_rx) = channel::<Job>();
+        let (ready_tx, ready_rx) = channel::<Result<Shared>>();
+        let opts = options.clone();
+        std::thread::Builder::new()
+            .name("meshdeco-model".into())
+            .spawn(move || {
+                let session = match open_session(&opts) {
+                    Ok(s) => s,
+                    Err(e) => {
+                        let _ = ready_tx.send(Err(e));
+                        return;
+                    }
+                };
+                let shared = describe(&session, &opts.model);
+                let failed = shared.is_err();
+                let _ = ready_tx.send(shared);
+                if failed {
+                    return;
+                }
+                for job in job_rx {
+                    // The job's own channel carries the answer; a panic inside is turned into a 500.
+                    let _ = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| job(&session)));
+                }
+            })
+            .map_err(|e| Error::Invalid(format!("cannot start the model thread: {e}")))?;
+        let shared = ready_rx.recv().map_err(|_| Error::Invalid("the model thread stopped while loading".into()))??;
+        let listener = TcpListener::bind(options.addr)
+            .map_err(|e| Error::Invalid(format!("--host/--port: cannot listen on {}: {e}", options.addr)))?;
+        Ok(Viewer { listener, shared: Arc::new(shared), jobs })
+    }
+
+    /// The bound address (the real port when 0 was asked for).
+    pub fn local_addr(&self) -> Result<SocketAddr> {
+        self.listener.local_addr().map_err(|e| Error::Invalid(format!("listening socket: {e}")))
+    }
+
+    /// One line about the model and data being served.
+    pub fn summary(&self) -> &str {
+        &self.shared.summary
+    }
+
+    /// Answers connections until the process ends (one thread per connection).
+    pub fn serve(self) -> Result<()> {
+        for stream in self.listener.incoming() {
+            let Ok(stream) = stream else { continue };
+            let shared = Arc::clone(&self.shared);
+            let jobs = self.jobs.clone();
+            let _ = std::thread::Builder::new()
+                .name("meshdeco-http".into())
+                .spawn(move || http::serve_connection(stream, &|req| route(req, &shared, &jobs)));
+        }
+        Ok(())
+    }
+}
+
+fn open_session(opts: &ViewOptions) -> Result<Session> {
+    let model = load_model(&opts.model)?;
+    let (frames, data_name) = match &opts.data {
+        Some(path) => {
+            let seq = crate::preprocess::load_frames(path)?;
+            model::check_connectivity(model.as_ref(), &seq, path)?;
+            (Some(seq), path.clone())
+        }
+        None => (None, String::new()),
+    };
+    Ok(Session { model, frames, data_name })
+}
+
+fn f32_bytes(values: impl IntoIterator<Item = f64>) -> Vec<u8> {
+    values.into_iter().flat_map(|v| (v as f32).to_le_bytes()).collect()
+}
+
+fn positions_bytes(p: &[Vec3]) -> Vec<u8> {
+    f32_bytes(p.iter().flatten().copied())
+}
+
+/// The binary shape of the API: `u32` N, `u32` K, K `f64` weights, K `f64` dials, N×3 `f32`
+/// positions (little-endian; the `f32` block starts at byte 8 + 16 K, 4-byte aligned).
+pub fn shape_bytes(weights: &[f64], dials: &[f64], positions: &[Vec3]) -> Vec<u8> {
+    let mut b = Vec::with_capacity(8 + 16 * weights.len() + 12 * positions.len());
+    b.extend((positions.len() as u32).to_le_bytes());
+    b.extend((weights.len() as u32).to_le_bytes());
+    for v in weights.iter().chain(dials) {
+        b.extend(v.to_le_bytes());
+    }
+    b.extend(positions_bytes(positions));
+    b
+}
+
+/// Per component (index order) the range of its dial over the training weights (0 included,
+/// padded by 10 %; [−1, 1] when the model stores none or they do not vary).
+fn dial_ranges(model: &dyn Model) -> Result<(Vec<[f64; 2]>, bool)> {
+    let k = model.n_components();
+    let mut lo = vec![0.0f64; k];
+    let mut hi = vec![0.0f64; k];
+    let trained = match model.train_weights() {
+        Some(ws) => {
+            for w in &ws {
+                let d = model.dials(w)?;
+                for i in 0..k {
+                    if d[i].is_finite() {
+                        lo[i] = lo[i].min(d[i]);
+                        hi[i] = hi[i].max(d[i]);
+                    }
+                }
+            }
+            !ws.is_empty()
+        }
+        None => false,
+    };
+    Ok((
+        (0..k)
+            .map(|i| {
+                let span = hi[i] - lo[i];
+                if span > 1e-12 { [lo[i] - 0.1 * span, hi[i] + 0.1 * span] } else { [-1.0, 1.0] }
+            })
+            .collect(),
+        trained,
+    ))
+}
+
+/// Groups components with the same support (vertices above 1e-6 of the component's peak) and
+/// labels each vertex with the group of its dominant component: the region model's regions
+/// (its components of one region share a support), one group per component elsewhere.
+fn segmentation(components: &[model::Component], n: usize) -> (Vec<u32>, usize) {
+    let mut supports: Vec<Vec<bool>> = Vec::new();
+    let mut group_of = Vec::with_capacity(components.len());
+    for c in components {
+        let peak = c.magnitudes.iter().cloned().fold(0.0, f64::max);
+        let s: Vec<bool> = c.magnitudes.iter().map(|&m| m > 1e-6 * peak).collect();
+        let g = supports.iter().position(|t| *t == s).unwrap_or_else(|| {
+            supports.push(s);
+            supports.len() - 1
+        });
+        group_of.push(g);
+    }
+    let labels = (0..n)
+        .map(|v| {
+            let best = components
+                .iter()
+                .enumerate()
+                .max_by(|a, b| a.1.magnitudes[v].total_cmp(&b.1.magnitudes[v]))
+                .map(|(i, _)| group_of[i] as u32);
+            best.unwrap_or(0)
+        })
+        .collect();
+    (labels, supports.len())
+}
+
+fn describe(s: &Session, model_path: &Path) -> Result<Shared> {
+    let m = s.model.as_ref();
+    let rest = m.rest();
+    let n = rest.n_vertices();
+    let k = m.n_components();
+    let mut components = m.components()?;
+    components.sort_by_key(|c| c.index);
+    let (ranges, trained_ranges) = dial_ranges(m)?;
+    let (labels, groups) = segmentation(&components, n);
+    let w0 = m.start_weights(None)?;
+    let d0 = m.dials(&w0)?;
+    let (lo, hi) = rest.bounding_box();
+    let (up, view) = crate::mesh::render::auto_axes(&rest.positions);
+    let mut ranked = components.clone();
+    ranked.sort_by_key(|c| c.rank);
+    let comps: Vec<Value> = ranked
+        .iter()
+        .map(|c| {
+            json!({
+                "index": c.index,
+                "rank": c.rank,
+                "name": c.name,
+                "center": c.center,
+                "peak": c.magnitudes.iter().cloned().fold(0.0, f64::max),
+                "range": ranges[c.index],
+            })
+        })
+        .collect();
+    let frames = s.frames.as_ref().map(|f| json!({ "source": s.data_name, "names": f.names }));
+    let name = model_path.file_name().map(|f| f.to_string_lossy().to_string()).unwrap_or_default();
+    let desc = json!({
+        "model": name,
+        "kind": m.kind().name(),
+        "representation": m.representation().name(),
+        "n_vertices": n,
+        "n_faces": rest.n_faces(),
+        "n_components": k,
+        "components": comps,
+        "ranges_from": if trained_ranges { "training weights" } else { "default [-1, 1]" },
+        "start": { "weights": w0, "dials": d0, "description": m.start_description() },
+        "bbox": { "min": lo, "max": hi },
+        "up_axis": up,
+        "view_axis": view,
+        "segmentation_groups": groups,
+        "frames": frames,
+        "pose_defaults": { "gamma": DEFAULT_GAMMA, "beta": DEFAULT_BETA, "max_iterations": DEFAULT_MAX_ITERATIONS },
+    });
+    let faces_bytes = rest.faces.iter().flatten().flat_map(|&i| (i as u32).to_le_bytes()).collect();
+    let heat = components.iter().map(|c| f32_bytes(c.magnitudes.iter().copied())).collect();
+    let summary = format!(
+        "{} model {} ({} representation): {n} vertices, {} faces, {k} weights{}",
+        m.kind().name(),
+        model_path.display(),
+        m.representation().name(),
+        rest.n_faces(),
+        s.frames.as_ref().map(|f| format!("; {} frames of {}", f.n_frames(), s.data_name)).unwrap_or_default()
+    );
+    Ok(Shared {
+        description: desc.to_string().into_bytes(),
+        rest_bytes: positions_bytes(&rest.positions),
+        faces_bytes,
+        heat,
+        segmentation: labels.iter().flat_map(|l| l.to_le_bytes()).collect(),
+        k,
+        n_frames: s.frames.as_ref().map_or(0, |f| f.n_frames()),
+        rest,
+        summary,
+    })
+}
+
+/// Runs `job` on the model thread and waits for its answer.
+fn on_model(jobs: &Sender<Job>, job: impl FnOnce(&Session) -> Response + Send + 'static) -> Response {
+    let (tx, rx) = channel();
+    let sent = jobs.send(Box::new(move |s: &Session| {
+        let t0 = Instant::now();
+        let r = job(s);
+        let ms = 1e3 * t0.elapsed().as_secs_f64();
+        let r = r.with_header("X-Compute-Ms", format!("{ms:.3}"));
+        let _ = tx.send(r);
+        Response::new(200, "text/plain", Vec::new())
+    }));
+    if sent.is_err() {
+        return Response::error(500, "the model thread has stopped");
+    }
+    rx.recv().unwrap_or_else(|_| Response::error(500, "the model call failed (panicked); the server keeps serving"))
+}
+
+/// The API's error type: status and message.
+type ApiResult<T> = std::result::Result<T, Response>;
+
+fn bad(message: impl Into<String>) -> Response {
+    Response::error(400, message)
+}
+
+fn parse_json(body: &[u8]) -> ApiResult<Value> {
+    let v: Value = serde_json::from_slice(body)
+        .map_err(|e| bad(format!("malformed JSON at line {} column {}: {e}", e.line(), e.column())))?;
+    if !v.is_object() {
+        return Err(bad("the request body must be a JSON object"));
+    }
+    Ok(v)
+}
+
+fn number(v: &Value, what: &str) -> ApiResult<f64> {
+    let x = v.as_f64().ok_or_else(|| bad(format!("{what} must be a number, got {v}")))?;
+    if !x.is_finite() {
+        return Err(bad(format!("{what} is not finite ({x})")));
+    }
+    Ok(x)
+}
+
+/// A dense vector of K numbers from a JSON array of length K, or (`sparse`) from an object
+/// `{"component index": value}` (unlisted: 0).
+fn vector(v: &Value, what: &str, k: usize, sparse: bool) -> ApiResult<Vec<f64>> {
+    match v {
+        Value::Array(a) => {
+            if a.len() != k {
+                return Err(bad(format!("`{what}` has {} numbers, the model has {k} components", a.len())));
+            }
+            a.iter().enumerate().map(|(i, x)| number(x, &format!("`{what}`[{i}]"))).collect()
+        }
+        Value::Object(o) if sparse => {
+            let mut out = vec![0.0; k];
+            for (key, x) in o {
+                let i: usize =
+                    key.trim().parse().map_err(|_| bad(format!("`{what}`: key `{key}` is not a component index")))?;
+                if i >= k {
+                    return Err(bad(format!(
+                        "`{what}`: unknown component {i} (the model has {k} components, 0..{})",
+                        k.saturating_sub(1)
+                    )));
+                }
+                out[i] = number(x, &format!("`{what}`[\"{key}\"]"))?;
+            }
+            Ok(out)
+        }
+        _ => Err(bad(format!(
+            "`{what}` must be an array of {k} numbers{}",
+            if sparse { " or an object {\"component index\": value}" } else { "" }
+        ))),
+    }
+}
+
+/// Dials or weights of a request body: exactly one of `dials` (as `meshdeco synthesize
+/// --weights`) and `weights` (the model's own coordinates).
+enum Coords {
+    Dials(Vec<f64>),
+    Weights(Vec<f64>),
+}
+
+fn coords(body: &Value, k: usize) -> ApiResult<Coords> {
+    match (body.get("dials"), body.get("weights")) {
+        (Some(d), None) => Ok(Coords::Dials(vector(d, "dials", k, true)?)),
+        (None, Some(w)) => Ok(Coords::Weights(vector(w, "weights", k, false)?)),
+        (Some(_), Some(_)) => Err(bad("give either `dials` or `weights`, not both")),
+        (None, None) => Err(bad("missing `dials` (synthesis dials, as `meshdeco synthesize --weights`) or `weights`")),
+    }
+}
+
+/// Weights, dials and positions of `c` (a 400 when decoding fails or leaves the finite range).
+fn evaluate(m: &dyn Model, c: Coords) -> ApiResult<(Vec<f64>, Vec<f64>, Vec<Vec3>)> {
+    let e = |e: Error| bad(e.to_string());
+    let (w, d) = match c {
+        Coords::Dials(d) => (m.synthesis_weights(&d).map_err(e)?, d),
+        Coords::Weights(w) => {
+            let d = m.dials(&w).map_err(e)?;
+            (w, d)
+        }
+    };
+    let p = m.decode(std::slice::from_ref(&w)).map_err(e)?.remove(0);
+    if let Some(i) = p.iter().position(|q| q.iter().any(|x| !x.is_finite() || x.abs() > f32::MAX as f64)) {
+        return Err(bad(format!("these weights decode to a non-finite position at vertex {i}; pick smaller values")));
+    }
+    Ok((w, d, p))
+}
+
+fn result(r: ApiResult<Response>) -> Response {
+    r.unwrap_or_else(|e| e)
+}
+
+/// Dispatches one request.
+fn route(req: &Request, shared: &Arc<Shared>, jobs: &Sender<Job>) -> Response {
+    let get = req.method == "GET";
+    let post = req.method == "POST";
+    let path = req.path.as_str();
+    let need = |ok: bool, allowed: &str| {
+        if ok { None } else { Some(Response::error(405, format!("{} {path}: use {allowed}", req.method))) }
+    };
+    let api_get = |body: Vec<u8>, ct: &'static str| need(get, "GET").unwrap_or_else(|| Response::new(200, ct, body));
+    match path {
+        "/" | "/index.html" => api_get(INDEX_HTML.as_bytes().to_vec(), "text/html; charset=utf-8"),
+        "/app.js" => api_get(APP_JS.as_bytes().to_vec(), "text/javascript; charset=utf-8"),
+        "/api/model" => api_get(shared.description.clone(), "application/json"),
+        "/api/rest" => api_get(shared.rest_bytes.clone(), "application/octet-stream"),
+        "/api/faces" => api_get(shared.faces_bytes.clone(), "application/octet-stream"),
+        "/api/segmentation" => api_get(shared.segmentation.clone(), "application/octet-stream"),
+        "/api/decode" => need(post, "POST").unwrap_or_else(|| result(decode(req, shared, jobs))),
+        "/api/pose" => need(post, "POST").unwrap_or_else(|| result(pose(req, shared, jobs))),
+        "/api/export" => need(post, "POST").unwrap_or_else(|| result(export(req, shared, jobs))),
+        _ => {
+            if let Some(i) = path.strip_prefix("/api/heat/") {
+                if let Some(r) = need(get, "GET") {
+                    return r;
+                }
+                return match i.parse::<usize>() {
+                    Ok(i) if i < shared.k => Response::binary(shared.heat[i].clone()),
+                    _ => bad(format!(
+                        "unknown component `{i}` (the model has {} components, 0..{})",
+                        shared.k,
+                        shared.k.saturating_sub(1)
+                    )),
+                };
+            }
+            if let Some(i) = path.strip_prefix("/api/frame/") {
+                if let Some(r) = need(get, "GET") {
+                    return r;
+                }
+                return result(frame(i, shared, jobs));
+            }
+            Response::error(404, format!("no such page or endpoint: {path}"))
+        }
+    }
+}
+
+fn decode(req: &Request, shared: &Shared, jobs: &Sender<Job>) -> ApiResult<Response> {
+    let body = parse_json(&req.body)?;
+    let c = coords(&body, shared.k)?;
+    Ok(on_model(jobs, move |s| {
+        result(evaluate(s.model.as_ref(), c).map(|(w, d, p)| Response::binary(shape_bytes(&w, &d, &p))))
+    }))
+}
+
+/// `POST /api/pose`: `{"constraints": [{"vertex": v, "target": [x, y, z]}, …], "start": [K
+/// weights] (optional), "gamma", "beta", "max_iterations" (optional)}`.
+fn pose(req: &Request, shared: &Shared, jobs: &Sender<Job>) -> ApiResult<Response> {
+    let body = parse_json(&req.body)?;
+    let n = shared.rest.n_vertices();
+    let list = body
+        .get("constraints")
+        .and_then(Value::as_array)
+        .ok_or_else(|| bad("missing `constraints`: an array of {\"vertex\": index, \"target\": [x, y, z]}"))?;
+    if list.is_empty() {
+        return Err(bad("`constraints` is empty: give at least one {\"vertex\", \"target\"}"));
+    }
+    let mut vertices = Vec::with_capacity(list.len());
+    let mut targets = Vec::with_capacity(list.len());
+    for (i, c) in list.iter().enumerate() {
+        let v = c
+            .get("vertex")
+            .and_then(Value::as_u64)
+            .ok_or_else(|| bad(format!("constraints[{i}]: `vertex` must be a vertex index (integer ≥ 0)")))?;
+        if v as usize >= n || v > u32::MAX as u64 {
+            return Err(bad(format!(
+                "constraints[{i}]: vertex {v} out of range (the model has {n} vertices, 0..{})",
+                n.saturating_sub(1)
+            )));
+        }
+        let v = v as usize;
+        let t = c
+            .get("target")
+            .and_then(Value::as_array)
+            .filter(|a| a.len() == 3)
+            .ok_or_else(|| bad(format!("constraints[{i}]: `target` of vertex {v} must be [x, y, z]")))?;
+        let t = [
+            number(&t[0], &format!("constraints[{i}].target[0]"))?,
+            number(&t[1], &format!("constraints[{i}].target[1]"))?,
+            number(&t[2], &format!("constraints[{i}].target[2]"))?,
+        ];
+        if vertices.contains(&v) {
+            return Err(bad(format!("constraints[{i}]: vertex {v} is constrained twice")));
+        }
+        vertices.push(v);
+        targets.push(t);
+    }
+    crate::pipeline::pose::check_targets(&shared.rest, &vertices, &targets).map_err(|e| bad(e.to_string()))?;
+    let start = match body.get("start") {
+        Some(s) => Some(vector(s, "start", shared.k, false)?),
+        None => None,
+    };
+    let param = |key: &str, default: f64| -> ApiResult<f64> {
+        match body.get(key) {
+            None => Ok(default),
+            Some(v) => {
+                let x = number(v, &format!("`{key}`"))?;
+                if x < 0.0 {
+                    return Err(bad(format!("`{key}` {x}: must be ≥ 0")));
+                }
+                Ok(x)
+            }
+        }
+    };
+    let gamma = param("gamma", DEFAULT_GAMMA)?;
+    let beta = param("beta", DEFAULT_BETA)?;
+    let iterations = param("max_iterations", DEFAULT_MAX_ITERATIONS as f64)?;
+    if !(1.0..=1000.0).contains(&iterations) || iterations.fract() != 0.0 {
+        return Err(bad(format!("`max_iterations` {iterations}: must be an integer from 1 to 1000")));
+    }
+    let options = PoseOptions {
+        linear: crate::methods::posing::PoseConfig { gamma, beta },
+        ae: crate::pipeline::ae_pose::AePoseConfig { gamma, max_iterations: iterations as usize, ..Default::default() },
+    };
+    Ok(on_model(jobs, move |s| {
+        let m = s.model.as_ref();
+        let r = (|| -> ApiResult<Response> {
+            let w0 = match start {
+                Some(w) => w,
+                None => m.start_weights(None).map_err(|e| bad(e.to_string()))?,
+            };
+            let r = m.pose(&vertices, &targets, &w0, &options).map_err(|e| bad(e.to_string()))?;
+            let (w, d, p) = evaluate(m, Coords::Weights(r.weights))?;
+            Ok(Response::binary(shape_bytes(&w, &d, &p)))
+        })();
+        result(r)
+    }))
+}
+
+/// `GET /api/frame/<i>`: the frame, the model's reconstruction and the per-vertex error.
+fn frame(i: &str, shared: &Shared, jobs: &Sender<Job>) -> ApiResult<Response> {
+    if shared.n_frames == 0 {
+        return Err(bad("no frames: start `meshdeco view` with --data PATH"));
+    }
+    let f: usize = i.parse().map_err(|_| bad(format!("frame `{i}` is not a frame index")))?;
+    if f >= shared.n_frames {
+        return Err(bad(format!("frame {f} out of range ({} frames, 0..{})", shared.n_frames, shared.n_frames - 1)));
+    }
+    Ok(on_model(jobs, move |s| {
+        let m = s.model.as_ref();
+        let frames = s.frames.as_ref().expect("frames checked");
+        let one = frames.select(&[f]);
+        let r = (|| -> ApiResult<Response> {
+            let e = model::encode_frames(m, &one, &s.data_name, None).map_err(|e| bad(e.to_string()))?;
+            let truth = &one.frames[0];
+            let rec = &e.reconstructions[0];
+            let shift = match e.alignment {
+                Alignment::Centroid => {
+                    let c = |p: &[Vec3]| -> Vec3 {
+                        std::array::from_fn(|k| p.iter().map(|q| q[k]).sum::<f64>() / p.len().max(1) as f64)
+                    };
+                    let (a, b) = (c(truth), c(rec));
+                    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+                }
+                Alignment::None => [0.0; 3],
+            };
+            let err: Vec<f64> = truth
+                .iter()
+                .zip(rec)
+                .map(|(t, r)| crate::mesh::dist(*t, [r[0] + shift[0], r[1] + shift[1], r[2] + shift[2]]))
+                .collect();
+            let w = &e.weights[0];
+            let d = m.dials(w).map_err(|e| bad(e.to_string()))?;
+            let mut b = shape_bytes(w, &d, rec);
+            b.extend(positions_bytes(truth));
+            b.extend(f32_bytes(err));
+            Ok(Response::binary(b)
+                .with_header("X-Frame-Erms", format!("{}", e.total_erms))
+                .with_header("X-Frame-Name", one.names.first().cloned().unwrap_or_default().replace(['\r', '\n'], " ")))
+        })();
+        result(r)
+    }))
+}
+
+/// `POST /api/export`: `{"format": "obj" | "ply" | "json", "dials" | "weights"}` → the shape as
+/// a mesh file, or `{"dials": […], "weights": […]}` that `meshdeco synthesize --weights-file`
+/// reads back.
+fn export(req: &Request, shared: &Shared, jobs: &Sender<Job>) -> ApiResult<Response> {
+    let body = parse_json(&req.body)?;
+    let format = body.get("format").and_then(Value::as_str).unwrap_or("obj").to_string();
+    if !["obj", "ply", "json"].contains(&format.as_str()) {
+        return Err(bad(format!("`format` `{format}`: must be obj, ply or json")));
+    }
+    let c = coords(&body, shared.k)?;
+    let faces = shared.rest.faces.clone();
+    Ok(on_model(jobs, move |s| {
+        let m = s.model.as_ref();
+        result(evaluate(m, c).map(|(w, d, p)| match format.as_str() {
+            "json" => Response::json(200, &json!({ "kind": m.kind().name(), "dials": d, "weights": w })),
+            "ply" => Response::new(200, "text/plain; charset=utf-8", ply_text(&p, &faces).into_bytes()),
+            _ => Response::new(200, "text/plain; charset=utf-8", obj_text(&p, &faces).into_bytes()),
+        }))
+    }))
+}
+
+/// OBJ text (shortest round-trip coordinates, 1-based faces).
+pub fn obj_text(p: &[Vec3], faces: &[[usize; 3]]) -> String {
+    let mut s = format!("# meshdeco view: {} vertices, {} faces\n", p.len(), faces.len());
+    for q in p {
+        s += &format!("v {:?} {:?} {:?}\n", q[0], q[1], q[2]);
+    }
+    for f in faces {
+        s += &format!("f {} {} {}\n", f[0] + 1, f[1] + 1, f[2] + 1);
+    }
+    s
+}
+
+/// ASCII PLY text.
+pub fn ply_text(p: &[Vec3], faces: &[[usize; 3]]) -> String {
+    let mut s = format!(
+        "ply\nformat ascii 1.0\ncomment meshdeco view\nelement vertex {}\nproperty double x\nproperty double y\nproperty double z\nelement face {}\nproperty list uchar int vertex_indices\nend_header\n",
+        p.len(),
+        faces.len()
+    );
+    for q in p {
+        s += &format!("{:?} {:?} {:?}\n", q[0], q[1], q[2]);
+    }
+    for f in faces {
+        s += &format!("3 {} {} {}\n", f[0], f[1], f[2]);
+    }
+    s
+}

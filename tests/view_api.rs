@@ -1,0 +1,371 @@
+//! `meshdeco view`'s HTTP API without a browser, as a script meets it: the binary started on a
+//! free port with models trained here on the synthetic tube. Decoding equals `meshdeco
+//! synthesize`; a pose lands the dragged vertex; heat maps equal the model's components; frames
+//! come with their reconstruction and Erms; every kind of bad request gets a 400 (or 404 / 405 /
+//! 413) with a message naming the problem and the next good request succeeds; Ctrl-C stops the
+//! server with status 0.
+
+mod common;
+mod view_support;
+
+use common::{fresh_dir, meshdeco, output_text};
+use meshdeco::model::load_model;
+use serde_json::{Value, json};
+use view_support::{Viewer, dist, f32s, header, max_diff, parse_shape, train};
+
+fn obj_positions(path: &std::path::Path) -> Vec<[f64; 3]> {
+    common::obj_vertices(path)
+}
+
+#[test]
+fn view_api_serves_decode_pose_heat_frames_and_export() {
+    let d = fresh_dir("view-api", "pca");
+    let model = train(&d, "pca", "synthetic:tube", "kind = \"pca\"\ncomponents = 8");
+    let m = load_model(&model).unwrap();
+    let k = m.n_components();
+    let v = Viewer::start(&[model.to_str().unwrap(), "--data", "synthetic:tube"]);
+    assert!(v.banner.contains("pca model"), "{}", v.banner);
+
+    // The page and its script are served from the binary.
+    let (s, h, body) = v.request("GET", "/", b"");
+    assert_eq!(s, 200);
+    assert!(header(&h, "content-type").unwrap().starts_with("text/html"));
+    assert!(String::from_utf8_lossy(&body).contains("/app.js"));
+    let (s, _, js) = v.request("GET", "/app.js", b"");
+    assert_eq!(s, 200);
+    assert!(String::from_utf8_lossy(&js).contains("webgl2"));
+
+    // Description: components in rank order, ranges containing 0, frames of --data.
+    let (s, _, body) = v.request("GET", "/api/model", b"");
+    assert_eq!(s, 200);
+    let desc: Value = serde_json::from_slice(&body).unwrap();
+    assert_eq!(desc["n_vertices"], 1466);
+    assert_eq!(desc["n_components"], k);
+    assert_eq!(desc["up_axis"], 2, "the tube lies along z");
+    let comps = desc["components"].as_array().unwrap();
+    assert_eq!(comps.len(), k);
+    for (r, c) in comps.iter().enumerate() {
+        assert_eq!(c["rank"], r);
+        let range = c["range"].as_array().unwrap();
+        let (lo, hi) = (range[0].as_f64().unwrap(), range[1].as_f64().unwrap());
+        assert!(lo < 0.0 && hi > 0.0 && lo.is_finite() && hi.is_finite(), "range {range:?}");
+    }
+    assert_eq!(desc["ranges_from"], "training weights");
+    assert_eq!(desc["frames"]["names"].as_array().unwrap().len(), 60);
+
+    // Faces and rest positions: binary, the model's.
+    let rest = m.rest();
+    let (_, _, faces) = v.request("GET", "/api/faces", b"");
+    assert_eq!(faces.len(), 12 * rest.n_faces());
+    assert_eq!(u32::from_le_bytes(faces[12..16].try_into().unwrap()) as usize, rest.faces[1][0]);
+    let (_, _, rp) = v.request("GET", "/api/rest", b"");
+    let rp: Vec<[f64; 3]> = f32s(&rp).chunks(3).map(|c| [c[0], c[1], c[2]]).collect();
+    assert!(max_diff(&rp, &rest.positions) < 1e-6);
+
+    // Decode = `meshdeco synthesize --weights`.
+    let (s, h, body) = v.post("/api/decode", &json!({ "dials": { "1": 0.7, "3": -0.4 } }));
+    assert_eq!(s, 200, "{}", String::from_utf8_lossy(&body));
+    assert!(header(&h, "x-compute-ms").unwrap().parse::<f64>().unwrap() >= 0.0);
+    let shape = parse_shape(&body);
+    assert_eq!(shape.dials[1], 0.7);
+    let o = meshdeco(&["synthesize", model.to_str().unwrap(), "--weights", "1:0.7,3:-0.4", "--out", "synth.obj"], &d);
+    assert!(o.status.success(), "{}", output_text(&o));
+    let synth = obj_positions(&d.join("synth.obj"));
+    let diff = max_diff(&shape.positions, &synth);
+    assert!(diff < 1e-5, "decode differs from synthesize by {diff}");
+    // The dense form, and weights in the model's coordinates, give the same shape.
+    let mut dense = vec![0.0; k];
+    dense[1] = 0.7;
+    dense[3] = -0.4;
+    let (_, _, b2) = v.post("/api/decode", &json!({ "dials": dense }));
+    assert!(max_diff(&parse_shape(&b2).positions, &synth) < 1e-5);
+    let (_, _, b3) = v.post("/api/decode", &json!({ "weights": shape.weights }));
+    assert!(max_diff(&parse_shape(&b3).positions, &synth) < 1e-5);
+
+    // Export: the weights JSON goes back through `synthesize --weights-file`; OBJ text equals it.
+    let (s, _, wjson) = v.post("/api/export", &json!({ "format": "json", "dials": { "1": 0.7, "3": -0.4 } }));
+    assert_eq!(s, 200);
+    std::fs::write(d.join("weights.json"), &wjson).unwrap();
+    let o =
+        meshdeco(&["synthesize", model.to_str().unwrap(), "--weights-file", "weights.json", "--out", "back.obj"], &d);
+    assert!(o.status.success(), "{}", output_text(&o));
+    assert!(max_diff(&obj_positions(&d.join("back.obj")), &synth) < 1e-12);
+    let (s, _, obj) = v.post("/api/export", &json!({ "format": "obj", "dials": { "1": 0.7, "3": -0.4 } }));
+    assert_eq!(s, 200);
+    std::fs::write(d.join("export.obj"), &obj).unwrap();
+    assert!(max_diff(&obj_positions(&d.join("export.obj")), &synth) < 1e-12);
+    let (s, _, ply) = v.post("/api/export", &json!({ "format": "ply", "weights": shape.weights }));
+    assert_eq!(s, 200);
+    std::fs::write(d.join("export.ply"), &ply).unwrap();
+    assert!(max_diff(&meshdeco::mesh::load_mesh(&d.join("export.ply")).unwrap().positions, &synth) < 1e-12);
+
+    // Pose: the tip of the tube dragged sideways lands within 5 % of the drag distance.
+    let tip = (0..rest.n_vertices()).max_by(|&a, &b| rest.positions[a][2].total_cmp(&rest.positions[b][2])).unwrap();
+    let start = m.decode(&[m.start_weights(None).unwrap()]).unwrap().remove(0);
+    let target = [start[tip][0], start[tip][1] + 0.1, start[tip][2]];
+    let (s, h, body) = v.post(
+        "/api/pose",
+        &json!({ "constraints": [{ "vertex": tip, "target": target }], "start": m.start_weights(None).unwrap() }),
+    );
+    assert_eq!(s, 200, "{}", String::from_utf8_lossy(&body));
+    assert!(header(&h, "x-compute-ms").is_some());
+    let posed = parse_shape(&body);
+    let drag = dist(start[tip], target);
+    let miss = dist(posed.positions[tip], target);
+    assert!(miss <= 0.05 * drag, "posed tip misses the target by {miss} (drag {drag})");
+    // Its weights decode to its positions, and its dials are the synthesis dials of the weights.
+    let (_, _, b4) = v.post("/api/decode", &json!({ "dials": posed.dials }));
+    assert!(max_diff(&parse_shape(&b4).positions, &posed.positions) < 1e-5);
+
+    // Heat maps equal the model's per-vertex magnitudes.
+    for c in m.components().unwrap() {
+        let (s, _, heat) = v.request("GET", &format!("/api/heat/{}", c.index), b"");
+        assert_eq!(s, 200);
+        let heat = f32s(&heat);
+        assert_eq!(heat.len(), rest.n_vertices());
+        let worst = heat.iter().zip(&c.magnitudes).map(|(a, b)| (a - b).abs() / b.abs().max(1e-3)).fold(0.0, f64::max);
+        assert!(worst < 1e-5, "heat map of component {} differs by {worst}", c.index);
+    }
+    let (s, _, seg) = v.request("GET", "/api/segmentation", b"");
+    assert_eq!(s, 200);
+    assert_eq!(seg.len(), 4 * rest.n_vertices());
+
+    // Frames: reconstruction, truth and per-vertex error; the Erms is the encode command's.
+    let (s, h, body) = v.request("GET", "/api/frame/5", b"");
+    assert_eq!(s, 200, "{}", String::from_utf8_lossy(&body));
+    let erms: f64 = header(&h, "x-frame-erms").unwrap().parse().unwrap();
+    assert!(erms.is_finite() && erms >= 0.0);
+    let f = parse_shape(&body);
+    let n = rest.n_vertices();
+    assert_eq!(f.rest.len(), 16 * n);
+    let truth: Vec<[f64; 3]> = f32s(&f.rest[..12 * n]).chunks(3).map(|c| [c[0], c[1], c[2]]).collect();
+    let err = f32s(&f.rest[12 * n..]);
+    let seq = meshdeco::synthetic::load("synthetic:tube").unwrap();
+    assert!(max_diff(&truth, &seq.frames[5]) < 1e-6);
+    for i in 0..n {
+        assert!((err[i] - dist(truth[i], f.positions[i])).abs() < 1e-5);
+    }
+    let own = meshdeco::model::encode_frames(m.as_ref(), &seq.select(&[5]), "t", None).unwrap();
+    assert!((own.total_erms - erms).abs() <= 1e-9 * erms.max(1.0), "Erms {erms} vs encode's {}", own.total_erms);
+}
+
+#[test]
+fn view_api_refuses_bad_requests_and_keeps_serving() {
+    let d = fresh_dir("view-api", "bad");
+    let model = train(&d, "pca", "synthetic:tube", "kind = \"pca\"\ncomponents = 4");
+    let v = Viewer::start(&[model.to_str().unwrap()]);
+    let good = || {
+        let (s, _, b) = v.post("/api/decode", &json!({ "dials": { "0": 0.5 } }));
+        assert_eq!(s, 200, "a good request after a bad one: {}", String::from_utf8_lossy(&b));
+        assert_eq!(parse_shape(&b).positions.len(), 1466);
+    };
+    let cases: Vec<(&str, &str, Vec<u8>, u16, &str)> = vec![
+        ("POST", "/api/decode", b"{\"dials\": [1, 2".to_vec(), 400, "malformed JSON"),
+        ("POST", "/api/decode", b"[1, 2]".to_vec(), 400, "JSON object"),
+        ("POST", "/api/decode", br#"{"dials": {"9": 1}}"#.to_vec(), 400, "unknown component 9"),
+        ("POST", "/api/decode", br#"{"dials": [1, 2]}"#.to_vec(), 400, "2 numbers"),
+        ("POST", "/api/decode", br#"{"dials": {"0": "NaN"}}"#.to_vec(), 400, "must be a number"),
+        ("POST", "/api/decode", br#"{"dials": {"0": 1e999}}"#.to_vec(), 400, "malformed JSON"),
+        ("POST", "/api/decode", br#"{"dials": {"0": 1e300}}"#.to_vec(), 400, "non-finite"),
+        ("POST", "/api/decode", br#"{}"#.to_vec(), 400, "missing `dials`"),
+        ("GET", "/api/heat/4", vec![], 400, "unknown component `4`"),
+        ("GET", "/api/heat/x", vec![], 400, "unknown component `x`"),
+        (
+            "POST",
+            "/api/pose",
+            br#"{"constraints": [{"vertex": 1466, "target": [0, 0, 0]}]}"#.to_vec(),
+            400,
+            "vertex 1466 out of range",
+        ),
+        (
+            "POST",
+            "/api/pose",
+            br#"{"constraints": [{"vertex": 3, "target": [0, "inf", 0]}]}"#.to_vec(),
+            400,
+            "target[1] must be a number",
+        ),
+        (
+            "POST",
+            "/api/pose",
+            br#"{"constraints": [{"vertex": 3, "target": [0, 1e300, 0]}]}"#.to_vec(),
+            400,
+            "vertex 3",
+        ),
+        ("POST", "/api/pose", br#"{"constraints": [{"vertex": 3, "target": [0, 0]}]}"#.to_vec(), 400, "[x, y, z]"),
+        ("POST", "/api/pose", br#"{"constraints": []}"#.to_vec(), 400, "empty"),
+        (
+            "POST",
+            "/api/pose",
+            br#"{"constraints": [{"vertex": 3, "target": [0, 0, 0]}, {"vertex": 3, "target": [0, 0, 0]}]}"#.to_vec(),
+            400,
+            "twice",
+        ),
+        (
+            "POST",
+            "/api/pose",
+            br#"{"constraints": [{"vertex": 3, "target": [0, 0, 0]}], "gamma": -1}"#.to_vec(),
+            400,
+            "`gamma`",
+        ),
+        (
+            "POST",
+            "/api/pose",
+            br#"{"constraints": [{"vertex": 3, "target": [0, 0, 0]}], "start": [0]}"#.to_vec(),
+            400,
+            "`start` has 1",
+        ),
+        ("GET", "/api/frame/0", vec![], 400, "--data"),
+        ("POST", "/api/export", br#"{"format": "stl", "dials": {}}"#.to_vec(), 400, "stl"),
+        ("GET", "/api/decode", vec![], 405, "POST"),
+        ("POST", "/api/model", vec![], 405, "GET"),
+        ("GET", "/../Cargo.toml", vec![], 404, "no such"),
+        ("GET", "/api/../../etc/passwd", vec![], 404, "no such"),
+    ];
+    for (method, path, body, status, needle) in cases {
+        let (s, h, b) = v.request(method, path, &body);
+        let text = String::from_utf8_lossy(&b).to_string();
+        assert_eq!(s, status, "{method} {path} {}: {text}", String::from_utf8_lossy(&body));
+        assert_eq!(header(&h, "content-type"), Some("application/json"));
+        let msg: Value = serde_json::from_str(&text).unwrap();
+        assert!(msg["error"].as_str().unwrap().contains(needle), "{method} {path}: `{text}` lacks `{needle}`");
+        good();
+    }
+    // A body over the limit is refused before it is read.
+    let huge = format!("POST /api/decode HTTP/1.1\r\nContent-Length: {}\r\n\r\n", meshdeco::view::http::MAX_BODY + 1);
+    let mut s = std::net::TcpStream::connect(&v.addr).unwrap();
+    use std::io::{Read, Write};
+    s.write_all(huge.as_bytes()).unwrap();
+    let mut raw = Vec::new();
+    s.read_to_end(&mut raw).unwrap();
+    assert_eq!(view_support::parse_response(&raw).0, 413);
+    good();
+    // Keep-alive: two requests on one connection.
+    let mut s = std::net::TcpStream::connect(&v.addr).unwrap();
+    s.write_all(b"GET /api/model HTTP/1.1\r\n\r\nGET /api/model HTTP/1.1\r\nConnection: close\r\n\r\n").unwrap();
+    let mut raw = Vec::new();
+    s.read_to_end(&mut raw).unwrap();
+    assert_eq!(String::from_utf8_lossy(&raw).matches("HTTP/1.1 200 OK").count(), 2);
+    // `Expect: 100-continue` (curl, larger bodies) is answered before the body is sent.
+    let body = br#"{"dials": {"0": 0.25}}"#;
+    let mut s = std::net::TcpStream::connect(&v.addr).unwrap();
+    s.set_read_timeout(Some(std::time::Duration::from_secs(30))).unwrap();
+    write!(
+        s,
+        "POST /api/decode HTTP/1.1\r\nContent-Length: {}\r\nExpect: 100-continue\r\nConnection: close\r\n\r\n",
+        body.len()
+    )
+    .unwrap();
+    let mut first = [0u8; 25];
+    s.read_exact(&mut first).unwrap();
+    assert_eq!(&first, b"HTTP/1.1 100 Continue\r\n\r\n");
+    s.write_all(body).unwrap();
+    let mut raw = Vec::new();
+    s.read_to_end(&mut raw).unwrap();
+    assert_eq!(view_support::parse_response(&raw).0, 200);
+}
+
+#[test]
+fn view_command_flags_errors_and_ctrl_c() {
+    let d = fresh_dir("view-api", "cli");
+    // A missing model directory: non-zero exit naming it, nothing served.
+    let o = meshdeco(&["view", "no-such-model", "--port", "0"], &d);
+    assert!(!o.status.success());
+    assert!(output_text(&o).contains("no-such-model"), "{}", output_text(&o));
+    let model = train(&d, "pca", "synthetic:tube", "kind = \"pca\"\ncomponents = 3");
+    // --data with another connectivity is refused, naming it.
+    let o = meshdeco(&["view", model.to_str().unwrap(), "--data", "synthetic:nope", "--port", "0"], &d);
+    assert!(!o.status.success());
+    assert!(output_text(&o).contains("synthetic:nope"), "{}", output_text(&o));
+    // A port in use: named.
+    let v = Viewer::start(&[model.to_str().unwrap()]);
+    let port = v.addr.rsplit(':').next().unwrap().to_string();
+    let o = meshdeco(&["view", model.to_str().unwrap(), "--port", &port], &d);
+    assert!(!o.status.success());
+    assert!(output_text(&o).contains(&port), "{}", output_text(&o));
+    // --host other than loopback warns.
+    let mut w = std::process::Command::new(env!("CARGO_BIN_EXE_meshdeco"))
+        .args(["view", model.to_str().unwrap(), "--port", "0", "--host", "0.0.0.0"])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(1500));
+    let _ = w.kill();
+    let o = w.wait_with_output().unwrap();
+    assert!(String::from_utf8_lossy(&o.stderr).contains("warning: --host 0.0.0.0"), "{}", output_text(&o));
+    // Ctrl-C (SIGINT): a clean stop with status 0.
+    let mut v = v;
+    let pid = v.child.id().to_string();
+    let k = std::process::Command::new("kill").args(["-INT", &pid]).status().unwrap();
+    assert!(k.success());
+    let t0 = std::time::Instant::now();
+    let status = loop {
+        if let Some(s) = v.child.try_wait().unwrap() {
+            break s;
+        }
+        assert!(t0.elapsed().as_secs() < 10, "meshdeco view did not stop on SIGINT");
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    };
+    assert!(status.success(), "exit status after Ctrl-C: {status}");
+}
+
+#[test]
+fn view_api_decodes_an_autoencoder_like_synthesize() {
+    let d = fresh_dir("view-api", "ae");
+    let model = train(
+        &d,
+        "ae",
+        "synthetic:tube",
+        "kind = \"autoencoder\"\ncomponents = 4\niterations = 60\ncheckpoint_every = 60\nseed = 1",
+    );
+    let v = Viewer::start(&[model.to_str().unwrap()]);
+    let (s, _, body) = v.post("/api/decode", &json!({ "dials": { "2": 0.8 } }));
+    assert_eq!(s, 200, "{}", String::from_utf8_lossy(&body));
+    let o = meshdeco(&["synthesize", model.to_str().unwrap(), "--weights", "2:0.8", "--out", "s.obj"], &d);
+    assert!(o.status.success(), "{}", output_text(&o));
+    let diff = max_diff(&parse_shape(&body).positions, &obj_positions(&d.join("s.obj")));
+    assert!(diff < 1e-5, "autoencoder decode differs from synthesize by {diff}");
+    let (s, _, body) = v.request("GET", "/api/model", b"");
+    assert_eq!(s, 200);
+    let desc: Value = serde_json::from_slice(&body).unwrap();
+    assert_eq!(desc["kind"], "autoencoder");
+}
+
+/// `meshdeco components` writes overview.png: one block (rest, extreme, heat map) per ranked
+/// component, the tube standing up (automatic up axis), heat maps in colour.
+#[test]
+fn components_overview_png_shows_every_component() {
+    let d = fresh_dir("view-api", "overview");
+    let model = train(&d, "pca", "synthetic:tube", "kind = \"pca\"\ncomponents = 5");
+    let o = meshdeco(&["components", model.to_str().unwrap(), "--out", "comps", "--cell", "100", "--per-row", "3"], &d);
+    assert!(o.status.success(), "{}", output_text(&o));
+    let png = d.join("comps/overview.png");
+    let (w, h, ink, colours) = common::png_ink(&png);
+    // 3 blocks per row of 3 × 100 px + 12 px gaps; 2 rows of 100 + 20 (label) + 6 px.
+    assert_eq!((w, h), (3 * 312 + 12, 2 * 126 + 12));
+    assert!(ink > 0.05, "overview is {:.1} % ink", 100.0 * ink);
+    assert!(colours > 50, "overview has {colours} colours: no heat map");
+    // Each picture: the tube stands up (taller than wide) and the extreme differs from the rest.
+    let img = image::open(&png).unwrap().to_rgb8();
+    let cell = |bx: u32, by: u32, j: u32| -> Vec<[u8; 3]> {
+        let (x0, y0) = (12 + bx * 312 + j * 100, 6 + by * 126 + 20);
+        (0..100).flat_map(|y| (0..100).map(move |x| (x, y))).map(|(x, y)| img.get_pixel(x0 + x, y0 + y).0).collect()
+    };
+    let extent = |c: &[[u8; 3]]| {
+        let on: Vec<(usize, usize)> =
+            (0..10000).filter(|&i| c[i] != [255, 255, 255]).map(|i| (i % 100, i / 100)).collect();
+        let w = on.iter().map(|p| p.0).max().unwrap() - on.iter().map(|p| p.0).min().unwrap();
+        let h = on.iter().map(|p| p.1).max().unwrap() - on.iter().map(|p| p.1).min().unwrap();
+        (w, h)
+    };
+    for (bx, by) in [(0, 0), (1, 0), (2, 0), (0, 1), (1, 1)] {
+        let rest = cell(bx, by, 0);
+        let (w, h) = extent(&rest);
+        assert!(h > 2 * w, "block ({bx}, {by}): rest picture {w}×{h}, not standing up");
+        assert_ne!(rest, cell(bx, by, 1), "block ({bx}, {by}): the extreme equals the rest");
+        let heat = cell(bx, by, 2);
+        assert!(heat.iter().any(|p| p[0] != p[1] || p[1] != p[2]), "block ({bx}, {by}): heat map without colour");
+    }
+    // The sixth slot of the grid stays empty.
+    assert!(cell(2, 1, 0).iter().all(|p| *p == [255, 255, 255]));
+}
