@@ -3,6 +3,7 @@
 
 use serde::{Deserialize, Serialize};
 
+use super::augment::AugmentMix;
 use crate::error::{Error, Result};
 
 /// Every hyperparameter of the autoencoder method. Defaults are the reference implementation's
@@ -51,6 +52,17 @@ pub struct AutoencoderConfig {
     pub engine: Engine,
     /// Where the [`Engine::Graph`] computation runs.
     pub device: ComputeDevice,
+    /// Synthetic shapes added to every step's batch ([`super::augment`]); 0: none (the paper).
+    pub augment: usize,
+    /// How the synthetic shapes are made.
+    pub augment_mix: AugmentMix,
+    /// [r_min, r_max] of the radius of a local mix's region (normalised geodesic distance).
+    pub augment_radius: [f64; 2],
+    /// Training shapes held out (evenly spaced) to choose the step whose parameters are kept:
+    /// the one with the lowest encode–decode feature error on them; 0: none (the last step's).
+    pub validation: usize,
+    /// Steps between validation measurements (with `validation > 0`).
+    pub validate_every: usize,
 }
 
 /// How a training step computes the loss and the gradients.
@@ -120,6 +132,11 @@ impl Default for AutoencoderConfig {
             seed: 0,
             engine: Engine::Hand,
             device: ComputeDevice::Cpu,
+            augment: 0,
+            augment_mix: AugmentMix::Local,
+            augment_radius: [0.1, 0.3],
+            validation: 0,
+            validate_every: 50,
         }
     }
 }
@@ -184,6 +201,16 @@ impl AutoencoderConfig {
         nonneg("d_max", self.d_max)?;
         if self.d_min >= self.d_max {
             return Err(bad("d_min", format!("d_min ({}) must be below d_max ({})", self.d_min, self.d_max)));
+        }
+        let [r0, r1] = self.augment_radius;
+        if !(r0.is_finite() && r1.is_finite() && r0 > 0.0 && r0 <= r1) {
+            return Err(bad(
+                "augment_radius",
+                format!("[{r0}, {r1}] must be two positive numbers, the first ≤ the second"),
+            ));
+        }
+        if self.validation > 0 && self.validate_every == 0 {
+            return Err(bad("validate_every", "0 must be at least 1 when validation > 0".into()));
         }
         if self.device == ComputeDevice::Wgpu {
             if self.engine != Engine::Graph {
