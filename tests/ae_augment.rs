@@ -175,6 +175,8 @@ fn graph_engine_follows_the_hand_engine_with_augmentation() {
             learning_rate: 5e-3,
             batch_size,
             augment: 5,
+            // The decorrelation term too (its hand gradient against Burn autodiff).
+            lambda_orthogonal: 0.5,
             seed: 3,
             ..Default::default()
         };
@@ -220,7 +222,7 @@ fn validation_keeps_the_step_with_the_lowest_validation_error() {
     // A large constant step makes the validation error go up and down.
     let cfg = AutoencoderConfig {
         components: 6,
-        iterations: 120,
+        iterations: 110,
         learning_rate: 3e-2,
         beta2: 0.99,
         validation: 3,
@@ -258,7 +260,7 @@ fn validation_keeps_the_step_with_the_lowest_validation_error() {
     let rec = model.reconstruct(&vf).unwrap();
     let sse: f64 = rec.data.iter().zip(&vf.data).map(|(a, b)| (a - b) * (a - b)).sum::<f64>() / 3.0;
     assert!((sse - err).abs() <= 1e-3 * err.max(1e-9), "model's validation error {sse} vs kept {err}");
-    if best.0 != cfg.iterations {
-        assert!(sse < last, "the kept model ({sse}) should beat the last step ({last})");
-    }
+    // On this run the last step is not the best (measured: 100 is), so keeping matters.
+    assert_ne!(best.0, cfg.iterations, "the test needs a run whose last step is not its best");
+    assert!(sse < last, "the kept model ({sse}) should beat the last step ({last})");
 }

@@ -358,6 +358,13 @@ pub struct AutoencoderMethod {
     /// Steps between validation measurements (default 50).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub validate_every: Option<usize>,
+    /// Weight of the decorrelation term on the rows of C (0: none).
+    #[serde(skip_serializing_if = "is_zero_f64")]
+    pub lambda_orthogonal: f64,
+}
+
+fn is_zero_f64(x: &f64) -> bool {
+    *x == 0.0
 }
 
 fn is_zero(n: &usize) -> bool {
@@ -393,6 +400,7 @@ impl Default for AutoencoderMethod {
             augment_radius: None,
             validation: d.validation,
             validate_every: None,
+            lambda_orthogonal: d.lambda_orthogonal,
         }
     }
 }
@@ -424,6 +432,7 @@ impl AutoencoderMethod {
             augment_radius: self.augment_radius.unwrap_or(d.augment_radius),
             validation: self.validation,
             validate_every: self.validate_every.unwrap_or(d.validate_every),
+            lambda_orthogonal: self.lambda_orthogonal,
             ..d
         }
     }

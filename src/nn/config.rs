@@ -63,6 +63,10 @@ pub struct AutoencoderConfig {
     pub validation: usize,
     /// Steps between validation measurements (with `validation > 0`).
     pub validate_every: usize,
+    /// Weight λo of the decorrelation term `(1/K) Σ_{k≠l} cos²(C_k, C_l)` on the rows of `C`
+    /// (0: none, the paper). With near-orthogonal rows the tied encoder `z = C·f` inverts the
+    /// decoder `f̂ = Cᵀz` for every code, not only the training shapes' codes.
+    pub lambda_orthogonal: f64,
 }
 
 /// How a training step computes the loss and the gradients.
@@ -137,6 +141,7 @@ impl Default for AutoencoderConfig {
             augment_radius: [0.1, 0.3],
             validation: 0,
             validate_every: 50,
+            lambda_orthogonal: 0.0,
         }
     }
 }
@@ -196,6 +201,7 @@ impl AutoencoderConfig {
         }
         nonneg("lambda1", self.lambda1)?;
         nonneg("lambda2", self.lambda2)?;
+        nonneg("lambda_orthogonal", self.lambda_orthogonal)?;
         nonneg("theta", self.theta)?;
         nonneg("d_min", self.d_min)?;
         nonneg("d_max", self.d_max)?;

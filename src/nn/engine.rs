@@ -478,6 +478,49 @@ pub fn loss_and_grad(
 
     // Sparsity on C.
     let sparsity = sparsity_with_grad(&w.c, maps, (cfg.lambda1 / k as f64) as f32, &mut grads.c);
+    let orthogonality = if cfg.lambda_orthogonal > 0.0 {
+        orthogonality_with_grad(&w.c, k, 9 * n, (cfg.lambda_orthogonal / k as f64) as f32, &mut grads.c)
+    } else {
+        0.0
+    };
 
-    LossTerms { total: reconstruction + cfg.lambda1 * sparsity + cfg.lambda2 * hinge, reconstruction, sparsity, hinge }
+    LossTerms {
+        total: reconstruction + cfg.lambda1 * sparsity + cfg.lambda2 * hinge + cfg.lambda_orthogonal * orthogonality,
+        reconstruction,
+        sparsity,
+        hinge,
+        orthogonality,
+    }
+}
+
+/// Decorrelation of the rows of `C`: returns `S = (1/K) Σ_{k≠l} G_kl² / (G_kk G_ll)` with
+/// `G = C·Cᵀ`, and adds `scale·K·∂S/∂C = scale · M·C` to `grad`, where `M_kl = 4 G_kl /
+/// (G_kk G_ll)` (k ≠ l) and `M_kk = −4 Σ_{l≠k} G_kl² / (G_kk² G_ll)`.
+///
+/// # Shapes
+/// `c`, `grad`: `[K, cols]` row-major.
+pub fn orthogonality_with_grad(c: &[f32], k: usize, cols: usize, scale: f32, grad: &mut [f32]) -> f64 {
+    let cm = MatRef::from_row_major_slice(c, k, cols);
+    let mut g = vec![0.0f32; k * k];
+    gemm(MatMut::from_row_major_slice_mut(&mut g, k, k), false, cm, cm.transpose());
+    let eps = super::loss::ORTHO_EPS as f64;
+    let diag: Vec<f64> = (0..k).map(|i| (g[i * k + i] as f64).max(eps)).collect();
+    let mut s = 0.0f64;
+    let mut m = vec![0.0f32; k * k];
+    for a in 0..k {
+        let mut mkk = 0.0f64;
+        for b in 0..k {
+            if a == b {
+                continue;
+            }
+            let gab = g[a * k + b] as f64;
+            let q = gab * gab / (diag[a] * diag[b]);
+            s += q;
+            m[a * k + b] = (2.0 * 2.0 * gab / (diag[a] * diag[b]) * scale as f64) as f32;
+            mkk -= 2.0 * q / diag[a];
+        }
+        m[a * k + a] = (2.0 * mkk * scale as f64) as f32;
+    }
+    gemm(MatMut::from_row_major_slice_mut(grad, k, cols), true, MatRef::from_row_major_slice(&m, k, k), cm);
+    s / k as f64
 }

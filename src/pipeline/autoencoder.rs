@@ -421,8 +421,8 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
     let summary = trainer.run(&RunOptions { checkpoint: Some(checkpoint.clone()), stop: ctx.stop.clone() }, |r| {
         let l = &r.loss;
         let line = format!(
-            "{{\"iteration\":{},\"loss\":{},\"reconstruction\":{},\"sparsity\":{},\"hinge\":{},\"step_seconds\":{},\"checkpoint\":{}}}\n",
-            r.iteration, l.total, l.reconstruction, l.sparsity, l.hinge, r.step_seconds, r.checkpointed
+            "{{\"iteration\":{},\"loss\":{},\"reconstruction\":{},\"sparsity\":{},\"hinge\":{},\"orthogonality\":{},\"step_seconds\":{},\"checkpoint\":{}}}\n",
+            r.iteration, l.total, l.reconstruction, l.sparsity, l.hinge, l.orthogonality, r.step_seconds, r.checkpointed
         );
         if let Err(e) = log.write_all(line.as_bytes()) {
             log_error.get_or_insert(e);
