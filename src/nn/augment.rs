@@ -106,6 +106,11 @@ impl Augmenter {
         self.mix
     }
 
+    /// Number of vertices N of the shapes it draws.
+    pub fn n_vertices(&self) -> usize {
+        self.n
+    }
+
     /// Draws one synthetic shape from `shapes` (each `N × 9` row-major) and writes it through
     /// `put(row, value)` for every row `i * 9 + c` (so the caller can write straight into a
     /// batch layout). Needs at least one shape; with one shape the shape itself is returned.
@@ -119,6 +124,7 @@ impl Augmenter {
         let a = rng.below(n_shapes);
         let b = if n_shapes > 1 { (a + 1 + rng.below(n_shapes - 1)) % n_shapes } else { a };
         let (xa, xb) = (shapes(a), shapes(b));
+        debug_assert!(xa.len() == 9 * self.n && xb.len() == 9 * self.n);
         match self.mix {
             AugmentMix::Blend => {
                 let t = rng.uniform() as f32;
@@ -130,8 +136,8 @@ impl Augmenter {
                 let d = &self.pool[rng.below(self.pool.len())];
                 let r = (self.radius[0] + rng.uniform() * (self.radius[1] - self.radius[0])) as f32;
                 let w = 0.5 * r;
-                for i in 0..self.n {
-                    let m = mask(d[i], r, w);
+                for (i, &di) in d.iter().enumerate() {
+                    let m = mask(di, r, w);
                     for c in 0..9 {
                         let row = i * 9 + c;
                         let (u, v) = (xa[row], xb[row]);
