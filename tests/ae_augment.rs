@@ -264,3 +264,67 @@ fn validation_keeps_the_step_with_the_lowest_validation_error() {
     assert_ne!(best.0, cfg.iterations, "the test needs a run whose last step is not its best");
     assert!(sse < last, "the kept model ({sse}) should beat the last step ({last})");
 }
+
+#[test]
+fn least_squares_encoder_gradients_match_finite_differences() {
+    use meshdeco::nn::config::EncoderKind;
+    use meshdeco::nn::engine::{self, Grads};
+    use meshdeco::nn::loss::SupportMaps;
+    let (nb, feats) = planted(9, 8, 10, 11);
+    let dist = HopDistances::new(&nb);
+    let data = TrainingData::from_features(&feats).unwrap();
+    // Reconstruction only (the encoder enters only there); a few steps away from the start.
+    let cfg = AutoencoderConfig {
+        components: 6,
+        encoder: EncoderKind::LeastSquares,
+        lambda1: 0.0,
+        lambda2: 0.0,
+        learning_rate: 1e-2,
+        seed: 4,
+        ..Default::default()
+    };
+    let mut t = Trainer::new(cfg.clone(), &data, &nb, &dist).unwrap();
+    for _ in 0..30 {
+        t.step().unwrap();
+    }
+    let mut w = Weights::from_module(t.module()).unwrap();
+    w.least_squares = true;
+    let (n, k, b) = (nb.n_vertices(), cfg.components, data.n_shapes());
+    let bp = padded_width(b);
+    let x = data.batch_vcb_width(&(0..b).collect::<Vec<_>>(), bp);
+    let mut maps = SupportMaps::new(k, n);
+    maps.update(&w.c, &cfg, &dist).unwrap();
+    let mut ws = Workspace::new(n, k, 1, bp);
+    let mut g = Grads::default();
+    let loss = |w: &Weights, ws: &mut Workspace| {
+        let mut scratch = Grads::default();
+        engine::loss_and_grad(ws, w, &nb, &x, b, &maps, &cfg, &mut scratch).total
+    };
+    engine::loss_and_grad(&mut ws, &w, &nb, &x, b, &maps, &cfg, &mut g);
+    // The entries of C with the largest gradients, and W_point[0][0].
+    let mut order: Vec<usize> = (0..g.c.len()).collect();
+    order.sort_by(|&i, &j| g.c[j].abs().total_cmp(&g.c[i].abs()));
+    let mut checked = 0;
+    for &i in order.iter().take(8) {
+        let h = 1e-2 * w.c[i].abs().max(1e-2);
+        let mut wp = w.clone();
+        wp.c[i] += h;
+        let mut wm = w.clone();
+        wm.c[i] -= h;
+        let fd = (loss(&wp, &mut ws) - loss(&wm, &mut ws)) / (2.0 * h as f64);
+        let an = g.c[i] as f64;
+        assert!((fd - an).abs() <= 0.05 * an.abs().max(1e-3), "dL/dC[{i}]: analytic {an}, finite difference {fd}");
+        checked += 1;
+    }
+    let h = 1e-3f32;
+    let (mut wp, mut wm) = (w.clone(), w.clone());
+    wp.layers[0].wp[0][0] += h;
+    wm.layers[0].wp[0][0] -= h;
+    let fd = (loss(&wp, &mut ws) - loss(&wm, &mut ws)) / (2.0 * h as f64);
+    let an = g.layers[0].wp[0][0];
+    assert!((fd - an).abs() <= 0.05 * an.abs().max(1e-3), "dL/dW_point[0][0]: analytic {an}, finite difference {fd}");
+    assert_eq!(checked, 8);
+    // The graph engine has only the tied encoder: refused by name.
+    let bad = AutoencoderConfig { engine: Engine::Graph, ..cfg };
+    assert!(bad.validate().unwrap_err().to_string().contains("encoder"));
+}

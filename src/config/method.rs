@@ -21,7 +21,7 @@ use crate::methods::region_pca::RegionPcaConfig;
 use crate::methods::segmentation::SegmentationConfig;
 use crate::methods::splocs::{AdmmConfig, SplocsConfig};
 use crate::nn::augment::AugmentMix;
-use crate::nn::config::{AutoencoderConfig, ComputeDevice, Engine};
+use crate::nn::config::{AutoencoderConfig, ComputeDevice, EncoderKind, Engine};
 use crate::representation::RepresentationKind;
 use crate::representation::acap::Consistency;
 use crate::representation::scaling::ScalingMode;
@@ -358,9 +358,16 @@ pub struct AutoencoderMethod {
     /// Steps between validation measurements (default 50).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub validate_every: Option<usize>,
+    /// `tied` (the paper) | `least-squares`.
+    #[serde(skip_serializing_if = "is_tied")]
+    pub encoder: EncoderKind,
     /// Weight of the decorrelation term on the rows of C (0: none).
     #[serde(skip_serializing_if = "is_zero_f64")]
     pub lambda_orthogonal: f64,
+}
+
+fn is_tied(e: &EncoderKind) -> bool {
+    *e == EncoderKind::Tied
 }
 
 fn is_zero_f64(x: &f64) -> bool {
@@ -401,6 +408,7 @@ impl Default for AutoencoderMethod {
             validation: d.validation,
             validate_every: None,
             lambda_orthogonal: d.lambda_orthogonal,
+            encoder: d.encoder,
         }
     }
 }
@@ -433,6 +441,7 @@ impl AutoencoderMethod {
             validation: self.validation,
             validate_every: self.validate_every.unwrap_or(d.validate_every),
             lambda_orthogonal: self.lambda_orthogonal,
+            encoder: self.encoder,
             ..d
         }
     }

@@ -63,6 +63,8 @@ pub struct AutoencoderConfig {
     pub validation: usize,
     /// Steps between validation measurements (with `validation > 0`).
     pub validate_every: usize,
+    /// The encoder's last map from the flattened features to the code.
+    pub encoder: EncoderKind,
     /// Weight λo of the decorrelation term `(1/K) Σ_{k≠l} cos²(C_k, C_l)` on the rows of `C`
     /// (0: none, the paper). With near-orthogonal rows the tied encoder `z = C·f` inverts the
     /// decoder `f̂ = Cᵀz` for every code, not only the training shapes' codes.
@@ -90,6 +92,20 @@ impl Engine {
             _ => None,
         }
     }
+}
+
+/// The encoder's map from the flattened features `f` to the code `z` (the decoder is
+/// `f̂ = Cᵀz` either way).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum EncoderKind {
+    /// `z = C·f` (the paper: the decoder's matrix, transposed).
+    #[default]
+    Tied,
+    /// `z = (C·Cᵀ + εI)⁻¹·C·f`: the code whose `Cᵀz` is closest to `f` (least squares), i.e.
+    /// the exact inverse of the decoder's linear map for every code (ε = 10⁻⁶ × the mean
+    /// diagonal). Same parameters as `tied`.
+    LeastSquares,
 }
 
 /// The Burn device of the [`Engine::Graph`] computation.
@@ -142,6 +158,7 @@ impl Default for AutoencoderConfig {
             validation: 0,
             validate_every: 50,
             lambda_orthogonal: 0.0,
+            encoder: EncoderKind::Tied,
         }
     }
 }
@@ -217,6 +234,13 @@ impl AutoencoderConfig {
         }
         if self.validation > 0 && self.validate_every == 0 {
             return Err(bad("validate_every", "0 must be at least 1 when validation > 0".into()));
+        }
+        if self.encoder == EncoderKind::LeastSquares && self.engine == Engine::Graph {
+            return Err(bad(
+                "encoder",
+                "encoder = \"least-squares\" needs engine = \"hand\" (the graph engine has the tied encoder only)"
+                    .into(),
+            ));
         }
         if self.device == ComputeDevice::Wgpu {
             if self.engine != Engine::Graph {

@@ -19,7 +19,7 @@ use serde::Serialize;
 
 use super::augment::Augmenter;
 use super::checkpoint::{Checkpoint, CheckpointHeader};
-use super::config::{AutoencoderConfig, ComputeDevice, Engine};
+use super::config::{AutoencoderConfig, ComputeDevice, EncoderKind, Engine};
 use super::data::TrainingData;
 use super::engine::{self, Grads, Weights, Workspace};
 use super::inference::Autoencoder;
@@ -219,7 +219,7 @@ impl<'a> Trainer<'a> {
         Ok(Trainer {
             optimizer: adam(&config),
             block_optimizers: (0..n_blocks).map(|_| adam(&config)).collect(),
-            weights: Weights { layers: Vec::new(), c: Vec::new(), k: 0, n: 0 },
+            weights: Weights { layers: Vec::new(), c: Vec::new(), k: 0, n: 0, least_squares: false },
             rng: batch_rng(config.seed),
             maps: SupportMaps::new(config.components, data.n_vertices()),
             grads: Grads { layers: Vec::new(), c: Vec::new() },
@@ -268,7 +268,8 @@ impl<'a> Trainer<'a> {
     fn validate(&mut self) -> Result<Option<f64>> {
         let Some(v) = self.validation.as_mut() else { return Ok(None) };
         let module = self.module.as_ref().expect("module present between steps");
-        let w = Weights::from_module(module)?;
+        let mut w = Weights::from_module(module)?;
+        w.least_squares = self.config.encoder == EncoderKind::LeastSquares;
         let err = feature_error(&mut v.workspace, &w, self.neighbors, &v.x, v.data.n_shapes());
         if v.best.as_ref().is_none_or(|b| err < b.1) {
             v.best = Some((self.iteration, err, module.clone()));
@@ -359,7 +360,11 @@ impl<'a> Trainer<'a> {
     /// gradient is not finite.
     pub fn step(&mut self) -> Result<LossTerms> {
         let t0 = Instant::now();
-        let mut w = std::mem::replace(&mut self.weights, Weights { layers: Vec::new(), c: Vec::new(), k: 0, n: 0 });
+        let mut w = std::mem::replace(
+            &mut self.weights,
+            Weights { layers: Vec::new(), c: Vec::new(), k: 0, n: 0, least_squares: false },
+        );
+        w.least_squares = self.config.encoder == EncoderKind::LeastSquares;
         let (module, read) = w.read_module_owned(self.module.take().expect("module present between steps"));
         self.module = Some(module);
         read.map_err(|e| Error::Numerical(format!("before iteration {}: {e}", self.iteration + 1)))?;
