@@ -56,7 +56,7 @@ fn main() {
     let median = |v: &mut Vec<f64>| {
         v.sort_by(f64::total_cmp);
         let m = v.len() / 2;
-        if v.len() % 2 == 0 { 0.5 * (v[m - 1] + v[m]) } else { v[m] }
+        if v.len().is_multiple_of(2) { 0.5 * (v[m - 1] + v[m]) } else { v[m] }
     };
     println!("components: median support size {}, median support regions {}", median(&mut sizes), median(&mut regions));
     let sted = Sted::new(prep.rest.n_vertices(), &prep.rest.faces, StedParams::default()).expect("sted");
