@@ -328,3 +328,33 @@ fn least_squares_encoder_gradients_match_finite_differences() {
     let bad = AutoencoderConfig { engine: Engine::Graph, ..cfg };
     assert!(bad.validate().unwrap_err().to_string().contains("encoder"));
 }
+
+#[test]
+fn new_keys_are_checked_by_name_and_default_to_the_paper() {
+    use meshdeco::config::{Config, MethodConfig};
+    let base = "[data]\npath = \"synthetic:tube\"\n[method]\nkind = \"autoencoder\"\n";
+    let c = Config::from_toml(base).unwrap();
+    let MethodConfig::Autoencoder(m) = &c.method else { panic!("kind") };
+    let n = m.network_config();
+    assert_eq!((n.augment, n.validation, n.lambda_orthogonal), (0, 0, 0.0), "all off by default");
+    assert_eq!(n.encoder, meshdeco::nn::config::EncoderKind::Tied);
+    for (body, needle) in [
+        ("augment_radius = [0.3, 0.1]", "method.augment_radius"),
+        ("augment_radius = [0.0, 0.1]", "method.augment_radius"),
+        ("lambda_orthogonal = -1.0", "method.lambda_orthogonal"),
+        ("augment_mix = \"swap\"", "augment_mix"),
+        ("encoder = \"untied\"", "encoder"),
+        ("validation = 2\nvalidate_every = 0", "method.validate_every"),
+    ] {
+        let e = Config::from_toml(&format!("{base}{body}\n")).unwrap_err().to_string();
+        assert!(e.contains(needle), "`{needle}` not in `{e}`");
+    }
+    let c = Config::from_toml(&format!(
+        "{base}augment = 3\naugment_mix = \"blend\"\nvalidation = 2\nlambda_orthogonal = 10.0\nencoder = \"least-squares\"\n"
+    ))
+    .unwrap();
+    let MethodConfig::Autoencoder(m) = &c.method else { panic!("kind") };
+    let n = m.network_config();
+    assert_eq!((n.augment, n.augment_mix, n.validation), (3, AugmentMix::Blend, 2));
+    assert_eq!((n.lambda_orthogonal, n.validate_every), (10.0, 50));
+}
