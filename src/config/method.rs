@@ -20,7 +20,8 @@ use crate::methods::WeightConstraint;
 use crate::methods::region_pca::RegionPcaConfig;
 use crate::methods::segmentation::SegmentationConfig;
 use crate::methods::splocs::{AdmmConfig, SplocsConfig};
-use crate::nn::config::{AutoencoderConfig, ComputeDevice, Engine};
+use crate::nn::augment::AugmentMix;
+use crate::nn::config::{AutoencoderConfig, ComputeDevice, EncoderKind, Engine};
 use crate::representation::RepresentationKind;
 use crate::representation::acap::Consistency;
 use crate::representation::scaling::ScalingMode;
@@ -342,6 +343,39 @@ pub struct AutoencoderMethod {
     pub device: ComputeDevice,
     /// Also report `test_erms_fitted`.
     pub fit_test: bool,
+    /// Synthetic shapes per training step (augmentation in feature space; 0: none).
+    #[serde(skip_serializing_if = "is_zero")]
+    pub augment: usize,
+    /// `local` | `blend` (default `local`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub augment_mix: Option<AugmentMix>,
+    /// [r_min, r_max] of a local mix's region radius (default [0.1, 0.3]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub augment_radius: Option<[f64; 2]>,
+    /// Training shapes held out to choose the kept step (0: none).
+    #[serde(skip_serializing_if = "is_zero")]
+    pub validation: usize,
+    /// Steps between validation measurements (default 50).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub validate_every: Option<usize>,
+    /// `tied` (the paper) | `least-squares`.
+    #[serde(skip_serializing_if = "is_tied")]
+    pub encoder: EncoderKind,
+    /// Weight of the decorrelation term on the rows of C (0: none).
+    #[serde(skip_serializing_if = "is_zero_f64")]
+    pub lambda_orthogonal: f64,
+}
+
+fn is_tied(e: &EncoderKind) -> bool {
+    *e == EncoderKind::Tied
+}
+
+fn is_zero_f64(x: &f64) -> bool {
+    *x == 0.0
+}
+
+fn is_zero(n: &usize) -> bool {
+    *n == 0
 }
 
 impl Default for AutoencoderMethod {
@@ -368,6 +402,13 @@ impl Default for AutoencoderMethod {
             engine: d.engine,
             device: d.device,
             fit_test: true,
+            augment: d.augment,
+            augment_mix: None,
+            augment_radius: None,
+            validation: d.validation,
+            validate_every: None,
+            lambda_orthogonal: d.lambda_orthogonal,
+            encoder: d.encoder,
         }
     }
 }
@@ -375,6 +416,7 @@ impl Default for AutoencoderMethod {
 impl AutoencoderMethod {
     /// The network's hyperparameters.
     pub fn network_config(&self) -> AutoencoderConfig {
+        let d = AutoencoderConfig::default();
         AutoencoderConfig {
             components: self.components,
             layers: self.layers,
@@ -393,7 +435,14 @@ impl AutoencoderMethod {
             seed: self.seed,
             engine: self.engine,
             device: self.device,
-            ..AutoencoderConfig::default()
+            augment: self.augment,
+            augment_mix: self.augment_mix.unwrap_or(d.augment_mix),
+            augment_radius: self.augment_radius.unwrap_or(d.augment_radius),
+            validation: self.validation,
+            validate_every: self.validate_every.unwrap_or(d.validate_every),
+            lambda_orthogonal: self.lambda_orthogonal,
+            encoder: self.encoder,
+            ..d
         }
     }
 }

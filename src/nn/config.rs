@@ -3,6 +3,7 @@
 
 use serde::{Deserialize, Serialize};
 
+use super::augment::AugmentMix;
 use crate::error::{Error, Result};
 
 /// Every hyperparameter of the autoencoder method. Defaults are the reference implementation's
@@ -51,6 +52,23 @@ pub struct AutoencoderConfig {
     pub engine: Engine,
     /// Where the [`Engine::Graph`] computation runs.
     pub device: ComputeDevice,
+    /// Synthetic shapes added to every step's batch ([`super::augment`]); 0: none (the paper).
+    pub augment: usize,
+    /// How the synthetic shapes are made.
+    pub augment_mix: AugmentMix,
+    /// [r_min, r_max] of the radius of a local mix's region (normalised geodesic distance).
+    pub augment_radius: [f64; 2],
+    /// Training shapes held out (evenly spaced) to choose the step whose parameters are kept:
+    /// the one with the lowest encode–decode feature error on them; 0: none (the last step's).
+    pub validation: usize,
+    /// Steps between validation measurements (with `validation > 0`).
+    pub validate_every: usize,
+    /// The encoder's last map from the flattened features to the code.
+    pub encoder: EncoderKind,
+    /// Weight λo of the decorrelation term `(1/K) Σ_{k≠l} cos²(C_k, C_l)` on the rows of `C`
+    /// (0: none, the paper). With near-orthogonal rows the tied encoder `z = C·f` inverts the
+    /// decoder `f̂ = Cᵀz` for every code, not only the training shapes' codes.
+    pub lambda_orthogonal: f64,
 }
 
 /// How a training step computes the loss and the gradients.
@@ -74,6 +92,20 @@ impl Engine {
             _ => None,
         }
     }
+}
+
+/// The encoder's map from the flattened features `f` to the code `z` (the decoder is
+/// `f̂ = Cᵀz` either way).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum EncoderKind {
+    /// `z = C·f` (the paper: the decoder's matrix, transposed).
+    #[default]
+    Tied,
+    /// `z = (C·Cᵀ + εI)⁻¹·C·f`: the code whose `Cᵀz` is closest to `f` (least squares), i.e.
+    /// the exact inverse of the decoder's linear map for every code (ε = 10⁻⁶ × the mean
+    /// diagonal). Same parameters as `tied`.
+    LeastSquares,
 }
 
 /// The Burn device of the [`Engine::Graph`] computation.
@@ -120,6 +152,13 @@ impl Default for AutoencoderConfig {
             seed: 0,
             engine: Engine::Hand,
             device: ComputeDevice::Cpu,
+            augment: 0,
+            augment_mix: AugmentMix::Local,
+            augment_radius: [0.1, 0.3],
+            validation: 0,
+            validate_every: 50,
+            lambda_orthogonal: 0.0,
+            encoder: EncoderKind::Tied,
         }
     }
 }
@@ -179,11 +218,29 @@ impl AutoencoderConfig {
         }
         nonneg("lambda1", self.lambda1)?;
         nonneg("lambda2", self.lambda2)?;
+        nonneg("lambda_orthogonal", self.lambda_orthogonal)?;
         nonneg("theta", self.theta)?;
         nonneg("d_min", self.d_min)?;
         nonneg("d_max", self.d_max)?;
         if self.d_min >= self.d_max {
             return Err(bad("d_min", format!("d_min ({}) must be below d_max ({})", self.d_min, self.d_max)));
+        }
+        let [r0, r1] = self.augment_radius;
+        if !(r0.is_finite() && r1.is_finite() && r0 > 0.0 && r0 <= r1) {
+            return Err(bad(
+                "augment_radius",
+                format!("[{r0}, {r1}] must be two positive numbers, the first ≤ the second"),
+            ));
+        }
+        if self.validation > 0 && self.validate_every == 0 {
+            return Err(bad("validate_every", "0 must be at least 1 when validation > 0".into()));
+        }
+        if self.encoder == EncoderKind::LeastSquares && self.engine == Engine::Graph {
+            return Err(bad(
+                "encoder",
+                "encoder = \"least-squares\" needs engine = \"hand\" (the graph engine has the tied encoder only)"
+                    .into(),
+            ));
         }
         if self.device == ComputeDevice::Wgpu {
             if self.engine != Engine::Graph {

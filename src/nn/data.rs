@@ -85,6 +85,39 @@ impl TrainingData {
         vcb_from_shapes(indices.iter().map(|&s| self.shape(s)), indices.len(), self.n_vertices)
     }
 
+    /// The shapes `indices` in VCB layout of batch width `bp` (≥ `indices.len()`, a multiple of
+    /// [`super::kernels::LANES`]); the other lanes are zero.
+    pub fn batch_vcb_width(&self, indices: &[usize], bp: usize) -> Vec<f32> {
+        assert!(bp >= indices.len() && bp.is_multiple_of(super::kernels::LANES));
+        let mut out = vec![0.0f32; self.n_vertices * WIDTH * bp];
+        for (j, &s) in indices.iter().enumerate() {
+            for (row, v) in self.shape(s).iter().enumerate() {
+                out[row * bp + j] = *v;
+            }
+        }
+        out
+    }
+
+    /// Splits off `v` shapes, evenly spaced (shape `⌊(j + ½)·S/v⌋` for j < v), as a validation
+    /// set: returns (the other shapes, the held-out ones) and the held-out indices.
+    pub fn split_validation(&self, v: usize) -> Result<(TrainingData, TrainingData, Vec<usize>)> {
+        let s = self.n_shapes;
+        if v == 0 || v >= s {
+            return Err(Error::config(
+                "validation",
+                format!("{v} held-out shapes of {s} training shapes: must be at least 1 and leave one to train on"),
+            ));
+        }
+        let held: Vec<usize> = (0..v).map(|j| ((2 * j + 1) * s) / (2 * v)).collect();
+        let keep: Vec<usize> = (0..s).filter(|i| !held.contains(i)).collect();
+        let sub = |idx: &[usize]| TrainingData {
+            n_shapes: idx.len(),
+            n_vertices: self.n_vertices,
+            data: idx.iter().flat_map(|&i| self.shape(i).iter().copied()).collect(),
+        };
+        Ok((sub(&keep), sub(&held), held))
+    }
+
     /// The shapes `indices` as a Burn tensor.
     ///
     /// # Shapes

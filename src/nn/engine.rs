@@ -41,6 +41,8 @@ pub struct Weights {
     pub k: usize,
     /// N.
     pub n: usize,
+    /// Least-squares encoder `z = (C·Cᵀ + εI)⁻¹·C·f` ([`super::config::EncoderKind`]).
+    pub least_squares: bool,
 }
 
 /// Copies a float tensor's values out of Burn.
@@ -74,7 +76,7 @@ fn check_finite(name: &str, v: &[f32]) -> Result<()> {
 impl Weights {
     /// Reads the module's parameters; errors if any is non-finite.
     pub fn from_module(m: &AutoencoderModule) -> Result<Self> {
-        let mut w = Weights { layers: Vec::new(), c: Vec::new(), k: 0, n: 0 };
+        let mut w = Weights { layers: Vec::new(), c: Vec::new(), k: 0, n: 0, least_squares: false };
         w.read_module(m)?;
         Ok(w)
     }
@@ -208,6 +210,8 @@ pub struct Workspace {
     dec_mean: Vec<Vec<f32>>,
     zt: Vec<f32>,
     dzt: Vec<f32>,
+    /// Cholesky factor (lower, row-major, `f64`) of `C·Cᵀ + εI` of the last least-squares encode.
+    chol: Vec<f64>,
     d_a: Vec<f32>,
     d_b: Vec<f32>,
     d_m: Vec<f32>,
@@ -231,6 +235,7 @@ impl Workspace {
             dec_mean: (0..layers).map(|_| z()).collect(),
             zt: vec![0.0; k * bp],
             dzt: vec![0.0; k * bp],
+            chol: Vec::new(),
             d_a: Vec::new(),
             d_b: Vec::new(),
             d_m: Vec::new(),
@@ -323,6 +328,74 @@ pub fn encode(ws: &mut Workspace, w: &Weights, nb: &NeighborIndex, x: &[f32], b:
     }
     let f = &ws.enc_out[l - 1];
     gemm(cols_mut(&mut ws.zt, k, bp, b), false, MatRef::from_row_major_slice(&w.c, k, 9 * n), cols(f, 9 * n, bp, b));
+    if w.least_squares {
+        ws.chol = gram_cholesky(&w.c, k, 9 * n);
+        cholesky_solve_lanes(&ws.chol, k, &mut ws.zt, bp, b);
+    }
+}
+
+/// Cholesky factor (lower, row-major, `f64`) of `P = C·Cᵀ + εI`, ε = 10⁻⁶ × mean diagonal.
+fn gram_cholesky(c: &[f32], k: usize, cols: usize) -> Vec<f64> {
+    let cm = MatRef::from_row_major_slice(c, k, cols);
+    let mut g = vec![0.0f32; k * k];
+    gemm(MatMut::from_row_major_slice_mut(&mut g, k, k), false, cm, cm.transpose());
+    let mean_diag = (0..k).map(|i| g[i * k + i] as f64).sum::<f64>() / k.max(1) as f64;
+    let eps = 1e-6 * mean_diag.max(1e-30);
+    let mut a: Vec<f64> = g.iter().map(|&x| x as f64).collect();
+    // Symmetrise (the f32 GEMM is not exactly symmetric) and add the ridge.
+    for i in 0..k {
+        for j in 0..i {
+            let v = 0.5 * (a[i * k + j] + a[j * k + i]);
+            a[i * k + j] = v;
+            a[j * k + i] = v;
+        }
+        a[i * k + i] += eps;
+    }
+    for j in 0..k {
+        let mut d = a[j * k + j];
+        for p in 0..j {
+            d -= a[j * k + p] * a[j * k + p];
+        }
+        let d = d.max(eps).sqrt();
+        a[j * k + j] = d;
+        for i in j + 1..k {
+            let mut s = a[i * k + j];
+            for p in 0..j {
+                s -= a[i * k + p] * a[j * k + p];
+            }
+            a[i * k + j] = s / d;
+        }
+    }
+    for i in 0..k {
+        for j in i + 1..k {
+            a[i * k + j] = 0.0;
+        }
+    }
+    a
+}
+
+/// Solves `L·Lᵀ·y = r` in place for each of the first `b` lanes of `r` (`[K, bp]` row-major).
+fn cholesky_solve_lanes(l: &[f64], k: usize, r: &mut [f32], bp: usize, b: usize) {
+    let mut y = vec![0.0f64; k];
+    for j in 0..b {
+        for i in 0..k {
+            let mut s = r[i * bp + j] as f64;
+            for p in 0..i {
+                s -= l[i * k + p] * y[p];
+            }
+            y[i] = s / l[i * k + i];
+        }
+        for i in (0..k).rev() {
+            let mut s = y[i];
+            for p in i + 1..k {
+                s -= l[p * k + i] * y[p];
+            }
+            y[i] = s / l[i * k + i];
+        }
+        for i in 0..k {
+            r[i * bp + j] = y[i] as f32;
+        }
+    }
 }
 
 /// Decoder pass from the codes in the workspace (`Zᵀ`, `[K, bp]`, first `b` lanes):
@@ -435,6 +508,26 @@ pub fn loss_and_grad(
         }
     }
     hinge /= k as f64;
+    // Least-squares encoder z = P⁻¹·C·f (P = C·Cᵀ + εI): with u = P⁻¹·dz, the encoder's part of
+    // dC is u·fᵀ − (u·zᵀ + z·uᵀ)·C and dF = Cᵀ·u. ws.dzt becomes u; the −(…)·C part is
+    // added below.
+    let mut sym: Option<Vec<f32>> = None;
+    if w.least_squares {
+        cholesky_solve_lanes(&ws.chol, k, &mut ws.dzt, bp, b_real);
+        let mut m = vec![0.0f32; k * k];
+        for a in 0..k {
+            for c in 0..k {
+                let (ua, za) = (&ws.dzt[a * bp..a * bp + b_real], &ws.zt[a * bp..a * bp + b_real]);
+                let (uc, zc) = (&ws.dzt[c * bp..c * bp + b_real], &ws.zt[c * bp..c * bp + b_real]);
+                let mut s = 0.0f64;
+                for j in 0..b_real {
+                    s += ua[j] as f64 * zc[j] as f64 + za[j] as f64 * uc[j] as f64;
+                }
+                m[a * k + c] = -s as f32;
+            }
+        }
+        sym = Some(m);
+    }
     // dC = Zᵀ·dF̂ + dZᵀ·F.
     grads.c.resize(w.c.len(), 0.0);
     gemm(
@@ -450,6 +543,14 @@ pub fn loss_and_grad(
         cols(&ws.dzt, k, bp, b_real),
         cols(f, 9 * n, bp, b_real).transpose(),
     );
+    if let Some(m) = &sym {
+        gemm(
+            MatMut::from_row_major_slice_mut(&mut grads.c, k, 9 * n),
+            true,
+            MatRef::from_row_major_slice(m, k, k),
+            c_ref,
+        );
+    }
     // dFᵀ = Cᵀ·dZᵀ (the padding lanes of ws.d_a stay zero from the decoder pass).
     gemm(cols_mut(&mut ws.d_a, 9 * n, bp, b_real), false, c_ref.transpose(), cols(&ws.dzt, k, bp, b_real));
 
@@ -478,6 +579,49 @@ pub fn loss_and_grad(
 
     // Sparsity on C.
     let sparsity = sparsity_with_grad(&w.c, maps, (cfg.lambda1 / k as f64) as f32, &mut grads.c);
+    let orthogonality = if cfg.lambda_orthogonal > 0.0 {
+        orthogonality_with_grad(&w.c, k, 9 * n, (cfg.lambda_orthogonal / k as f64) as f32, &mut grads.c)
+    } else {
+        0.0
+    };
 
-    LossTerms { total: reconstruction + cfg.lambda1 * sparsity + cfg.lambda2 * hinge, reconstruction, sparsity, hinge }
+    LossTerms {
+        total: reconstruction + cfg.lambda1 * sparsity + cfg.lambda2 * hinge + cfg.lambda_orthogonal * orthogonality,
+        reconstruction,
+        sparsity,
+        hinge,
+        orthogonality,
+    }
+}
+
+/// Decorrelation of the rows of `C`: returns `S = (1/K) Σ_{k≠l} G_kl² / (G_kk G_ll)` with
+/// `G = C·Cᵀ`, and adds `scale·K·∂S/∂C = scale · M·C` to `grad`, where `M_kl = 4 G_kl /
+/// (G_kk G_ll)` (k ≠ l) and `M_kk = −4 Σ_{l≠k} G_kl² / (G_kk² G_ll)`.
+///
+/// # Shapes
+/// `c`, `grad`: `[K, cols]` row-major.
+pub fn orthogonality_with_grad(c: &[f32], k: usize, cols: usize, scale: f32, grad: &mut [f32]) -> f64 {
+    let cm = MatRef::from_row_major_slice(c, k, cols);
+    let mut g = vec![0.0f32; k * k];
+    gemm(MatMut::from_row_major_slice_mut(&mut g, k, k), false, cm, cm.transpose());
+    let eps = super::loss::ORTHO_EPS as f64;
+    let diag: Vec<f64> = (0..k).map(|i| (g[i * k + i] as f64).max(eps)).collect();
+    let mut s = 0.0f64;
+    let mut m = vec![0.0f32; k * k];
+    for a in 0..k {
+        let mut mkk = 0.0f64;
+        for b in 0..k {
+            if a == b {
+                continue;
+            }
+            let gab = g[a * k + b] as f64;
+            let q = gab * gab / (diag[a] * diag[b]);
+            s += q;
+            m[a * k + b] = (2.0 * 2.0 * gab / (diag[a] * diag[b]) * scale as f64) as f32;
+            mkk -= 2.0 * q / diag[a];
+        }
+        m[a * k + a] = (2.0 * mkk * scale as f64) as f32;
+    }
+    gemm(MatMut::from_row_major_slice_mut(grad, k, cols), true, MatRef::from_row_major_slice(&m, k, k), cm);
+    s / k as f64
 }

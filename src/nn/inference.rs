@@ -107,7 +107,8 @@ impl ComponentAnalysis {
 impl Autoencoder {
     /// Wraps trained parameters (errors if a parameter is not finite or sizes disagree).
     pub fn new(config: AutoencoderConfig, module: AutoencoderModule, neighbors: NeighborIndex) -> Result<Self> {
-        let weights = Weights::from_module(&module)?;
+        let mut weights = Weights::from_module(&module)?;
+        weights.least_squares = config.encoder == super::config::EncoderKind::LeastSquares;
         if weights.n != neighbors.n_vertices()
             || weights.k != config.components
             || weights.layers.len() != config.layers

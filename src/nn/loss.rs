@@ -22,6 +22,8 @@ use crate::error::{Error, Result};
 
 /// ε of the guarded norm `sqrt(max(‖v‖², ε²))`.
 pub const NORM_EPS: f32 = 1e-8;
+/// Lower bound of `‖C_k‖²` in the decorrelation term's denominators.
+pub const ORTHO_EPS: f32 = 1e-12;
 
 /// Distances on the rest mesh from one centre vertex, normalised by the largest pairwise
 /// geodesic distance (so that the ramp `[d_min, d_max]` is scale-free).
@@ -128,12 +130,19 @@ pub struct LossTerms {
     pub sparsity: f64,
     /// `(1/K) Σ_k max(max_m |Z_km| − θ, 0)`.
     pub hinge: f64,
+    /// `(1/K) Σ_{k≠l} (C_k·C_l)² / (‖C_k‖² ‖C_l‖²)` (computed only when `lambda_orthogonal > 0`).
+    #[serde(default)]
+    pub orthogonality: f64,
 }
 
 impl LossTerms {
     /// Whether every term is finite.
     pub fn is_finite(&self) -> bool {
-        self.total.is_finite() && self.reconstruction.is_finite() && self.sparsity.is_finite() && self.hinge.is_finite()
+        self.total.is_finite()
+            && self.reconstruction.is_finite()
+            && self.sparsity.is_finite()
+            && self.hinge.is_finite()
+            && self.orthogonality.is_finite()
     }
 }
 
@@ -257,8 +266,21 @@ pub fn reference_loss(
     let norms = c.square().sum_dim(2).reshape([k, n]).clamp_min(NORM_EPS * NORM_EPS).sqrt();
     let sparsity = (norms * maps.to_tensor(&device)).sum().div_scalar(k as f32);
     let hinge = z.abs().max_dim(0).sub_scalar(cfg.theta as f32).clamp_min(0.0).sum().div_scalar(k as f32);
-    let total =
+    let mut total =
         recon.clone() + sparsity.clone().mul_scalar(cfg.lambda1 as f32) + hinge.clone().mul_scalar(cfg.lambda2 as f32);
+    let mut orthogonality = None;
+    if cfg.lambda_orthogonal > 0.0 {
+        let c2 = module.components_tensor();
+        let g = c2.clone().matmul(c2.transpose());
+        let off_mask: Vec<f32> = (0..k * k).map(|i| if i / k == i % k { 0.0 } else { 1.0 }).collect();
+        let off_mask = Tensor::<2>::from_data(TensorData::new(off_mask, [k, k]), &device);
+        let eye_mask = off_mask.clone().neg().add_scalar(1.0);
+        let d = (g.clone() * eye_mask).sum_dim(1).clamp_min(ORTHO_EPS); // [K, 1]
+        let dd = d.clone().matmul(d.transpose()); // [K, K]: G_kk G_ll
+        let o = (g.square() / dd * off_mask).sum().div_scalar(k as f32);
+        total = total + o.clone().mul_scalar(cfg.lambda_orthogonal as f32);
+        orthogonality = Some(o);
+    }
     let scalar =
         |t: Tensor<1>| -> f64 { t.into_data().try_into_vec_as::<f32>().map(|v| v[0] as f64).unwrap_or(f64::NAN) };
     let terms = LossTerms {
@@ -266,6 +288,7 @@ pub fn reference_loss(
         reconstruction: scalar(recon.detach()),
         sparsity: scalar(sparsity.detach()),
         hinge: scalar(hinge.detach()),
+        orthogonality: orthogonality.map(|o| scalar(o.detach())).unwrap_or(0.0),
     };
     (total, terms)
 }

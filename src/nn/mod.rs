@@ -40,6 +40,7 @@
 //! size and prints where the time goes; `cargo run --release --example ae_synthetic -- --profile
 //! OBJ SHAPES STEPS` does the same for any mesh.
 
+pub mod augment;
 pub mod checkpoint;
 pub mod config;
 pub mod data;

@@ -17,8 +17,9 @@ use burn::store::ModuleRecord;
 use burn::tensor::{Bytes, Device, Tensor, TensorData};
 use serde::Serialize;
 
+use super::augment::Augmenter;
 use super::checkpoint::{Checkpoint, CheckpointHeader};
-use super::config::{AutoencoderConfig, ComputeDevice, Engine};
+use super::config::{AutoencoderConfig, ComputeDevice, EncoderKind, Engine};
 use super::data::TrainingData;
 use super::engine::{self, Grads, Weights, Workspace};
 use super::inference::Autoencoder;
@@ -103,6 +104,36 @@ pub struct RunSummary {
     pub last_loss: Option<LossTerms>,
     /// Mean wall time per step of this run, seconds.
     pub mean_step_seconds: f64,
+    /// With validation shapes: the step whose parameters are kept and its validation error
+    /// (mean squared feature error of encode–decode per shape).
+    pub best: Option<(usize, f64)>,
+}
+
+/// Held-out shapes and the best parameters seen on them (see
+/// [`AutoencoderConfig::validation`]).
+struct Validation<'a> {
+    data: &'a TrainingData,
+    /// The shapes in VCB layout.
+    x: Vec<f32>,
+    workspace: Workspace,
+    /// (step, error, parameters) of the lowest validation error so far.
+    best: Option<(usize, f64, AutoencoderModule)>,
+}
+
+/// Mean over the `b` real lanes of the squared error between encode–decode of `x` and `x`.
+pub fn feature_error(ws: &mut Workspace, w: &Weights, nb: &NeighborIndex, x: &[f32], b: usize) -> f64 {
+    engine::encode(ws, w, nb, x, b);
+    engine::decode(ws, w, nb, b);
+    let bp = ws.width();
+    let out = ws.output();
+    let mut sse = 0.0f64;
+    for (ro, rx) in out.chunks_exact(bp).zip(x.chunks_exact(bp)) {
+        for j in 0..b {
+            let d = (ro[j] - rx[j]) as f64;
+            sse += d * d;
+        }
+    }
+    sse / b as f64
 }
 
 /// Trains the autoencoder on one data set.
@@ -127,6 +158,11 @@ pub struct Trainer<'a> {
     graph_neighbors: Option<NeighborTensors>,
     last_loss: Option<LossTerms>,
     timings: StepTimings,
+    /// Synthetic shapes of every step (`augment > 0`).
+    augmenter: Option<Augmenter>,
+    /// The mini-batch buffer (VCB, padded width of batch + synthetic shapes).
+    batch_buf: Vec<f32>,
+    validation: Option<Validation<'a>>,
 }
 
 fn adam(cfg: &AutoencoderConfig) -> ModuleOptimizer {
@@ -171,13 +207,19 @@ impl<'a> Trainer<'a> {
         let device = training_device(config.device)?;
         let module = config.init(data.n_vertices(), &device);
         let b = config.batch_size.unwrap_or(data.n_shapes()).min(data.n_shapes());
-        let workspace = Workspace::new(data.n_vertices(), config.components, config.layers, padded_width(b));
-        let full_batch = (b == data.n_shapes()).then(|| data.batch_vcb(&(0..b).collect::<Vec<_>>()));
+        let bp = padded_width(b + config.augment);
+        let workspace = Workspace::new(data.n_vertices(), config.components, config.layers, bp);
+        let full_batch = (b == data.n_shapes()).then(|| data.batch_vcb_width(&(0..b).collect::<Vec<_>>(), bp));
+        let augmenter = if config.augment > 0 {
+            Some(Augmenter::new(config.augment_mix, config.augment_radius, data.n_vertices(), distances, config.seed)?)
+        } else {
+            None
+        };
         let n_blocks = module.components.len();
         Ok(Trainer {
             optimizer: adam(&config),
             block_optimizers: (0..n_blocks).map(|_| adam(&config)).collect(),
-            weights: Weights { layers: Vec::new(), c: Vec::new(), k: 0, n: 0 },
+            weights: Weights { layers: Vec::new(), c: Vec::new(), k: 0, n: 0, least_squares: false },
             rng: batch_rng(config.seed),
             maps: SupportMaps::new(config.components, data.n_vertices()),
             grads: Grads { layers: Vec::new(), c: Vec::new() },
@@ -193,7 +235,46 @@ impl<'a> Trainer<'a> {
             graph_neighbors: None,
             last_loss: None,
             timings: StepTimings::default(),
+            augmenter,
+            batch_buf: Vec::new(),
+            validation: None,
         })
+    }
+
+    /// Gives the run held-out shapes (`config.validation > 0`): every `validate_every` steps
+    /// and at the end, the encode–decode feature error on them is measured and the parameters
+    /// of the lowest one are what [`Self::into_model`] returns. (A resumed run starts the
+    /// search afresh.)
+    pub fn with_validation(mut self, data: &'a TrainingData) -> Result<Self> {
+        if data.n_vertices() != self.data.n_vertices() {
+            return Err(Error::Invalid(format!(
+                "validation shapes have {} vertices, the training shapes {}",
+                data.n_vertices(),
+                self.data.n_vertices()
+            )));
+        }
+        let b = data.n_shapes();
+        let bp = padded_width(b);
+        self.validation = Some(Validation {
+            data,
+            x: data.batch_vcb_width(&(0..b).collect::<Vec<_>>(), bp),
+            workspace: Workspace::new(data.n_vertices(), self.config.components, self.config.layers, bp),
+            best: None,
+        });
+        Ok(self)
+    }
+
+    /// Measures the validation error of the current parameters and keeps them if best.
+    fn validate(&mut self) -> Result<Option<f64>> {
+        let Some(v) = self.validation.as_mut() else { return Ok(None) };
+        let module = self.module.as_ref().expect("module present between steps");
+        let mut w = Weights::from_module(module)?;
+        w.least_squares = self.config.encoder == EncoderKind::LeastSquares;
+        let err = feature_error(&mut v.workspace, &w, self.neighbors, &v.x, v.data.n_shapes());
+        if v.best.as_ref().is_none_or(|b| err < b.1) {
+            v.best = Some((self.iteration, err, module.clone()));
+        }
+        Ok(Some(err))
     }
 
     /// Continues the run saved in `checkpoint`. `config` must describe the same model and loss
@@ -279,7 +360,11 @@ impl<'a> Trainer<'a> {
     /// gradient is not finite.
     pub fn step(&mut self) -> Result<LossTerms> {
         let t0 = Instant::now();
-        let mut w = std::mem::replace(&mut self.weights, Weights { layers: Vec::new(), c: Vec::new(), k: 0, n: 0 });
+        let mut w = std::mem::replace(
+            &mut self.weights,
+            Weights { layers: Vec::new(), c: Vec::new(), k: 0, n: 0, least_squares: false },
+        );
+        w.least_squares = self.config.encoder == EncoderKind::LeastSquares;
         let (module, read) = w.read_module_owned(self.module.take().expect("module present between steps"));
         self.module = Some(module);
         read.map_err(|e| Error::Numerical(format!("before iteration {}: {e}", self.iteration + 1)))?;
@@ -304,21 +389,28 @@ impl<'a> Trainer<'a> {
             };
             return Ok(terms);
         }
-        let batch_owned;
-        let x: &[f32] = match &self.full_batch {
+        let bp = self.workspace.width();
+        if self.full_batch.is_none() {
+            let idx = self.rng.sample_distinct(n_shapes, b);
+            self.batch_buf = self.data.batch_vcb_width(&idx, bp);
+        }
+        let x: &mut [f32] = match &mut self.full_batch {
             Some(x) => x,
-            None => {
-                let idx = self.rng.sample_distinct(n_shapes, b);
-                batch_owned = self.data.batch_vcb(&idx);
-                &batch_owned
-            }
+            None => &mut self.batch_buf,
         };
+        let m = self.config.augment;
+        if let Some(aug) = &self.augmenter {
+            let data = self.data;
+            for j in 0..m {
+                aug.draw(&|s| data.shape(s), n_shapes, &mut self.rng, |row, v| x[row * bp + b + j] = v);
+            }
+        }
         let terms = engine::loss_and_grad(
             &mut self.workspace,
             &w,
             self.neighbors,
             x,
-            b,
+            b + m,
             &self.maps,
             &self.config,
             &mut self.grads,
@@ -358,7 +450,24 @@ impl<'a> Trainer<'a> {
     fn graph_step(&mut self, idx: &[usize]) -> Result<LossTerms> {
         let nb = self.graph_neighbors.get_or_insert_with(|| NeighborTensors::new(self.neighbors, &self.device));
         let module = self.module.take().expect("module present between steps");
-        let x = self.data.batch_tensor(idx, &self.device);
+        let x = match &self.augmenter {
+            None => self.data.batch_tensor(idx, &self.device),
+            Some(aug) => {
+                let (n, m) = (self.data.n_vertices(), self.config.augment);
+                let mut v = Vec::with_capacity((idx.len() + m) * n * 9);
+                for &s in idx {
+                    v.extend_from_slice(self.data.shape(s));
+                }
+                let data = self.data;
+                for _ in 0..m {
+                    let start = v.len();
+                    v.resize(start + n * 9, 0.0);
+                    let dst = &mut v[start..];
+                    aug.draw(&|s| data.shape(s), data.n_shapes(), &mut self.rng, |row, x| dst[row] = x);
+                }
+                Tensor::from_data(TensorData::new(v, [idx.len() + m, n, 9]), &self.device)
+            }
+        };
         let (loss, terms) = reference_loss(&module, x, nb, &self.maps, &self.config);
         if !terms.is_finite() {
             self.module = Some(module);
@@ -481,6 +590,10 @@ impl<'a> Trainer<'a> {
             let dt = t0.elapsed().as_secs_f64();
             time += dt;
             steps += 1;
+            let ve = self.config.validate_every.max(1);
+            if self.iteration.is_multiple_of(ve) || self.iteration == total {
+                self.validate()?;
+            }
             let every = self.config.checkpoint_every;
             let mut checkpointed = false;
             if let Some(path) = &options.checkpoint
@@ -505,12 +618,17 @@ impl<'a> Trainer<'a> {
             stopped,
             last_loss: self.last_loss,
             mean_step_seconds: if steps > 0 { time / steps as f64 } else { 0.0 },
+            best: self.validation.as_ref().and_then(|v| v.best.as_ref().map(|b| (b.0, b.1))),
         })
     }
 
     /// The trained model for inference.
     pub fn into_model(self) -> Result<Autoencoder> {
-        let module = self.module.unwrap().to_device(&default_device());
+        let module = match self.validation.and_then(|v| v.best) {
+            Some((_, _, best)) => best,
+            None => self.module.unwrap(),
+        };
+        let module = module.to_device(&default_device());
         Autoencoder::new(self.config, module, self.neighbors.clone())
     }
 }

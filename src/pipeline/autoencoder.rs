@@ -387,7 +387,14 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
     ctx.progress.stage("geodesics", 0);
     let distances = GeodesicSupport::max_normalised(&prep.rest, m.geodesic_m)?;
     let neighbors = NeighborIndex::new(representation.element_adjacency())?;
-    let data = TrainingData::from_features(&xs_train)?;
+    let all = TrainingData::from_features(&xs_train)?;
+    // With `validation = v`, v evenly spaced training shapes are held out to choose the step.
+    let (data, held_out) = if ae_cfg.validation > 0 {
+        let (fit, val, _) = all.split_validation(ae_cfg.validation).map_err(crate::config::method_key)?;
+        (fit, Some(val))
+    } else {
+        (all, None)
+    };
 
     std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
     let mut trainer = if ctx.resume {
@@ -395,6 +402,9 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
     } else {
         Trainer::new(ae_cfg.clone(), &data, &neighbors, &distances)?
     };
+    if let Some(val) = &held_out {
+        trainer = trainer.with_validation(val)?;
+    }
     let log_path = out.join(LOG_FILE);
     let mut log = std::fs::OpenOptions::new()
         .create(true)
@@ -411,8 +421,8 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
     let summary = trainer.run(&RunOptions { checkpoint: Some(checkpoint.clone()), stop: ctx.stop.clone() }, |r| {
         let l = &r.loss;
         let line = format!(
-            "{{\"iteration\":{},\"loss\":{},\"reconstruction\":{},\"sparsity\":{},\"hinge\":{},\"step_seconds\":{},\"checkpoint\":{}}}\n",
-            r.iteration, l.total, l.reconstruction, l.sparsity, l.hinge, r.step_seconds, r.checkpointed
+            "{{\"iteration\":{},\"loss\":{},\"reconstruction\":{},\"sparsity\":{},\"hinge\":{},\"orthogonality\":{},\"step_seconds\":{},\"checkpoint\":{}}}\n",
+            r.iteration, l.total, l.reconstruction, l.sparsity, l.hinge, l.orthogonality, r.step_seconds, r.checkpointed
         );
         if let Err(e) = log.write_all(line.as_bytes()) {
             log_error.get_or_insert(e);
@@ -420,6 +430,12 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
         progress.step(r.iteration as u64, &format!("loss {:.4} (rec {:.4}, sparse {:.4}, hinge {:.4})", l.total, l.reconstruction, l.sparsity, l.hinge));
     })?;
     let train_seconds = t_train.elapsed().as_secs_f64();
+    if let Some((it, err)) = summary.best {
+        let line = format!("{{\"best_iteration\":{it},\"validation_error\":{err}}}\n");
+        if let Err(e) = log.write_all(line.as_bytes()) {
+            log_error.get_or_insert(e);
+        }
+    }
     if let Some(e) = log_error {
         return Err(Error::io(&log_path, e));
     }
