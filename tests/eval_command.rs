@@ -108,8 +108,13 @@ fn sweep_table_reuse_reproducibility_and_retraining() {
         if f[1] == "ae" {
             let fitted: f64 = f[13].parse().unwrap_or_else(|_| panic!("fitted column of `{l}`"));
             assert!(fitted.is_finite() && fitted <= f[5].parse::<f64>().unwrap(), "{l}");
+            // STED of the fitted codes' reconstruction beside the encoder's (ordered: both parts).
+            for i in [14, 15] {
+                let v: f64 = f[i].parse().unwrap_or_else(|_| panic!("fitted STED column {i} of `{l}`"));
+                assert!(v.is_finite() && v >= 0.0, "{l}");
+            }
         } else {
-            assert!(f[13].is_empty(), "{l}");
+            assert!(f[13].is_empty() && f[14].is_empty() && f[15].is_empty(), "{l}");
         }
     }
     let want: Vec<(String, String)> = [("pca", "2"), ("pca", "4"), ("splocs", "3"), ("ae", "3")]

@@ -110,6 +110,13 @@ pub struct CellResult {
     /// (edge, frame) pairs STED left out: zero-length edges of the ground truth.
     #[serde(default)]
     pub sted_skipped_edges: usize,
+    /// Autoencoder only: STED spatial part of the test frames decoded from fitted codes (the
+    /// counterpart of `test_erms_fitted`; `sted_spatial` is the network encoder's).
+    #[serde(default)]
+    pub sted_spatial_fitted: Option<f64>,
+    /// Autoencoder only: STED temporal part with fitted codes (ordered datasets).
+    #[serde(default)]
+    pub sted_temporal_fitted: Option<f64>,
 }
 
 /// A cell whose training or measuring failed: recorded, shown in the tables and the report,
@@ -233,6 +240,18 @@ fn measure(cell: &Cell, cfg: &EvalConfig, ds: &DatasetData, trained: &TrainOutco
     }
     let order = if d.ordered { FrameOrder::Sequence } else { FrameOrder::Unordered };
     let sted = ds.sted.evaluate(&ds.test, &test_rec, order)?;
+    // The fitted codes' reconstruction, measured the same way (side by side in the tables).
+    let sted_fitted = if trained.test_reconstruction_fitted.is_empty() {
+        None
+    } else {
+        let mut rec = trained.test_reconstruction_fitted.clone();
+        if alignment == Alignment::Centroid {
+            for (r, t) in rec.iter_mut().zip(&ds.test) {
+                centroid_align(r, t);
+            }
+        }
+        Some(ds.sted.evaluate(&ds.test, &rec, order)?)
+    };
     let (norms, adjacency) = model.element_norms();
     let mut sizes = Vec::new();
     let mut regions = Vec::new();
@@ -261,6 +280,11 @@ fn measure(cell: &Cell, cfg: &EvalConfig, ds: &DatasetData, trained: &TrainOutco
         train_frames: ds.prep.train.len(),
         test_frames: ds.test.len(),
         sted_skipped_edges: sted.skipped_edges,
+        sted_spatial_fitted: sted_fitted.map(|s| check_finite("fitted STED", &name, s.spatial)).transpose()?,
+        sted_temporal_fitted: sted_fitted
+            .and_then(|s| s.temporal)
+            .map(|t| check_finite("fitted temporal STED", &name, t))
+            .transpose()?,
     })
 }
 

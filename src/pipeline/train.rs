@@ -41,6 +41,9 @@ pub struct TrainOutcome {
     pub metrics: Metrics,
     pub model: Box<dyn Model>,
     pub test_reconstruction: Vec<Vec<Vec3>>,
+    /// The test frames decoded from refined codes ([`Model::refine`], the autoencoder's fitted
+    /// codes); empty when the model has none or `fit_test = false`.
+    pub test_reconstruction_fitted: Vec<Vec<Vec3>>,
 }
 
 /// Loads and prepares `cfg.data`, then [`train_prepared`].
@@ -105,6 +108,7 @@ fn fit_measure_write(
     };
     let train_erms = erms(&train_truth, &train_rec, alignment)?;
     let (mut test_erms, mut test_erms_fitted, mut test_reconstruction) = (None, None, Vec::new());
+    let mut test_reconstruction_fitted = Vec::new();
     if !prep.test.is_empty() {
         let test = MeshSequence { faces, frames: frames_in_data_units(prep, &prep.test), names: Vec::new() };
         let codes = model.encode(&test)?;
@@ -116,6 +120,7 @@ fn fit_measure_write(
             let refined = model.refine(&test, &codes, &opts, &mut |i| progress.step(i as u64 + 1, ""))?;
             if let Some((_, rec)) = refined {
                 test_erms_fitted = Some(erms(&test.frames, &rec, alignment)?);
+                test_reconstruction_fitted = rec;
             }
         }
     }
@@ -163,5 +168,5 @@ fn fit_measure_write(
     })?;
     crate::timing::record("write", t.elapsed().as_secs_f64());
     progress.finish_stage();
-    Ok(TrainOutcome { out_dir: out.to_path_buf(), metrics, model, test_reconstruction })
+    Ok(TrainOutcome { out_dir: out.to_path_buf(), metrics, model, test_reconstruction, test_reconstruction_fitted })
 }
