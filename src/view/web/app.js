@@ -405,7 +405,7 @@ function poseParams() {
 }
 // While the pointer moves, solvers with iterations (the autoencoder's Gauss–Newton) run at most
 // DRAG_ITERATIONS, warm-started from the previous solve; the release solves once more in full.
-const DRAG_ITERATIONS = 8;
+const DRAG_ITERATIONS = 4;
 function requestPose(t0, final) {
   const cons = [];
   for (const [v, t] of S.pins) if (!S.drag || v !== S.drag.v) cons.push({ vertex: v, target: t });
