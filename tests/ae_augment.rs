@@ -11,24 +11,8 @@ use meshdeco::nn::training::feature_error;
 use meshdeco::nn::{AutoencoderConfig, HopDistances, NeighborIndex, RunOptions, Trainer, TrainingData};
 use meshdeco::representation::Features;
 
-/// A regular grid of `nx × ny` vertices in the unit square, two triangles per cell.
-fn grid(nx: usize, ny: usize) -> (Vec<[f64; 3]>, Vec<[usize; 3]>) {
-    let mut p = Vec::new();
-    for y in 0..ny {
-        for x in 0..nx {
-            p.push([x as f64 / (nx - 1) as f64, y as f64 / (ny - 1) as f64, 0.0]);
-        }
-    }
-    let mut f = Vec::new();
-    for y in 0..ny - 1 {
-        for x in 0..nx - 1 {
-            let v = y * nx + x;
-            f.push([v, v + 1, v + nx + 1]);
-            f.push([v, v + nx + 1, v + nx]);
-        }
-    }
-    (p, f)
-}
+mod common;
+use common::unit_grid as grid;
 
 /// `frames` shapes on an `nx × ny` grid: two localized bumps with independent amplitudes.
 fn planted(nx: usize, ny: usize, frames: usize, seed: u64) -> (NeighborIndex, Features) {

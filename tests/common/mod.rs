@@ -122,3 +122,23 @@ pub fn fresh_dir(prefix: &str, tag: &str) -> PathBuf {
 pub fn output_text(o: &std::process::Output) -> String {
     format!("{}{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr))
 }
+
+/// A regular grid of `nx × ny` vertices in the unit square (positions, triangles), two triangles
+/// per cell split along the same diagonal — the small mesh of the autoencoder tests.
+pub fn unit_grid(nx: usize, ny: usize) -> (Vec<[f64; 3]>, Vec<[usize; 3]>) {
+    let mut p = Vec::new();
+    for y in 0..ny {
+        for x in 0..nx {
+            p.push([x as f64 / (nx - 1) as f64, y as f64 / (ny - 1) as f64, 0.0]);
+        }
+    }
+    let mut f = Vec::new();
+    for y in 0..ny - 1 {
+        for x in 0..nx - 1 {
+            let v = y * nx + x;
+            f.push([v, v + 1, v + nx + 1]);
+            f.push([v, v + nx + 1, v + nx]);
+        }
+    }
+    (p, f)
+}
