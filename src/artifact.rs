@@ -317,7 +317,12 @@ pub const MANIFEST_FILE: &str = "manifest.json";
 
 /// Work files of a training (the autoencoder's checkpoint and log): kept in the directory, not
 /// part of the manifest (the checkpoint carries its own checksum).
-pub const WORK_FILES: &[&str] = &["checkpoint.bin", "training.jsonl"];
+pub const WORK_FILES: &[&str] = &[CHECKPOINT_FILE, LOG_FILE];
+
+/// The autoencoder's last training checkpoint, which `--resume` continues from.
+pub const CHECKPOINT_FILE: &str = "checkpoint.bin";
+/// The autoencoder's per-iteration training log.
+pub const LOG_FILE: &str = "training.jsonl";
 
 /// Names a training writes into an artefact directory (files and the `components/` folder): a
 /// committed run removes those of an earlier run that it did not write itself, and leaves every
@@ -332,8 +337,8 @@ pub const ARTEFACT_NAMES: &[&str] = &[
     "metrics.json",
     "segmentation.ply",
     "components",
-    "checkpoint.bin",
-    "training.jsonl",
+    CHECKPOINT_FILE,
+    LOG_FILE,
 ];
 
 /// Length and checksum of one file of an artefact.
@@ -468,8 +473,8 @@ pub fn staging_path(out: &Path) -> Result<PathBuf> {
 /// Where a resumed training of `out` finds its checkpoint: an interrupted run's (in the staging
 /// directory) before a finished run's (in `out`).
 pub fn resumable_checkpoint(out: &Path) -> Option<PathBuf> {
-    let staged = staging_path(out).ok().map(|s| s.join(WORK_FILES[0]));
-    staged.into_iter().chain([out.join(WORK_FILES[0])]).find(|p| p.is_file())
+    let staged = staging_path(out).ok().map(|s| s.join(CHECKPOINT_FILE));
+    staged.into_iter().chain([out.join(CHECKPOINT_FILE)]).find(|p| p.is_file())
 }
 
 /// An exclusive lock on an artefact directory: one writer at a time. The lock file (holding the
@@ -542,7 +547,7 @@ impl Staging {
         }
         let lock = DirLock::acquire(out)?;
         let dir = staging_path(out)?;
-        let staged_checkpoint = dir.join(WORK_FILES[0]).is_file();
+        let staged_checkpoint = dir.join(CHECKPOINT_FILE).is_file();
         if resume && staged_checkpoint {
             // An interrupted run: keep its work files, drop anything else it left.
             for entry in std::fs::read_dir(&dir).map_err(|e| Error::io(&dir, e))? {
@@ -557,13 +562,13 @@ impl Staging {
             }
             std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
             if resume {
-                let finished = out.join(WORK_FILES[0]);
+                let finished = out.join(CHECKPOINT_FILE);
                 if !finished.is_file() {
                     let _ = std::fs::remove_dir(&dir);
                     return Err(Error::Invalid(format!(
                         "--resume: no checkpoint at {} (nor an interrupted run's at {})",
                         finished.display(),
-                        dir.join(WORK_FILES[0]).display()
+                        dir.join(CHECKPOINT_FILE).display()
                     )));
                 }
                 for name in WORK_FILES {
@@ -628,7 +633,7 @@ impl Staging {
 
 impl Drop for Staging {
     fn drop(&mut self) {
-        if !self.committed && !self.dir.join(WORK_FILES[0]).is_file() {
+        if !self.committed && !self.dir.join(CHECKPOINT_FILE).is_file() {
             let _ = std::fs::remove_dir_all(&self.dir);
         }
     }

@@ -8,11 +8,7 @@ static COUNTS: Mutex<Vec<(String, u64)>> = Mutex::new(Vec::new());
 
 /// Adds `n` to counter `name` (e.g. bytes read), printed with the phases.
 pub fn count(name: &str, n: u64) {
-    let mut c = COUNTS.lock().unwrap_or_else(|e| e.into_inner());
-    match c.iter_mut().find(|(k, _)| k == name) {
-        Some((_, v)) => *v += n,
-        None => c.push((name.to_string(), n)),
-    }
+    add(&COUNTS, name, n);
 }
 
 /// The counters recorded so far, in order.
@@ -25,10 +21,15 @@ pub fn record(name: &str, seconds: f64) {
     if !seconds.is_finite() {
         return;
     }
-    let mut p = PHASES.lock().unwrap_or_else(|e| e.into_inner());
-    match p.iter_mut().find(|(n, _)| n == name) {
-        Some((_, s)) => *s += seconds,
-        None => p.push((name.to_string(), seconds)),
+    add(&PHASES, name, seconds);
+}
+
+/// Adds `v` to entry `name` of `list` (appended when new, so entries keep their first order).
+fn add<T: std::ops::AddAssign + Copy>(list: &Mutex<Vec<(String, T)>>, name: &str, v: T) {
+    let mut l = list.lock().unwrap_or_else(|e| e.into_inner());
+    match l.iter_mut().find(|(n, _)| n == name) {
+        Some((_, s)) => *s += v,
+        None => l.push((name.to_string(), v)),
     }
 }
 

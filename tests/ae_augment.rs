@@ -12,32 +12,11 @@ use meshdeco::nn::{AutoencoderConfig, HopDistances, NeighborIndex, RunOptions, T
 use meshdeco::representation::Features;
 
 mod common;
-use common::unit_grid as grid;
 
 /// `frames` shapes on an `nx × ny` grid: two localized bumps with independent amplitudes.
 fn planted(nx: usize, ny: usize, frames: usize, seed: u64) -> (NeighborIndex, Features) {
-    let (p, f) = grid(nx, ny);
-    let n = p.len();
-    let c1 = (ny / 4) * nx + nx / 4;
-    let c2 = (3 * ny / 4) * nx + 3 * nx / 4;
-    let mut rng = Rng::new(seed);
-    let mut feat = Features::zeros(frames, n, 9);
-    for s in 0..frames {
-        let a1 = rng.uniform() * 1.6 - 0.8;
-        let a2 = rng.uniform() * 1.6 - 0.8;
-        for i in 0..n {
-            let d1 = meshdeco::mesh::dist(p[i], p[c1]);
-            let d2 = meshdeco::mesh::dist(p[i], p[c2]);
-            let b1 = (-(d1 * d1) / (2.0 * 0.12f64.powi(2))).exp();
-            let b2 = (-(d2 * d2) / (2.0 * 0.12f64.powi(2))).exp();
-            for c in 0..9 {
-                let pat1 = [0.9, -0.5, 0.3, 0.7, -0.2, 0.1, 0.4, -0.6, 0.2][c];
-                let pat2 = [-0.3, 0.8, 0.5, -0.1, 0.6, -0.7, 0.2, 0.3, -0.4][c];
-                feat.data[(s * n + i) * 9 + c] = (a1 * b1 * pat1 + a2 * b2 * pat2).clamp(-0.95, 0.95);
-            }
-        }
-    }
-    (NeighborIndex::from_faces(n, &f).unwrap(), feat)
+    let (p, f, feat, _) = common::planted_bumps(nx, ny, frames, seed);
+    (NeighborIndex::from_faces(p.len(), &f).unwrap(), feat)
 }
 
 fn random_shapes(frames: usize, n: usize, seed: u64) -> TrainingData {

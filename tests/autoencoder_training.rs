@@ -27,35 +27,10 @@ fn random_features(n_frames: usize, n: usize, amp: f64, seed: u64) -> Features {
     f
 }
 
-/// Ten shapes: a smooth global field plus two planted localized bumps (around vertices `c1`,
-/// `c2`) whose amplitudes vary independently across the shapes.
-/// Rest positions, faces, features and the two planted centres.
-type Planted = (Vec<[f64; 3]>, Vec<[usize; 3]>, Features, [usize; 2]);
-
-fn planted(nx: usize, ny: usize) -> Planted {
-    let (p, f) = grid(nx, ny);
-    let n = p.len();
-    let c1 = (ny / 4) * nx + nx / 4;
-    let c2 = (3 * ny / 4) * nx + 3 * nx / 4;
-    let mut rng = Rng::new(11);
-    let frames = 10;
-    let mut feat = Features::zeros(frames, n, 9);
-    for s in 0..frames {
-        let a1 = rng.uniform() * 1.6 - 0.8;
-        let a2 = rng.uniform() * 1.6 - 0.8;
-        for i in 0..n {
-            let d1 = meshdeco::mesh::dist(p[i], p[c1]);
-            let d2 = meshdeco::mesh::dist(p[i], p[c2]);
-            let b1 = (-(d1 * d1) / (2.0 * 0.12f64.powi(2))).exp();
-            let b2 = (-(d2 * d2) / (2.0 * 0.12f64.powi(2))).exp();
-            for c in 0..9 {
-                let pat1 = [0.9, -0.5, 0.3, 0.7, -0.2, 0.1, 0.4, -0.6, 0.2][c];
-                let pat2 = [-0.3, 0.8, 0.5, -0.1, 0.6, -0.7, 0.2, 0.3, -0.4][c];
-                feat.data[(s * n + i) * 9 + c] = (a1 * b1 * pat1 + a2 * b2 * pat2).clamp(-0.95, 0.95);
-            }
-        }
-    }
-    (p, f, feat, [c1, c2])
+/// Ten shapes: two planted localized bumps (around vertices `c1`, `c2`) whose amplitudes vary
+/// independently across the shapes ([`common::planted_bumps`]).
+fn planted(nx: usize, ny: usize) -> common::PlantedBumps {
+    common::planted_bumps(nx, ny, 10, 11)
 }
 
 fn rel_err(a: &[f32], b: &[f32]) -> f64 {

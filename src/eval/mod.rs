@@ -231,27 +231,22 @@ fn measure(cell: &Cell, cfg: &EvalConfig, ds: &DatasetData, trained: &TrainOutco
     let alignment = model.alignment();
     let test_erms =
         metrics.test_erms.ok_or_else(|| Error::Invalid(format!("{name}: training measured no test split")))?;
-    let mut test_rec = trained.test_reconstruction.clone();
-    if alignment == Alignment::Centroid {
-        // The same alignment for STED (its temporal part sees per-frame translations).
-        for (r, t) in test_rec.iter_mut().zip(&ds.test) {
-            centroid_align(r, t);
-        }
-    }
     let order = if d.ordered { FrameOrder::Sequence } else { FrameOrder::Unordered };
-    let sted = ds.sted.evaluate(&ds.test, &test_rec, order)?;
-    // The fitted codes' reconstruction, measured the same way (side by side in the tables).
-    let sted_fitted = if trained.test_reconstruction_fitted.is_empty() {
-        None
-    } else {
-        let mut rec = trained.test_reconstruction_fitted.clone();
+    // STED of a test reconstruction, with the alignment of Erms (its temporal part sees
+    // per-frame translations).
+    let sted_of = |rec: &[Vec<Vec3>]| {
+        let mut rec = rec.to_vec();
         if alignment == Alignment::Centroid {
             for (r, t) in rec.iter_mut().zip(&ds.test) {
                 centroid_align(r, t);
             }
         }
-        Some(ds.sted.evaluate(&ds.test, &rec, order)?)
+        ds.sted.evaluate(&ds.test, &rec, order)
     };
+    let sted = sted_of(&trained.test_reconstruction)?;
+    // The fitted codes' reconstruction, measured the same way (side by side in the tables).
+    let fitted = &trained.test_reconstruction_fitted;
+    let sted_fitted = if fitted.is_empty() { None } else { Some(sted_of(fitted)?) };
     let (norms, adjacency) = model.element_norms();
     let mut sizes = Vec::new();
     let mut regions = Vec::new();

@@ -69,7 +69,7 @@ pub fn fit(prep: &Prepared, method: &MethodConfig, ctx: &mut FitContext<'_>) -> 
         MethodConfig::RegionPca(m) => region::fit(m, prep, ctx),
         MethodConfig::Autoencoder(m) => autoencoder::fit(m, prep, ctx),
     }?;
-    warn_zero_components(fitted.model.as_ref())?;
+    warn_zero_components(fitted.model.as_ref());
     Ok(fitted)
 }
 
@@ -142,7 +142,7 @@ fn check_training_data(prep: &Prepared, method: &MethodConfig) -> Result<()> {
 
 /// After fitting: names the components that came out zero (largest element norm below 1e-9 ×
 /// the largest of all components), which the data could not support.
-fn warn_zero_components(model: &dyn Model) -> Result<()> {
+fn warn_zero_components(model: &dyn Model) {
     let (norms, _) = model.element_norms();
     let peaks: Vec<f64> = norms.iter().map(|c| c.iter().cloned().fold(0.0, f64::max)).collect();
     let top = peaks.iter().cloned().fold(0.0, f64::max);
@@ -155,7 +155,6 @@ fn warn_zero_components(model: &dyn Model) -> Result<()> {
             zero
         );
     }
-    Ok(())
 }
 
 /// Loads the trained model in `dir` (an artefact directory or its `model.json`), by the

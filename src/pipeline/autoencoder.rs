@@ -36,10 +36,8 @@ use crate::representation::roundtrip::Alignment;
 use crate::representation::scaling::FeatureScaling;
 use crate::representation::{Representation, RepresentationKind, RepresentationOptions};
 
-/// Checkpoint file name inside the artefact directory.
-pub const CHECKPOINT_FILE: &str = "checkpoint.bin";
-/// Per-iteration log file name.
-pub const LOG_FILE: &str = "training.jsonl";
+/// Checkpoint and per-iteration log file names (the artefact directory's work files).
+pub use crate::artifact::{CHECKPOINT_FILE, LOG_FILE};
 pub use crate::config::AE_GEODESIC_M;
 
 /// Header of an autoencoder's `model.json`.

@@ -142,3 +142,35 @@ pub fn unit_grid(nx: usize, ny: usize) -> (Vec<[f64; 3]>, Vec<[usize; 3]>) {
     }
     (p, f)
 }
+
+/// Rest positions, faces, ACAP-like features (F × N × 9) and the two planted centres.
+pub type PlantedBumps = (Vec<[f64; 3]>, Vec<[usize; 3]>, meshdeco::representation::Features, [usize; 2]);
+
+/// `frames` shapes on the [`unit_grid`] `nx × ny`: two localized bumps (around vertices `c1`,
+/// `c2`, Gaussian of width 0.12, each with its own 9-number pattern) whose amplitudes, drawn
+/// from the generator seeded with `seed`, vary independently across the shapes; every feature
+/// clamped to [−0.95, 0.95].
+pub fn planted_bumps(nx: usize, ny: usize, frames: usize, seed: u64) -> PlantedBumps {
+    let (p, f) = unit_grid(nx, ny);
+    let n = p.len();
+    let c1 = (ny / 4) * nx + nx / 4;
+    let c2 = (3 * ny / 4) * nx + 3 * nx / 4;
+    let mut rng = meshdeco::nn::rng::Rng::new(seed);
+    let mut feat = meshdeco::representation::Features::zeros(frames, n, 9);
+    for s in 0..frames {
+        let a1 = rng.uniform() * 1.6 - 0.8;
+        let a2 = rng.uniform() * 1.6 - 0.8;
+        for i in 0..n {
+            let d1 = meshdeco::mesh::dist(p[i], p[c1]);
+            let d2 = meshdeco::mesh::dist(p[i], p[c2]);
+            let b1 = (-(d1 * d1) / (2.0 * 0.12f64.powi(2))).exp();
+            let b2 = (-(d2 * d2) / (2.0 * 0.12f64.powi(2))).exp();
+            for c in 0..9 {
+                let pat1 = [0.9, -0.5, 0.3, 0.7, -0.2, 0.1, 0.4, -0.6, 0.2][c];
+                let pat2 = [-0.3, 0.8, 0.5, -0.1, 0.6, -0.7, 0.2, 0.3, -0.4][c];
+                feat.data[(s * n + i) * 9 + c] = (a1 * b1 * pat1 + a2 * b2 * pat2).clamp(-0.95, 0.95);
+            }
+        }
+    }
+    (p, f, feat, [c1, c2])
+}
