@@ -120,7 +120,7 @@ impl<'a> AeFitEncoder<'a> {
         if shape.len() != n {
             return Err(Error::Invalid(format!("shape has {} vertices, the model {n}", shape.len())));
         }
-        let k = self.artifact.model.n_components();
+        let k = self.artifact.n_dims();
         if z0.len() != k {
             return Err(Error::Invalid(format!("start code has {} numbers, the model K = {k}", z0.len())));
         }

@@ -20,6 +20,10 @@
 //! differences of Rodrigues' formula, step 1e-6) and the feature scaling, then back through the
 //! network decoder with [`DecoderVjp`] (one batched backward pass for the 3·C rows of J).
 //!
+//! **Pieces.** On a multi-piece mesh the code also holds the pieces' translations τ (after the
+//! network's K dimensions, see [`super::autoencoder`]); placing the pieces is affine in τ, so
+//! p_a gains `Σ_r ∂x_a/∂t_r · τ_r` ([`crate::representation::piece_placement::PiecePlacement::derivative`]) and J constant columns.
+//!
 //! **Solver.** Gauss–Newton on the K unknowns (normal equations JᵀJ + λI, Cholesky) with
 //! backtracking on the true objective; stops when the objective decreases by less than
 //! `tolerance` (relative) or after `max_iterations`.
@@ -92,6 +96,9 @@ pub struct AePoser<'a> {
     /// Per constrained vertex: g_a (N × 3) of p_a = Σ_i T_i g_{a,i} + κ_a.
     g: Vec<Vec<Vec3>>,
     kappa: Vec<Vec3>,
+    /// Multi-piece meshes: per constrained vertex, ∂p_a/∂τ_j (a multiple of the identity) for
+    /// each translated piece j (code dimension K + 3j + c); empty otherwise.
+    piece_derivatives: Vec<Vec<f64>>,
     /// Per feature dimension (9): ∂f/∂x̂ = 1/a of the scaling, and its centre c.
     unscale: [(f64, f64); 9],
     config: AePoseConfig,
@@ -177,7 +184,30 @@ impl<'a> AePoser<'a> {
         artifact.header.scaling.invert_in_place(&mut zero)?;
         artifact.header.scaling.invert_in_place(&mut one)?;
         let unscale = std::array::from_fn(|q| (one[q] - zero[q], zero[q]));
-        Ok(AePoser { artifact, decoder, vertices: vertices.to_vec(), g, kappa, unscale, config: *config })
+        let pieces = super::autoencoder::translated_pieces(&artifact.representation);
+        let piece_derivatives = match artifact.representation.pieces() {
+            Some((placement, _)) => {
+                let of = placement.piece_of_vertex();
+                let d = |v: usize| -> Vec<f64> {
+                    pieces
+                        .iter()
+                        .map(|&r| if of[v] == usize::MAX { 0.0 } else { placement.derivative(of[v], r) })
+                        .collect()
+                };
+                vertices.iter().map(|&v| d(v)).collect()
+            }
+            None => Vec::new(),
+        };
+        Ok(AePoser {
+            artifact,
+            decoder,
+            vertices: vertices.to_vec(),
+            g,
+            kappa,
+            piece_derivatives,
+            unscale,
+            config: *config,
+        })
     }
 
     /// The constrained vertices.
@@ -209,17 +239,36 @@ impl<'a> AePoser<'a> {
             .collect()
     }
 
-    /// Constrained positions (model units) of code `z`.
-    fn eval(&self, z: &[f64]) -> Result<Vec<Vec3>> {
-        Ok(self.positions(&self.decoder.decode(z)?))
+    /// Network dimensions K (the rest of a code are piece translations).
+    fn k_network(&self) -> usize {
+        self.decoder.n_components()
     }
 
-    /// Constrained positions (model units) and their Jacobian with respect to z (3·C rows of K,
-    /// row 3a + c = ∂p_a[c]/∂z).
+    /// Adds the pieces' placement to constrained positions of the network part.
+    fn place(&self, p: &mut [Vec3], z: &[f64]) {
+        let tau = &z[self.k_network()..];
+        for (pa, d) in p.iter_mut().zip(&self.piece_derivatives) {
+            for (j, dj) in d.iter().enumerate() {
+                for c in 0..3 {
+                    pa[c] += dj * tau[3 * j + c];
+                }
+            }
+        }
+    }
+
+    /// Constrained positions (model units) of code `z`.
+    fn eval(&self, z: &[f64]) -> Result<Vec<Vec3>> {
+        let mut p = self.positions(&self.decoder.decode(&z[..self.k_network()])?);
+        self.place(&mut p, z);
+        Ok(p)
+    }
+
+    /// Constrained positions (model units) and their Jacobian with respect to z (3·C rows of
+    /// the code's length, row 3a + c = ∂p_a[c]/∂z).
     pub fn positions_and_jacobian(&self, z: &[f64]) -> Result<(Vec<Vec3>, Vec<Vec<f64>>)> {
         let nv = self.vertices.len();
         let mut pos = Vec::new();
-        let (_, jac) = self.decoder.decode_vjp(z, 3 * nv, &mut |xs: &[f64]| {
+        let (_, mut jac) = self.decoder.decode_vjp(&z[..self.k_network()], 3 * nv, &mut |xs: &[f64]| {
             pos = self.positions(xs);
             let f = self.unscaled(xs);
             let n = f.len() / 9;
@@ -241,6 +290,12 @@ impl<'a> AePoser<'a> {
             }
             Ok(u)
         })?;
+        self.place(&mut pos, z);
+        let n_tau = z.len() - self.k_network();
+        for (row, r) in jac.iter_mut().enumerate() {
+            let (a, c) = (row / 3, row % 3);
+            r.extend((0..n_tau).map(|i| if i % 3 == c { self.piece_derivatives[a][i / 3] } else { 0.0 }));
+        }
         Ok((pos, jac))
     }
 
@@ -260,7 +315,7 @@ impl<'a> AePoser<'a> {
     /// [`AePoser::solve`] plus iteration count and start/final constraint cost.
     pub fn solve_report(&self, targets: &[Vec3], z0: &[f64]) -> Result<(Vec<f64>, Vec<Vec3>, AePoseReport)> {
         let nv = self.vertices.len();
-        let k = self.decoder.n_components();
+        let k = self.artifact.n_dims();
         if targets.len() != nv {
             return Err(Error::Invalid(format!(
                 "autoencoder posing: {} targets for {nv} constrained vertices",

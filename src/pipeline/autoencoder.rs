@@ -10,6 +10,15 @@
 //! - `checkpoint.bin`: the last training checkpoint (model, Adam state, iteration, RNG), which
 //!   `--resume` continues from;
 //! - `training.jsonl`: one JSON object per iteration (loss terms, step time).
+//!
+//! **Meshes in several pieces.** The network reads the 9 ACAP numbers per vertex, which say how
+//! each piece deforms but not where it sits. On a mesh with P ≥ 2 connected pieces the code
+//! therefore has 3·(P − 1) more dimensions after the network's K: the translation `t_p` of every
+//! piece but the anchor (the largest piece), in the representation's convention
+//! ([`crate::representation::piece_placement`]; dimensionless, units of the rest bounding-box
+//! diagonal). Encoding reads them off the shape, decoding places each piece by them, posing and
+//! fitting solve for them with the network's dimensions; each is a component confined to its
+//! piece (ranked after the network's, named `piece<p>_<axis>` in `components.csv`).
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -75,6 +84,9 @@ pub struct ComponentSummary {
     pub distance: f64,
     pub center: usize,
     pub support_size: usize,
+    /// For a piece-translation dimension (multi-piece meshes): `[piece, axis]`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub piece: Option<[usize; 2]>,
 }
 
 /// Heat-geodesic distances normalised by the largest geodesic distance (the trainer's
@@ -114,7 +126,14 @@ impl AeArtifact {
         let representation = Representation::new(RepresentationKind::Acap, &rest, options)?;
         let neighbors = NeighborIndex::new(representation.element_adjacency())?;
         let model = Autoencoder::load(&dir, neighbors)?;
-        let k = header.components;
+        let k = header.components + 3 * translated_pieces(&representation).len();
+        if header.analysis.len() != k {
+            return Err(Error::Invalid(format!(
+                "{}: the component analysis has {} dimensions, the model {k}",
+                dir.join("model.json").display(),
+                header.analysis.len()
+            )));
+        }
         let f = header.train_frames.len();
         let codes = arrays.get_shaped("train_codes", &[f, k])?;
         let train_codes = codes.chunks_exact(k.max(1)).map(<[f64]>::to_vec).collect();
@@ -127,15 +146,55 @@ impl AeArtifact {
         for p in scaled.frames.iter_mut().flatten() {
             *p = self.header.unit_box.apply(*p);
         }
-        let x = self.representation.encode(&scaled)?;
-        let xs = self.header.scaling.apply(&x)?;
-        self.model.encode(&xs)
+        let (own, translations) = self.representation.split_pieces(&self.representation.encode(&scaled)?)?;
+        let xs = self.header.scaling.apply(&own)?;
+        let mut codes = self.model.encode(&xs)?;
+        let pieces = translated_pieces(&self.representation);
+        for (z, t) in codes.iter_mut().zip(&translations) {
+            z.extend(pieces.iter().flat_map(|&p| t[p]));
+        }
+        Ok(codes)
     }
 
-    /// Vertex positions (data units) decoded from codes.
+    /// Network dimensions K (the config's `components`).
+    pub fn n_network(&self) -> usize {
+        self.header.components
+    }
+
+    /// Every code dimension: K, plus 3 per piece but the anchor on a multi-piece mesh (module
+    /// docs).
+    pub fn n_dims(&self) -> usize {
+        self.header.components + 3 * translated_pieces(&self.representation).len()
+    }
+
+    /// The P piece translations of a full code (anchor zero); empty on a mesh in one piece.
+    fn translations_of(&self, code: &[f64]) -> Vec<Vec3> {
+        let Some((placement, _)) = self.representation.pieces() else {
+            return Vec::new();
+        };
+        let mut t = vec![[0.0; 3]; placement.n_pieces()];
+        for (j, p) in translated_pieces(&self.representation).into_iter().enumerate() {
+            let at = self.header.components + 3 * j;
+            t[p] = [code[at], code[at + 1], code[at + 2]];
+        }
+        t
+    }
+
+    /// Vertex positions (data units) decoded from codes (each [`AeArtifact::n_dims`] numbers).
     pub fn decode_codes(&self, codes: &[Vec<f64>]) -> Result<Vec<Vec<Vec3>>> {
-        let xs = self.model.decode(codes)?;
-        let x = self.header.scaling.invert(&xs)?;
+        let (k, d) = (self.header.components, self.n_dims());
+        if let Some(z) = codes.iter().find(|z| z.len() != d) {
+            return Err(Error::Invalid(format!("a code has {} numbers, the model {d}", z.len())));
+        }
+        let network: Vec<Vec<f64>> = codes.iter().map(|z| z[..k].to_vec()).collect();
+        let xs = self.model.decode(&network)?;
+        let own = self.header.scaling.invert(&xs)?;
+        let x = if d > k {
+            let t: Vec<Vec<Vec3>> = codes.iter().map(|z| self.translations_of(z)).collect();
+            self.representation.join_pieces(&own, &t)?
+        } else {
+            own
+        };
         let mut frames = self.representation.decode(&x)?;
         for p in frames.iter_mut().flatten() {
             *p = self.header.unit_box.invert(*p);
@@ -154,7 +213,7 @@ impl AeArtifact {
         let mut z = self.reference_code().to_vec();
         for &(i, w) in weights {
             let s = self.header.analysis.get(i).ok_or_else(|| {
-                Error::Invalid(format!("component {i} does not exist (K = {})", self.header.components))
+                Error::Invalid(format!("component {i} does not exist ({} components)", self.n_dims()))
             })?;
             z[i] = z[i] + (s.z_extreme - z[i]) * w;
         }
@@ -179,13 +238,22 @@ impl AeArtifact {
                 z
             }))
             .collect();
-        let feats = self.header.scaling.invert(&self.model.decode(&codes)?)?;
+        let k = self.header.components;
+        let network: Vec<Vec<f64>> = codes.iter().map(|z| z[..k].to_vec()).collect();
+        let feats = self.header.scaling.invert(&self.model.decode(&network)?)?;
         let mut meshes = self.decode_codes(&codes)?;
         let n = self.rest.n_vertices();
+        let piece_of = self.representation.pieces().map(|(p, _)| p.piece_of_vertex().to_vec());
         Ok(order
             .into_iter()
             .enumerate()
             .map(|(j, c)| {
+                // A piece translation: its change (units of the rest diagonal) on its piece.
+                if let (Some([piece, _]), Some(of)) = (c.piece, &piece_of) {
+                    let dz = (c.z_extreme - zr[c.dim]).abs();
+                    let change = of.iter().map(|&p| if p == piece { dz } else { 0.0 }).collect();
+                    return (c, std::mem::take(&mut meshes[j + 1]), change);
+                }
                 let change: Vec<f64> = (0..n)
                     .map(|v| {
                         let a = feats.element(j + 1, v);
@@ -200,11 +268,12 @@ impl AeArtifact {
 
     /// Writes, per component in rank order, `<rank>_<dim>.obj` (the extreme shape) and
     /// `<rank>_<dim>_change.ply` (rest mesh coloured by per-vertex feature change), plus
-    /// `components.csv` (dimension, rank, distance, z_extreme, centre vertex, support size).
+    /// `components.csv` (dimension, rank, distance, z_extreme, centre vertex, support size,
+    /// and for a piece translation `piece<p>_<axis>`).
     pub fn write_components(&self, dir: &Path) -> Result<()> {
         std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
         let rest = self.rest_in_data_units();
-        let mut csv = String::from("dimension,rank,distance,z_extreme,center_vertex,support_size\n");
+        let mut csv = String::from("dimension,rank,distance,z_extreme,center_vertex,support_size,piece\n");
         for (c, shape, change) in self.extremes()? {
             let stem = format!("{}_{}", c.rank, c.dim);
             mesh::write_obj(&dir.join(format!("{stem}.obj")), &TriMesh::new(shape, self.rest.faces.clone()))?;
@@ -214,8 +283,9 @@ impl AeArtifact {
                 Some(&mesh::colormap(&change)),
                 Some(("change", &change)),
             )?;
+            let piece = c.piece.map_or(String::new(), |[p, a]| format!("piece{p}_{}", ["x", "y", "z"][a]));
             csv.push_str(&format!(
-                "{},{},{},{},{},{}\n",
+                "{},{},{},{},{},{},{piece}\n",
                 c.dim, c.rank, c.distance, c.z_extreme, c.center, c.support_size
             ));
         }
@@ -230,7 +300,7 @@ impl AeArtifact {
         rest_to_arrays(&self.rest, &mut arrays)?;
         arrays.insert(
             "train_codes",
-            vec![self.train_codes.len(), self.header.components],
+            vec![self.train_codes.len(), self.n_dims()],
             self.train_codes.iter().flatten().copied().collect(),
         )?;
         artifact::save_model(dir, &self.header, &arrays)
@@ -261,7 +331,7 @@ impl Model for AeArtifact {
         self.rest_in_data_units()
     }
     fn n_components(&self) -> usize {
-        self.header.components
+        self.n_dims()
     }
     fn components(&self) -> Result<Vec<Component>> {
         let mut out: Vec<Component> = self
@@ -281,10 +351,18 @@ impl Model for AeArtifact {
     fn element_norms(&self) -> (Vec<Vec<f64>>, &[Vec<usize>]) {
         let c = self.model.components_matrix();
         let n = self.rest.n_vertices();
-        let norms = c
+        let mut norms: Vec<Vec<f64>> = c
             .chunks_exact((9 * n).max(1))
             .map(|row| row.chunks_exact(9).map(|g| g.iter().map(|&x| (x as f64).powi(2)).sum::<f64>().sqrt()).collect())
             .collect();
+        // A piece translation moves its piece, all of it, and nothing else.
+        if let Some((placement, _)) = self.representation.pieces() {
+            for p in translated_pieces(&self.representation) {
+                let on: Vec<f64> =
+                    placement.piece_of_vertex().iter().map(|&q| if q == p { 1.0 } else { 0.0 }).collect();
+                norms.extend([on.clone(), on.clone(), on]);
+            }
+        }
         (norms, self.representation.element_adjacency())
     }
     fn alignment(&self) -> Alignment {
@@ -301,13 +379,13 @@ impl Model for AeArtifact {
     }
     /// `z_i = Z_r,i + (Z_h,i − Z_r,i)·w_i` (other dimensions keep the reference code Z_r).
     fn synthesis_weights(&self, dials: &[f64]) -> Result<Vec<f64>> {
-        crate::model::check_len("weights", dials.len(), self.header.components)?;
+        crate::model::check_len("weights", dials.len(), self.n_dims())?;
         let pairs: Vec<(usize, f64)> =
             dials.iter().enumerate().filter(|(_, w)| **w != 0.0).map(|(i, w)| (i, *w)).collect();
         self.synthesis_code(&pairs)
     }
     fn dials(&self, weights: &[f64]) -> Result<Vec<f64>> {
-        crate::model::check_len("weights", weights.len(), self.header.components)?;
+        crate::model::check_len("weights", weights.len(), self.n_dims())?;
         let zr = self.reference_code();
         Ok(self
             .header
@@ -360,6 +438,57 @@ impl Model for AeArtifact {
     }
 }
 
+/// The pieces whose translations are code dimensions (every piece but the anchor, ascending);
+/// empty on a mesh in one piece.
+pub fn translated_pieces(representation: &Representation) -> Vec<usize> {
+    representation.pieces().map(|(p, _)| (0..p.n_pieces()).filter(|&q| q != p.anchor()).collect()).unwrap_or_default()
+}
+
+/// Summaries of the piece-translation dimensions (after the K network ones): extremes over the
+/// training translations, ranked after the network's, centred on the piece's vertex nearest its
+/// rest centroid.
+fn piece_summaries(
+    representation: &Representation,
+    k: usize,
+    train_t: &[Vec<Vec3>],
+    reference: usize,
+) -> Vec<ComponentSummary> {
+    let Some((placement, _)) = representation.pieces() else {
+        return Vec::new();
+    };
+    let rest = &representation.rest().positions;
+    let mut out = Vec::new();
+    for (j, p) in translated_pieces(representation).into_iter().enumerate() {
+        let members: Vec<usize> = (0..rest.len()).filter(|&v| placement.piece_of_vertex()[v] == p).collect();
+        let c: Vec3 = std::array::from_fn(|a| members.iter().map(|&v| rest[v][a]).sum::<f64>() / members.len() as f64);
+        let center = members
+            .iter()
+            .copied()
+            .min_by(|&a, &b| crate::math::vec3::dist2(rest[a], c).total_cmp(&crate::math::vec3::dist2(rest[b], c)))
+            .unwrap_or(0);
+        for axis in 0..3 {
+            let values: Vec<f64> = train_t.iter().map(|t| t[p][axis]).collect();
+            let zr = values.get(reference).copied().unwrap_or(0.0);
+            let (lo, hi) = values.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &v| (l.min(v), h.max(v)));
+            let (lo, hi) = if lo <= hi { (lo, hi) } else { (0.0, 0.0) };
+            let extreme = if (hi - zr).abs() >= (lo - zr).abs() { hi } else { lo };
+            let dim = k + 3 * j + axis;
+            out.push(ComponentSummary {
+                dim,
+                rank: dim,
+                z_min: lo,
+                z_max: hi,
+                z_extreme: extreme,
+                distance: (extreme - zr).abs() * placement.unit(),
+                center,
+                support_size: members.len(),
+                piece: Some([p, axis]),
+            });
+        }
+    }
+    out
+}
+
 /// Trains the autoencoder (`kind = "autoencoder"`) on prepared data. Writes its checkpoints
 /// (`checkpoint.bin`) and per-iteration log (`training.jsonl`) into `ctx.out` while it trains;
 /// with `ctx.resume`, continues from that checkpoint (same data and hyperparameters; only
@@ -377,7 +506,18 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
     let options = RepresentationOptions { acap_consistency: m.consistency.to_acap(), ..Default::default() };
     let representation = Representation::new(RepresentationKind::Acap, &prep.rest, options)?;
     let train_seq = prep.train_sequence();
-    let x_train = representation.encode(&train_seq)?;
+    // The network's 9 numbers per vertex, and the pieces' translations (multi-piece meshes).
+    let (x_train, train_t) = representation.split_pieces(&representation.encode(&train_seq)?)?;
+    if let Some((placement, _)) = representation.pieces() {
+        let extra = 3 * (placement.n_pieces() - 1);
+        eprintln!(
+            "note: the mesh has {} separate pieces: the code has the network's {} dimensions plus {extra} piece \
+             translations ({} in all; components.csv names them piece<p>_<axis>)",
+            placement.n_pieces(),
+            ae_cfg.components,
+            ae_cfg.components + extra
+        );
+    }
     let scaling = FeatureScaling::fit(&x_train, m.scaling.mode())?;
     let xs_train = scaling.apply(&x_train)?;
     let representation_seconds = t_rep.elapsed().as_secs_f64();
@@ -449,7 +589,11 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
     let model = trainer.into_model()?;
 
     progress.stage("measuring", 0);
-    let train_codes = model.encode(&xs_train)?;
+    let mut train_codes = model.encode(&xs_train)?;
+    let pieces = translated_pieces(&representation);
+    for (z, t) in train_codes.iter_mut().zip(&train_t) {
+        z.extend(pieces.iter().flat_map(|&p| t[p]));
+    }
     let analysis = model.analyze_components(&xs_train, 0)?;
     let mut summaries: Vec<ComponentSummary> = analysis
         .components
@@ -463,9 +607,11 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
             distance: c.distance,
             center: c.center,
             support_size: c.support_size,
+            piece: None,
         })
         .collect();
     summaries.sort_by_key(|c| c.dim);
+    summaries.extend(piece_summaries(&representation, ae_cfg.components, &train_t, 0));
     let header = AeHeader {
         method: MethodKind::Autoencoder.name().into(),
         representation: RepresentationKind::Acap.name().into(),

@@ -16,6 +16,14 @@
 //! lose translation ([`Representation::translation_free`]): their decoders place the result's
 //! centroid on the rest centroid, and errors must be measured after centroid alignment
 //! ([`roundtrip`]).
+//!
+//! **Meshes in several pieces.** When the rest mesh has P ≥ 2 connected pieces, the
+//! translation-free kinds carry where each piece sits ([`piece_placement`]): every element gets
+//! three more numbers after its own W, the translation `t_p` of the piece it belongs to
+//! (dimensionless, in units of the rest bounding-box diagonal), so the width is 12 instead of 9
+//! ([`Representation::width`]). Decoding averages those numbers over each piece's elements and
+//! moves the piece there; the round trip of a multi-piece sequence is as exact as a connected
+//! one's.
 
 pub mod acap;
 pub mod acap_consistency;
@@ -23,6 +31,7 @@ pub mod acap_fit_inverse;
 pub mod acap_reconstruct;
 pub mod acap_text;
 pub mod displacement;
+pub mod piece_placement;
 pub mod roundtrip;
 pub mod scaling;
 pub mod triangle_gradient;
@@ -34,6 +43,7 @@ use crate::error::{Error, Result};
 use crate::mesh::{MeshSequence, Topology, TriMesh, Vec3};
 use acap::{Acap, Consistency};
 use displacement::Displacement;
+use piece_placement::PiecePlacement;
 use triangle_gradient::{NormalConvention, TriangleGradient};
 
 /// Which mesh element carries a feature vector (and on which graph support maps live).
@@ -157,6 +167,9 @@ pub struct Representation {
     rest: TriMesh,
     codec: Codec,
     adjacency: Vec<Vec<usize>>,
+    /// Translation-free kinds on a mesh with several pieces: where each piece sits, and the
+    /// piece of every element (`usize::MAX`: a vertex referenced by no face).
+    pieces: Option<(PiecePlacement, Vec<usize>)>,
 }
 
 impl std::fmt::Debug for Representation {
@@ -181,15 +194,6 @@ impl Representation {
                 rest.n_vertices()
             )));
         }
-        if kind != RepresentationKind::Displacement {
-            let (_, pieces) = Topology::new(rest.n_vertices(), &rest.faces).components();
-            if pieces > 1 {
-                return Err(Error::Invalid(format!(
-                    "the mesh has {pieces} separate connected pieces; the {} representation does not yet carry each piece's position, so decoding would put every piece back at its rest position and lose how the pieces move relative to each other. Use representation = \"displacement\" (pca, splocs) or region-pca on this mesh",
-                    kind.name()
-                )));
-            }
-        }
         let codec = match kind {
             RepresentationKind::Displacement => Codec::Displacement(Displacement::new(&rest.positions)?),
             RepresentationKind::TriangleGradient => {
@@ -204,7 +208,18 @@ impl Representation {
             Element::Vertex => (0..rest.n_vertices()).map(|v| topo.neighbors(v).to_vec()).collect(),
             Element::Triangle => triangle_adjacency(&topo, rest.n_faces()),
         };
-        Ok(Representation { kind, options, rest: rest.clone(), codec, adjacency })
+        let pieces = match kind {
+            RepresentationKind::Displacement => None,
+            _ => PiecePlacement::new(rest).map(|p| {
+                let of_vertex = p.piece_of_vertex();
+                let element_piece = match kind.element() {
+                    Element::Vertex => of_vertex.to_vec(),
+                    Element::Triangle => rest.faces.iter().map(|f| of_vertex[f[0]]).collect(),
+                };
+                (p, element_piece)
+            }),
+        };
+        Ok(Representation { kind, options, rest: rest.clone(), codec, adjacency, pieces })
     }
 
     /// The kind.
@@ -222,9 +237,16 @@ impl Representation {
         self.kind.element()
     }
 
-    /// Numbers per element W.
+    /// Numbers per element W: the kind's own ([`RepresentationKind::width`]), plus 3 (the
+    /// piece's translation) for a translation-free kind on a mesh with several pieces.
     pub fn width(&self) -> usize {
-        self.kind.width()
+        self.kind.width() + if self.pieces.is_some() { 3 } else { 0 }
+    }
+
+    /// Where each piece sits, for a translation-free kind on a mesh with several connected
+    /// pieces (`None` otherwise): the placement and the piece of every element.
+    pub fn pieces(&self) -> Option<(&PiecePlacement, &[usize])> {
+        self.pieces.as_ref().map(|(p, e)| (p, e.as_slice()))
     }
 
     /// Number of elements E (vertices N or triangles T of the rest mesh).
@@ -241,8 +263,8 @@ impl Representation {
     }
 
     /// `true` when decoding loses translation (triangle-gradient, acap): decoded shapes have
-    /// the rest centroid (per connected component for triangle-gradient) and must be compared
-    /// after centroid alignment. `false` for displacement (absolute positions).
+    /// the rest centroid (each piece placed by its carried translation on a multi-piece mesh)
+    /// and must be compared after centroid alignment. `false` for displacement (absolute positions).
     pub fn translation_free(&self) -> bool {
         !matches!(self.kind, RepresentationKind::Displacement)
     }
@@ -305,11 +327,22 @@ impl Representation {
                 self.rest.n_vertices()
             )));
         }
-        match &self.codec {
+        let own = match &self.codec {
             Codec::Displacement(d) => d.encode_frame(positions),
             Codec::TriangleGradient(t) => t.encode_frame(positions),
             Codec::Acap(a) => Ok(a.encode_frame(positions, self.options.acap_consistency)?.features()),
+        }?;
+        let Some((placement, element_piece)) = &self.pieces else {
+            return Ok(own);
+        };
+        let t = placement.translations(positions);
+        let w0 = self.kind.width();
+        let mut out = Vec::with_capacity(element_piece.len() * (w0 + 3));
+        for (e, &p) in element_piece.iter().enumerate() {
+            out.extend_from_slice(&own[e * w0..(e + 1) * w0]);
+            out.extend_from_slice(&if p == usize::MAX { [0.0; 3] } else { t[p] });
         }
+        Ok(out)
     }
 
     /// N vertex positions from the E·W features of one frame.
@@ -324,11 +357,41 @@ impl Representation {
                 self.width()
             )));
         }
-        match &self.codec {
-            Codec::Displacement(d) => d.decode_frame(features),
-            Codec::TriangleGradient(t) => t.decode_frame(features),
-            Codec::Acap(a) => a.decode_frame(features),
+        let Some((placement, element_piece)) = &self.pieces else {
+            return match &self.codec {
+                Codec::Displacement(d) => d.decode_frame(features),
+                Codec::TriangleGradient(t) => t.decode_frame(features),
+                Codec::Acap(a) => a.decode_frame(features),
+            };
+        };
+        // Split off the translations; each piece's is the mean over its elements.
+        let (w0, w) = (self.kind.width(), self.width());
+        let mut own = Vec::with_capacity(element_piece.len() * w0);
+        let mut t = vec![[0.0; 3]; placement.n_pieces()];
+        let mut count = vec![0usize; placement.n_pieces()];
+        for (e, &p) in element_piece.iter().enumerate() {
+            let f = &features[e * w..(e + 1) * w];
+            own.extend_from_slice(&f[..w0]);
+            if p != usize::MAX {
+                count[p] += 1;
+                for k in 0..3 {
+                    t[p][k] += f[w0 + k];
+                }
+            }
         }
+        for (tp, &n) in t.iter_mut().zip(&count) {
+            *tp = tp.map(|v| v / n.max(1) as f64);
+        }
+        if let Some((p, _)) = t.iter().enumerate().find(|(_, tp)| tp.iter().any(|v| !v.is_finite())) {
+            return Err(Error::Invalid(format!("{} decode: non-finite translation of piece {p}", self.kind.name())));
+        }
+        let mut positions = match &self.codec {
+            Codec::Displacement(d) => d.decode_frame(&own),
+            Codec::TriangleGradient(tg) => tg.decode_frame(&own),
+            Codec::Acap(a) => a.decode_frame(&own),
+        }?;
+        placement.place(&mut positions, &t);
+        Ok(positions)
     }
 
     /// Features F × E × W of every frame of `seq` (frames in parallel). Errors when the
@@ -354,6 +417,87 @@ impl Representation {
         let mut out = Features::zeros(0, self.n_elements(), self.width());
         out.n_frames = frames.len();
         out.data = frames.concat();
+        Ok(out)
+    }
+
+    /// Splits features of this representation (width W + 3 on a multi-piece mesh) into the
+    /// kind's own features (width W) and, per frame, the P translations `t_p` (the mean of each
+    /// piece's elements' three extra numbers). Without pieces: the features and no translations.
+    pub fn split_pieces(&self, features: &Features) -> Result<(Features, Vec<Vec<Vec3>>)> {
+        let Some((placement, element_piece)) = &self.pieces else {
+            return Ok((features.clone(), Vec::new()));
+        };
+        let (w0, w) = (self.kind.width(), self.width());
+        if features.width != w || features.n_elements != element_piece.len() {
+            return Err(Error::Invalid(format!(
+                "features are {} elements × {}, the {} representation of this mesh has {} × {}",
+                features.n_elements,
+                features.width,
+                self.kind.name(),
+                element_piece.len(),
+                w
+            )));
+        }
+        let mut own = Features::zeros(features.n_frames, features.n_elements, w0);
+        let mut translations = Vec::with_capacity(features.n_frames);
+        for f in 0..features.n_frames {
+            let mut t = vec![[0.0; 3]; placement.n_pieces()];
+            let mut count = vec![0usize; placement.n_pieces()];
+            let dst = own.frame_mut(f);
+            for (e, &p) in element_piece.iter().enumerate() {
+                let x = features.element(f, e);
+                dst[e * w0..(e + 1) * w0].copy_from_slice(&x[..w0]);
+                if p != usize::MAX {
+                    count[p] += 1;
+                    for k in 0..3 {
+                        t[p][k] += x[w0 + k];
+                    }
+                }
+            }
+            translations.push(t.iter().zip(&count).map(|(tp, &n)| tp.map(|v| v / n.max(1) as f64)).collect());
+        }
+        Ok((own, translations))
+    }
+
+    /// The inverse of [`Representation::split_pieces`]: the kind's own features (width W) and
+    /// per frame the P piece translations, joined into this representation's features (every
+    /// element carries its piece's translation). Without pieces `translations` must be empty.
+    pub fn join_pieces(&self, own: &Features, translations: &[Vec<Vec3>]) -> Result<Features> {
+        let Some((placement, element_piece)) = &self.pieces else {
+            if !translations.is_empty() {
+                return Err(Error::Invalid("piece translations given for a mesh in one piece".into()));
+            }
+            return Ok(own.clone());
+        };
+        let (w0, w) = (self.kind.width(), self.width());
+        if own.width != w0 || own.n_elements != element_piece.len() || translations.len() != own.n_frames {
+            return Err(Error::Invalid(format!(
+                "joining {} frames of {} elements × {} with {} frames of piece translations; expected {} elements × {}",
+                own.n_frames,
+                own.n_elements,
+                own.width,
+                translations.len(),
+                element_piece.len(),
+                w0
+            )));
+        }
+        let mut out = Features::zeros(own.n_frames, own.n_elements, w);
+        for (f, t) in translations.iter().enumerate() {
+            if t.len() != placement.n_pieces() {
+                return Err(Error::Invalid(format!(
+                    "frame {f}: {} piece translations for {} pieces",
+                    t.len(),
+                    placement.n_pieces()
+                )));
+            }
+            let dst = out.frame_mut(f);
+            for (e, &p) in element_piece.iter().enumerate() {
+                dst[e * w..e * w + w0].copy_from_slice(own.element(f, e));
+                if p != usize::MAX {
+                    dst[e * w + w0..(e + 1) * w].copy_from_slice(&t[p]);
+                }
+            }
+        }
         Ok(out)
     }
 
@@ -481,5 +625,62 @@ mod tests {
             short.width = 2;
             assert!(r.decode(&short).is_err());
         }
+    }
+    #[test]
+    fn pieces_carry_their_translation() {
+        // Two tetrahedra; in every frame the second one slides and turns against the first, which
+        // turns the other way (rigid pieces: ACAP's decoder is exact for them on a tetrahedron,
+        // whose 1-rings are too small for an exact stretch).
+        let t = tetra();
+        let mut positions = t.positions.clone();
+        positions.extend(t.positions.iter().map(|p| [p[0] + 2.0, p[1], p[2]]));
+        let mut faces = t.faces.clone();
+        faces.extend(t.faces.iter().map(|f| f.map(|v| v + 4)));
+        let rest = TriMesh::new(positions, faces.clone());
+        let frames: Vec<Vec<Vec3>> = (0..3)
+            .map(|f| {
+                let (s, c) = (0.3 * f as f64).sin_cos();
+                rest.positions
+                    .iter()
+                    .enumerate()
+                    .map(|(i, p)| {
+                        if i < 4 {
+                            [c * p[0] + s * p[2], p[1], -s * p[0] + c * p[2] + 1.0]
+                        } else {
+                            [c * p[0] - s * p[1] + 0.4 * f as f64, s * p[0] + c * p[1] - 0.2 * f as f64, p[2] + 1.0]
+                        }
+                    })
+                    .collect()
+            })
+            .collect();
+        let seq = MeshSequence { faces, frames: frames.clone(), names: vec!["a".into(), "b".into(), "c".into()] };
+        for kind in [RepresentationKind::TriangleGradient, RepresentationKind::Acap] {
+            let r = Representation::new(kind, &rest, Default::default()).unwrap();
+            assert_eq!(r.width(), 12);
+            let (placement, element_piece) = r.pieces().unwrap();
+            assert_eq!((placement.n_pieces(), element_piece.len()), (2, r.n_elements()));
+            // The rest shape has zero translations.
+            let rest_seq =
+                MeshSequence { faces: rest.faces.clone(), frames: vec![rest.positions.clone()], names: vec![] };
+            let z = r.encode(&rest_seq).unwrap();
+            assert!((0..r.n_elements()).all(|e| z.element(0, e)[9..].iter().all(|v| v.abs() < 1e-15)));
+            let feats = r.encode(&seq).unwrap();
+            let (own, t) = r.split_pieces(&feats).unwrap();
+            assert_eq!((own.width, t.len(), t[0].len()), (9, 3, 2));
+            assert_eq!(r.join_pieces(&own, &t).unwrap(), feats);
+            assert!(t.iter().all(|tf| tf[placement.anchor()] == [0.0; 3]));
+            let back = r.decode(&feats).unwrap();
+            for (b, x) in back.iter().zip(&frames) {
+                let off: Vec3 = std::array::from_fn(|k| {
+                    (x.iter().map(|p| p[k]).sum::<f64>() - b.iter().map(|p| p[k]).sum::<f64>()) / 8.0
+                });
+                for (p, q) in b.iter().zip(x) {
+                    assert!((0..3).all(|k| (p[k] + off[k] - q[k]).abs() < 1e-9), "{kind:?}: {p:?} vs {q:?}");
+                }
+            }
+        }
+        // Displacement is absolute: no pieces to carry.
+        let d = Representation::new(RepresentationKind::Displacement, &rest, Default::default()).unwrap();
+        assert!(d.pieces().is_none() && d.width() == 3);
     }
 }

@@ -27,6 +27,9 @@ pub struct RoundTripReport {
     pub alignment: Alignment,
     /// Vertices per frame N.
     pub n_vertices: usize,
+    /// Connected pieces whose translation the representation carries (0: none carried — one
+    /// piece, or an absolute representation).
+    pub pieces_placed: usize,
     /// `(frame name, Erms of that frame alone)`, in input order.
     pub frames: Vec<(String, f64)>,
     /// Erms over all frames.
@@ -54,18 +57,20 @@ pub fn roundtrip(rep: &Representation, seq: &MeshSequence) -> Result<RoundTripRe
         }
     }
     let total = erms(&seq.frames, &decoded, alignment)?;
-    Ok(RoundTripReport { kind: rep.kind(), alignment, n_vertices: n, frames, total, max_distance })
+    let pieces_placed = rep.pieces().map_or(0, |(p, _)| p.n_pieces());
+    Ok(RoundTripReport { kind: rep.kind(), alignment, n_vertices: n, pieces_placed, frames, total, max_distance })
 }
 
 impl fmt::Display for RoundTripReport {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         writeln!(
             f,
-            "round trip: representation {}, {} frames × {} vertices, alignment {}",
+            "round trip: representation {}, {} frames × {} vertices, alignment {}{}",
             self.kind.name(),
             self.frames.len(),
             self.n_vertices,
-            self.alignment
+            self.alignment,
+            if self.pieces_placed > 0 { format!(", {} pieces placed", self.pieces_placed) } else { String::new() }
         )?;
         let w = self.frames.iter().map(|(n, _)| n.len()).max().unwrap_or(0).max(5);
         writeln!(f, "{:>5}  {:<w$}  {:>12}", "#", "frame", "Erms")?;
