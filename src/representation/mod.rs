@@ -679,6 +679,15 @@ mod tests {
                 }
             }
         }
+        // A frame with two coincident vertices (a zero-length edge) still encodes and decodes to
+        // finite positions.
+        let mut collapsed = frames[1].clone();
+        collapsed[5] = collapsed[4];
+        for kind in [RepresentationKind::TriangleGradient, RepresentationKind::Acap] {
+            let r = Representation::new(kind, &rest, Default::default()).unwrap();
+            let back = r.decode_frame(&r.encode_frame(&collapsed).unwrap()).unwrap();
+            assert!(back.iter().flatten().all(|v| v.is_finite()), "{kind:?}");
+        }
         // Displacement is absolute: no pieces to carry.
         let d = Representation::new(RepresentationKind::Displacement, &rest, Default::default()).unwrap();
         assert!(d.pieces().is_none() && d.width() == 3);
