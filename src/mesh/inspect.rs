@@ -14,7 +14,7 @@ use super::sequence::read_sequence;
 use super::{MeshSequence, Topology, Vec3, bounding_box, dist};
 use crate::error::Result;
 use crate::math::DisjointSet;
-use crate::math::vec3::{cross, norm, sub};
+use crate::math::vec3::{cross, dist2, dot, sub};
 
 /// What a [`Warning`] is about.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
@@ -179,9 +179,11 @@ pub fn mesh_warnings(seq: &MeshSequence, topology: &Topology) -> Vec<Warning> {
     let zero_area = |frame: &[Vec3]| -> Vec<usize> {
         (0..faces.len())
             .filter(|&i| {
+                // Squared on both sides (no square roots): |n|² ≤ (rel · longest²)².
                 let [a, b, c] = faces[i].map(|v| frame[v]);
-                let longest = dist(a, b).max(dist(b, c)).max(dist(c, a));
-                norm(cross(sub(b, a), sub(c, a))) <= ZERO_AREA_REL * longest * longest
+                let longest2 = dist2(a, b).max(dist2(b, c)).max(dist2(c, a));
+                let n = cross(sub(b, a), sub(c, a));
+                dot(n, n) <= (ZERO_AREA_REL * longest2).powi(2)
             })
             .filter(|i| repeated.binary_search(i).is_err())
             .collect()

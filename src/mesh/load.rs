@@ -131,7 +131,7 @@ const POW10: [f64; 23] = [
 /// exact in an f64 and so is the power of ten, and one correctly rounded multiplication or
 /// division gives the correctly rounded result — the same bits as `str::parse`. Anything else
 /// (more digits, large exponents, `nan`, `inf`, junk) returns `None` and takes the general path.
-fn fast_decimal(t: &[u8]) -> Option<f64> {
+pub(crate) fn fast_decimal(t: &[u8]) -> Option<f64> {
     let (neg, mut i) = match t.first()? {
         b'-' => (true, 1),
         b'+' => (false, 1),

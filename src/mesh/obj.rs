@@ -21,7 +21,9 @@
 use std::path::Path;
 
 use super::TriMesh;
-use super::load::{FaceCollector, LoadedMesh, finite_coordinate, numbered_lines, parse_f64, show, tokens};
+use super::load::{
+    FaceCollector, LoadedMesh, fast_decimal, finite_coordinate, numbered_lines, parse_f64, show, tokens,
+};
 use crate::error::{Error, Result};
 
 /// Statements that do not affect positions or triangles and are skipped without a warning.
@@ -39,6 +41,16 @@ pub fn parse_obj(bytes: &[u8], path: &Path) -> Result<LoadedMesh> {
     let mut trailing: (usize, Option<usize>) = (0, None);
 
     for (line_no, line) in numbered_lines(bytes) {
+        // The lines almost every file is made of take one pass; anything else (comments, extra
+        // data, other number forms, errors) goes the general way below.
+        if let Some(p) = plain_vertex(line) {
+            positions.push(p);
+            continue;
+        }
+        if plain_face(line, &mut polygon) {
+            faces.push(&polygon, line_no).map_err(|m| Error::parse(path, Some(line_no), m))?;
+            continue;
+        }
         let line = line.split(|&b| b == b'#').next().unwrap_or(line);
         let mut tok = tokens(line);
         let Some(keyword) = tok.next() else { continue };
@@ -121,6 +133,79 @@ pub fn parse_obj(bytes: &[u8], path: &Path) -> Result<LoadedMesh> {
     Ok(LoadedMesh { mesh: TriMesh::new(positions, faces.faces), warnings })
 }
 
+/// Spaces and tabs from `i`: the index after them.
+#[inline]
+fn skip_blank(line: &[u8], mut i: usize) -> usize {
+    while i < line.len() && (line[i] == b' ' || line[i] == b'\t') {
+        i += 1;
+    }
+    i
+}
+
+/// `v x y z` with three plain decimals (Clinger's fast path: the same bits as the general
+/// parser) and nothing after them but blanks; `None` sends the line the general way.
+#[inline]
+fn plain_vertex(line: &[u8]) -> Option<[f64; 3]> {
+    if line.len() < 2 || line[0] != b'v' || (line[1] != b' ' && line[1] != b'\t') {
+        return None;
+    }
+    let mut i = 1;
+    let mut p = [0.0; 3];
+    for slot in &mut p {
+        let start = skip_blank(line, i);
+        if start == i {
+            return None;
+        }
+        i = start;
+        while i < line.len() && !line[i].is_ascii_whitespace() {
+            i += 1;
+        }
+        *slot = fast_decimal(&line[start..i])?;
+    }
+    (skip_blank(line, i) == line.len()).then_some(p)
+}
+
+/// `f a b c …` with positive indices, each optionally followed by `/t/n` parts made of digits
+/// and slashes, nothing else but blanks, at least 3 of them: fills `polygon` (0-based) and
+/// returns `true`; `false` sends the line the general way.
+#[inline]
+fn plain_face(line: &[u8], polygon: &mut Vec<usize>) -> bool {
+    if line.len() < 2 || line[0] != b'f' || (line[1] != b' ' && line[1] != b'\t') {
+        return false;
+    }
+    polygon.clear();
+    let mut i = 1;
+    loop {
+        let start = skip_blank(line, i);
+        if start == line.len() {
+            break;
+        }
+        if start == i {
+            return false;
+        }
+        i = start;
+        let mut v: usize = 0;
+        while i < line.len() && line[i].is_ascii_digit() {
+            if i - start >= 18 {
+                return false;
+            }
+            v = v * 10 + usize::from(line[i] - b'0');
+            i += 1;
+        }
+        if i == start || v == 0 {
+            return false;
+        }
+        while i < line.len() && (line[i] == b'/' || line[i].is_ascii_digit()) {
+            i += 1;
+        }
+        if i < line.len() && line[i] != b' ' && line[i] != b'\t' {
+            return false;
+        }
+        polygon.push(v - 1);
+    }
+    polygon.len() >= 3
+}
+
 /// `[-]digits` with at most 18 digits (no overflow), else `None` (the general parser decides).
 fn digits_i64(t: &[u8]) -> Option<i64> {
     let (neg, d) = match t.first()? {
@@ -186,6 +271,30 @@ mod tests {
         assert_eq!(m.mesh.faces, vec![[0, 1, 2], [0, 2, 3]]);
         assert_eq!(m.warnings.len(), 1);
         assert!(m.warnings[0].starts_with("t.obj:5: 1 polygon"), "{}", m.warnings[0]);
+    }
+
+    #[test]
+    fn plain_lines_take_the_fast_path_with_the_general_paths_results() {
+        assert_eq!(plain_vertex(b"v 0.0176488 -0.0854527 0.270707"), Some([0.0176488, -0.0854527, 0.270707]));
+        assert_eq!(plain_vertex(b"v\t1e-3 2.5E+2 -0 "), Some([1e-3, 2.5e2, -0.0]));
+        for general in
+            [&b"v 1 2"[..], b"v 1 2 3 4", b"v 1 2 3 # c", b" v 1 2 3", b"v 1 2 nan", b"v 1 2 3\\", b"vn 1 2 3"]
+        {
+            assert_eq!(plain_vertex(general), None, "{}", String::from_utf8_lossy(general));
+        }
+        let mut p = Vec::new();
+        assert!(plain_face(b"f 1141// 1085// 1165//", &mut p) && p == [1140, 1084, 1164]);
+        assert!(plain_face(b"f 1/2/3 4/5/6 7/8/9 10 ", &mut p) && p == [0, 3, 6, 9]);
+        for general in [&b"f 1 2"[..], b"f 1 -2 3", b"f 0 1 2", b"f 1 2 3 # c", b"f 1 2 x", b"f 1/-1 2 3", b"fo 1 2 3"]
+        {
+            assert!(!plain_face(general, &mut p), "{}", String::from_utf8_lossy(general));
+        }
+        // Same mesh either way: the fast path on, and every line forced the general way by a
+        // trailing comment.
+        let text = "v 0.5 -1.25e-2 3\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\nf 1// 3// 4//\nf 2/1/1 3/2/2 4/3/3\n";
+        let slow: String = text.lines().map(|l| format!("{l} #\n")).collect();
+        let (a, b) = (parse(text).unwrap().mesh, parse(&slow).unwrap().mesh);
+        assert_eq!((a.positions, a.faces), (b.positions, b.faces));
     }
 
     #[test]
