@@ -69,6 +69,17 @@ fn pose_refuses_absurd_targets_bad_flags_and_duplicate_keys() {
     std::fs::write(&c, r#"{"5": [0.1, 0.0, 0.0]}"#).unwrap();
     let r = meshdeco(&["pose", m, "--constraints", c.to_str().unwrap(), "--out", o], &d);
     assert!(r.status.success() && out.exists(), "{}", output_text(&r));
+    // `encode`'s refinement flags are named as flags too, and nothing is written.
+    let enc = d.join("enc");
+    for (flags, needle) in [(vec!["--fit", "0"], "--fit 0"), (vec!["--fit", "10", "--fit-gamma=-1"], "--fit-gamma -1")]
+    {
+        let mut args = vec!["encode", m, "synthetic:tube", "--out", enc.to_str().unwrap()];
+        args.extend(flags);
+        let r = meshdeco(&args, &d);
+        fails_with(&r, needle);
+        assert!(!output_text(&r).contains("config key"), "{}", output_text(&r));
+        assert!(!enc.exists());
+    }
     std::fs::remove_dir_all(&d).unwrap();
 }
 

@@ -96,6 +96,12 @@ pub fn encode(a: EncodeArgs) -> Result<()> {
             meshdeco::config::FrameSelection::parse("--frames", spec)?.resolve("--frames", seq.n_frames(), None)?;
         seq = seq.select(&sel);
     }
+    if a.fit == Some(0) {
+        anyhow::bail!("--fit 0: the number of vertices to fit must be at least 1");
+    }
+    if !(a.fit_gamma.is_finite() && a.fit_gamma >= 0.0) {
+        anyhow::bail!("--fit-gamma {}: must be a finite number ≥ 0", a.fit_gamma);
+    }
     let refine = a.fit.map(|points| RefineOptions { points, gamma: a.fit_gamma });
     if let Some(o) = &refine {
         println!("fitting codes to min({}, {}) vertices per frame", o.points, seq.n_vertices());
