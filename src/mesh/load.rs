@@ -98,9 +98,44 @@ pub fn parse_mesh(bytes: &[u8], format: MeshFormat, path: &Path) -> Result<Loade
     }
 }
 
-/// Lines of a text buffer with their 1-based numbers; a trailing `\r` is removed.
+/// Lines of a text buffer with their 1-based numbers; a trailing `\r` is removed. (The same
+/// lines as splitting at every `\n`, found eight bytes at a time.)
 pub(crate) fn numbered_lines(bytes: &[u8]) -> impl Iterator<Item = (usize, &[u8])> {
-    bytes.split(|&b| b == b'\n').enumerate().map(|(i, l)| (i + 1, l.strip_suffix(b"\r").unwrap_or(l)))
+    let mut rest = Some(bytes);
+    std::iter::from_fn(move || {
+        let r = rest?;
+        let line = match find_newline(r) {
+            Some(i) => {
+                rest = Some(&r[i + 1..]);
+                &r[..i]
+            }
+            None => {
+                rest = None;
+                r
+            }
+        };
+        Some(line.strip_suffix(b"\r").unwrap_or(line))
+    })
+    .enumerate()
+    .map(|(i, l)| (i + 1, l))
+}
+
+/// Index of the first `\n` in `s`: eight bytes per step (a word has a zero byte after XOR with
+/// `\n` repeated exactly when `(w − 0x01…) & !w & 0x80…` is non-zero), then byte by byte.
+#[inline]
+fn find_newline(s: &[u8]) -> Option<usize> {
+    const ONES: u64 = 0x0101_0101_0101_0101;
+    const HIGHS: u64 = 0x8080_8080_8080_8080;
+    let mut i = 0;
+    while i + 8 <= s.len() {
+        let w = u64::from_le_bytes(s[i..i + 8].try_into().unwrap_or([0; 8])) ^ (ONES * u64::from(b'\n'));
+        let z = w.wrapping_sub(ONES) & !w & HIGHS;
+        if z != 0 {
+            return Some(i + (z.trailing_zeros() / 8) as usize);
+        }
+        i += 8;
+    }
+    s[i..].iter().position(|&b| b == b'\n').map(|k| i + k)
 }
 
 /// Whitespace-separated tokens of one line.
@@ -266,6 +301,30 @@ impl FaceCollector {
             self.n_polygons,
             if self.n_polygons == 1 { "" } else { "s" }
         ))
+    }
+}
+
+#[cfg(test)]
+mod line_tests {
+    #[test]
+    fn lines_are_those_of_a_plain_split() {
+        let mut text = Vec::new();
+        for i in 0..200usize {
+            text.extend(std::iter::repeat_n(b'a' + (i % 26) as u8, i % 19));
+            text.extend_from_slice(if i % 7 == 0 { b"\r\n" } else { b"\n" });
+            if i % 11 == 0 {
+                text.push(b'\n');
+            }
+        }
+        for cut in [0, 1, 7, 8, 9, text.len() - 1, text.len()] {
+            let t = &text[..cut];
+            let want: Vec<(usize, &[u8])> = t
+                .split(|&b| b == b'\n')
+                .enumerate()
+                .map(|(i, l)| (i + 1, l.strip_suffix(b"\r").unwrap_or(l)))
+                .collect();
+            assert_eq!(super::numbered_lines(t).collect::<Vec<_>>(), want, "cut {cut}");
+        }
     }
 }
 
