@@ -233,6 +233,14 @@ fn view_in_headless_chromium_draws_dials_poses_and_recovers() {
 
     let lat = b.eval("meshdeco.latencies()");
     eprintln!("latencies (ms): {lat}");
+
+    // Closing the browser ends every process it started.
+    let profile = b.profile().display().to_string();
+    assert!(!view_support::cdp::processes_mentioning(&profile).is_empty(), "the browser runs");
+    drop(b);
+    std::thread::sleep(std::time::Duration::from_millis(200));
+    let left = view_support::cdp::processes_mentioning(&profile);
+    assert!(left.is_empty(), "browser processes left running: {left:?}");
 }
 
 /// Median and 90th percentile.

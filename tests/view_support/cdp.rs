@@ -28,7 +28,10 @@ pub fn find_chromium() -> Option<PathBuf> {
     None
 }
 
-/// A headless Chromium with one page, killed when dropped.
+/// A headless Chromium with one page, killed when dropped — with every process it started: it
+/// runs in its own process group, because the `chromium-headless-shell` on the PATH of Debian is
+/// a shell script that starts the browser as its child (killing the script alone leaves the
+/// browser running).
 pub struct Browser {
     child: Child,
     ws: TcpStream,
@@ -38,10 +41,40 @@ pub struct Browser {
 
 impl Drop for Browser {
     fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
+        kill_group(&mut self.child);
         let _ = std::fs::remove_dir_all(&self._profile);
     }
+}
+
+/// Processes whose command line mentions `needle` (from /proc; empty where there is none).
+pub fn processes_mentioning(needle: &str) -> Vec<u32> {
+    let Ok(dir) = std::fs::read_dir("/proc") else { return Vec::new() };
+    dir.filter_map(|e| {
+        let e = e.ok()?;
+        let pid: u32 = e.file_name().to_str()?.parse().ok()?;
+        let cmd = std::fs::read(e.path().join("cmdline")).ok()?;
+        String::from_utf8_lossy(&cmd).contains(needle).then_some(pid)
+    })
+    .collect()
+}
+
+impl Browser {
+    /// The browser's profile directory (unique to it; its processes name it).
+    pub fn profile(&self) -> &Path {
+        &self._profile
+    }
+}
+
+/// Kills the process group led by `child` (see [`Browser`]) and reaps the child.
+fn kill_group(child: &mut Child) {
+    if let Ok(pgid) = i32::try_from(child.id()) {
+        // SAFETY: kill(2) with a negative pid signals that process group; no memory is touched.
+        unsafe {
+            libc::kill(-pgid, libc::SIGKILL);
+        }
+    }
+    let _ = child.kill();
+    let _ = child.wait();
 }
 
 fn ws_connect(url: &str) -> TcpStream {
@@ -132,7 +165,9 @@ impl Browser {
     pub fn launch(chromium: &Path, w: u32, h: u32) -> Browser {
         let profile = std::env::temp_dir().join(format!("meshdeco-chromium-{}-{}", std::process::id(), w * 7 + h));
         let _ = std::fs::remove_dir_all(&profile);
-        let mut child = Command::new(chromium)
+        let mut child = Command::new(chromium);
+        std::os::unix::process::CommandExt::process_group(&mut child, 0);
+        let mut child = child
             .args([
                 "--headless",
                 "--no-sandbox",
@@ -154,8 +189,7 @@ impl Browser {
         let browser_ws = loop {
             let mut line = String::new();
             if err.read_line(&mut line).unwrap() == 0 {
-                let _ = child.kill();
-                let _ = child.wait();
+                kill_group(&mut child);
                 panic!("{} exited before DevTools listened", chromium.display());
             }
             if let Some(u) = line.split("DevTools listening on ").nth(1) {
