@@ -1,32 +1,39 @@
 //! Training checkpoints: one file holding everything a resumed run needs (hyperparameters,
-//! iteration, RNG state, the module's parameters and Adam's state), written atomically.
+//! iteration, RNG state, the parameters and Adam's state), written atomically.
 //!
 //! File layout (little-endian):
 //! ```text
-//! b"MDAECKPT"  u32 format version
+//! b"MDAECKPT"  u32 format version (3)
 //! u64 n, n bytes   JSON header (CheckpointHeader)
-//! u64 n, n bytes   module record (burnpack, Burn's ModuleRecord)
-//! u64 m            number of optimizer records
-//! m × (u64 n, n bytes)  optimizer records (burnpack, Burn's ModuleOptimizer): the layers' Adam,
-//!                  then one per row block of C
-//! u32              CRC-32 of every byte before it (format version 2)
+//! u64 n, n bytes   module record of the convolution layers (burnpack, Burn's ModuleRecord of
+//!                  an AutoencoderModule without component blocks)
+//! u64 n, n bytes   optimizer record of the layers (burnpack, Burn's ModuleOptimizer: Adam)
+//! u64 K, u64 9N, u64 t   shape of C and Adam's step count for C
+//! K·9N × f32       C, row-major
+//! K·9N × f32       Adam's first moment of C   (only when t > 0)
+//! K·9N × f32       Adam's second moment of C  (only when t > 0)
+//! u32              CRC-32 of every byte before it
 //! ```
 //!
-//! The checksum is verified before anything else is read: a damaged checkpoint is named, never
-//! resumed from.
+//! `C` and its moments are written straight from the trainer's buffers and read straight into
+//! the resumed trainer's (no intermediate copies of the 13 M-number arrays of a large mesh). The
+//! checksum is verified, in a first pass over the file, before anything else is read: a damaged
+//! checkpoint is named, never resumed from.
 
-use std::io::Write;
+use std::fs::File;
+use std::io::{BufReader, Read, Seek, SeekFrom, Write};
 use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
+use super::adam::ComponentAdam;
 use super::config::AutoencoderConfig;
 use super::loss::LossTerms;
 use crate::artifact::write_atomic_with;
 use crate::error::{Error, Result};
 
 const MAGIC: &[u8; 8] = b"MDAECKPT";
-const VERSION: u32 = 2;
+const VERSION: u32 = 3;
 
 /// Metadata of a checkpoint.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -52,85 +59,210 @@ pub struct CheckpointHeader {
 pub struct Checkpoint {
     /// Metadata.
     pub header: CheckpointHeader,
-    /// Burnpack bytes of the module record.
-    pub module: Vec<u8>,
-    /// Burnpack bytes of the optimizer records (layers, then each block of `C`).
-    pub optimizers: Vec<Vec<u8>>,
+    /// Burnpack bytes of the module record of the layers (no component blocks).
+    pub layers: Vec<u8>,
+    /// Burnpack bytes of the layers' optimizer record.
+    pub layers_optimizer: Vec<u8>,
+    /// `C`, `[K, 9N]` row-major.
+    pub components: Vec<f32>,
+    /// Number of columns of `C` (9N).
+    pub columns: usize,
+    /// Adam's state for `C`.
+    pub adam: ComponentAdam,
+}
+
+/// The parts of a checkpoint, borrowed from a trainer (see [`write()`]).
+pub struct CheckpointParts<'a> {
+    /// Metadata.
+    pub header: &'a CheckpointHeader,
+    /// Burnpack bytes of the module record of the layers.
+    pub layers: &'a [u8],
+    /// Burnpack bytes of the layers' optimizer record.
+    pub layers_optimizer: &'a [u8],
+    /// `C`, `[K, 9N]` row-major.
+    pub components: &'a [f32],
+    /// 9N.
+    pub columns: usize,
+    /// Adam's state for `C`.
+    pub adam: &'a ComponentAdam,
+}
+
+/// A writer that keeps the CRC-32 of everything written through it.
+struct Crc<W> {
+    inner: W,
+    hasher: crc32fast::Hasher,
+}
+
+impl<W: Write> Write for Crc<W> {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        let n = self.inner.write(buf)?;
+        self.hasher.update(&buf[..n]);
+        Ok(n)
+    }
+    fn flush(&mut self) -> std::io::Result<()> {
+        self.inner.flush()
+    }
+}
+
+fn write_f32s(w: &mut impl Write, v: &[f32]) -> std::io::Result<()> {
+    let mut buf = Vec::with_capacity(4 * 8192);
+    for chunk in v.chunks(8192) {
+        buf.clear();
+        for x in chunk {
+            buf.extend_from_slice(&x.to_le_bytes());
+        }
+        w.write_all(&buf)?;
+    }
+    Ok(())
+}
+
+fn read_f32s(r: &mut impl Read, out: &mut [f32]) -> std::io::Result<()> {
+    let mut buf = vec![0u8; 4 * 8192];
+    for chunk in out.chunks_mut(8192) {
+        let bytes = &mut buf[..4 * chunk.len()];
+        r.read_exact(bytes)?;
+        for (x, b) in chunk.iter_mut().zip(bytes.chunks_exact(4)) {
+            *x = f32::from_le_bytes(b.try_into().unwrap());
+        }
+    }
+    Ok(())
+}
+
+/// Serialises a checkpoint from borrowed parts and writes it atomically (streamed: no copy of
+/// the file is built in memory).
+pub fn write(path: &Path, parts: &CheckpointParts<'_>) -> Result<()> {
+    let header = serde_json::to_vec(parts.header).map_err(|e| Error::Invalid(format!("checkpoint header: {e}")))?;
+    let t = parts.adam.time;
+    if parts.columns == 0
+        || !parts.components.len().is_multiple_of(parts.columns)
+        || (t > 0
+            && (parts.adam.moment_1.len() != parts.components.len()
+                || parts.adam.moment_2.len() != parts.components.len()))
+    {
+        return Err(Error::Invalid("checkpoint: inconsistent sizes of C and its Adam state".into()));
+    }
+    write_atomic_with(path, |w| {
+        let mut w = Crc { inner: w, hasher: crc32fast::Hasher::new() };
+        w.write_all(MAGIC)?;
+        w.write_all(&VERSION.to_le_bytes())?;
+        for part in [&header[..], parts.layers, parts.layers_optimizer] {
+            w.write_all(&(part.len() as u64).to_le_bytes())?;
+            w.write_all(part)?;
+        }
+        for v in [parts.components.len() / parts.columns, parts.columns, t] {
+            w.write_all(&(v as u64).to_le_bytes())?;
+        }
+        write_f32s(&mut w, parts.components)?;
+        if t > 0 {
+            write_f32s(&mut w, &parts.adam.moment_1)?;
+            write_f32s(&mut w, &parts.adam.moment_2)?;
+        }
+        let crc = w.hasher.clone().finalize();
+        w.inner.write_all(&crc.to_le_bytes())
+    })
 }
 
 impl Checkpoint {
     /// Serialises and writes the checkpoint atomically.
     pub fn save(&self, path: &Path) -> Result<()> {
-        let header = serde_json::to_vec(&self.header).map_err(|e| Error::Invalid(format!("checkpoint header: {e}")))?;
-        let total: usize = self.optimizers.iter().map(|o| o.len() + 8).sum();
-        let mut out = Vec::with_capacity(40 + header.len() + self.module.len() + total);
-        out.extend_from_slice(MAGIC);
-        out.extend_from_slice(&VERSION.to_le_bytes());
-        for part in [&header[..], &self.module[..]] {
-            out.extend_from_slice(&(part.len() as u64).to_le_bytes());
-            out.extend_from_slice(part);
-        }
-        out.extend_from_slice(&(self.optimizers.len() as u64).to_le_bytes());
-        for part in &self.optimizers {
-            out.extend_from_slice(&(part.len() as u64).to_le_bytes());
-            out.extend_from_slice(part);
-        }
-        let crc = crc32fast::hash(&out);
-        out.extend_from_slice(&crc.to_le_bytes());
-        write_atomic_with(path, |w| w.write_all(&out))
+        write(
+            path,
+            &CheckpointParts {
+                header: &self.header,
+                layers: &self.layers,
+                layers_optimizer: &self.layers_optimizer,
+                components: &self.components,
+                columns: self.columns,
+                adam: &self.adam,
+            },
+        )
     }
 
-    /// Reads a checkpoint written by [`Self::save`].
+    /// Reads a checkpoint written by [`Self::save`] or [`write()`].
     pub fn load(path: &Path) -> Result<Self> {
-        let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
         let corrupt = |m: &str| Error::parse(path, None, format!("not a meshdeco autoencoder checkpoint: {m}"));
-        if bytes.len() < 12 || &bytes[..8] != MAGIC {
+        let io = |e: std::io::Error| {
+            if e.kind() == std::io::ErrorKind::UnexpectedEof { corrupt("truncated") } else { Error::io(path, e) }
+        };
+        let mut file = File::open(path).map_err(|e| Error::io(path, e))?;
+        let len = file.metadata().map_err(|e| Error::io(path, e))?.len();
+        let mut head = [0u8; 12];
+        if len < 12 || file.read_exact(&mut head).is_err() || &head[..8] != MAGIC {
             return Err(corrupt("bad magic"));
         }
-        let version = u32::from_le_bytes(bytes[8..12].try_into().unwrap());
+        let version = u32::from_le_bytes(head[8..12].try_into().unwrap());
         if version != VERSION {
             return Err(corrupt(&format!("format version {version}, this build reads {VERSION}")));
         }
-        if bytes.len() < 16 {
+        if len < 16 {
             return Err(corrupt("truncated"));
         }
-        let (body, trailer) = bytes.split_at(bytes.len() - 4);
-        let stored = u32::from_le_bytes(trailer.try_into().unwrap());
-        let actual = crc32fast::hash(body);
+        // First pass: the checksum of everything before the trailer.
+        let body = len - 4;
+        file.seek(SeekFrom::Start(0)).map_err(|e| Error::io(path, e))?;
+        let mut r = BufReader::with_capacity(1 << 20, file);
+        let mut hasher = crc32fast::Hasher::new();
+        let mut buf = vec![0u8; 1 << 20];
+        let mut left = body;
+        while left > 0 {
+            let n = left.min(buf.len() as u64) as usize;
+            r.read_exact(&mut buf[..n]).map_err(io)?;
+            hasher.update(&buf[..n]);
+            left -= n as u64;
+        }
+        let mut trailer = [0u8; 4];
+        r.read_exact(&mut trailer).map_err(io)?;
+        let stored = u32::from_le_bytes(trailer);
+        let actual = hasher.finalize();
         if stored != actual {
             return Err(corrupt(&format!(
                 "checksum {actual:08x} differs from the recorded {stored:08x} (damaged or truncated)"
             )));
         }
-        let bytes = body;
-        let mut pos = 12;
-        let mut take = |len_only: bool| -> Result<Vec<u8>> {
-            if bytes.len() < pos + 8 {
+        drop(buf);
+        // Second pass: the contents.
+        r.seek(SeekFrom::Start(12)).map_err(|e| Error::io(path, e))?;
+        let mut pos = 12u64;
+        let u64_at = |r: &mut BufReader<File>, pos: &mut u64| -> Result<u64> {
+            if *pos + 8 > body {
                 return Err(corrupt("truncated"));
             }
-            let n = u64::from_le_bytes(bytes[pos..pos + 8].try_into().unwrap()) as usize;
-            pos += 8;
-            if len_only {
-                return Ok(n.to_le_bytes().to_vec());
-            }
-            if pos.checked_add(n).is_none_or(|end| end > bytes.len()) {
+            let mut b = [0u8; 8];
+            r.read_exact(&mut b).map_err(io)?;
+            *pos += 8;
+            Ok(u64::from_le_bytes(b))
+        };
+        let bytes = |r: &mut BufReader<File>, pos: &mut u64| -> Result<Vec<u8>> {
+            let n = u64_at(r, pos)?;
+            if pos.checked_add(n).is_none_or(|end| end > body) {
                 return Err(corrupt("truncated"));
             }
-            let v = bytes[pos..pos + n].to_vec();
-            pos += n;
+            let mut v = vec![0u8; n as usize];
+            r.read_exact(&mut v).map_err(io)?;
+            *pos += n;
             Ok(v)
         };
-        let header = take(false)?;
-        let module = take(false)?;
-        let count = usize::from_le_bytes(take(true)?.try_into().unwrap());
-        if count > 1 << 20 {
-            return Err(corrupt("implausible number of optimizer records"));
+        let header = bytes(&mut r, &mut pos)?;
+        let layers = bytes(&mut r, &mut pos)?;
+        let layers_optimizer = bytes(&mut r, &mut pos)?;
+        let (k, columns, time) = (u64_at(&mut r, &mut pos)?, u64_at(&mut r, &mut pos)?, u64_at(&mut r, &mut pos)?);
+        let len_c = k.checked_mul(columns).filter(|&l| l <= (body - pos) / 4).ok_or_else(|| corrupt("truncated"))?;
+        let arrays = if time > 0 { 3 } else { 1 };
+        if columns == 0 || pos + 4 * arrays * len_c != body {
+            return Err(corrupt(if pos + 4 * arrays * len_c > body { "truncated" } else { "trailing bytes" }));
         }
-        let optimizers = (0..count).map(|_| take(false)).collect::<Result<Vec<_>>>()?;
-        if pos != bytes.len() {
-            return Err(corrupt("trailing bytes"));
-        }
+        let read = |r: &mut BufReader<File>| -> Result<Vec<f32>> {
+            let mut v = vec![0.0f32; len_c as usize];
+            read_f32s(r, &mut v).map_err(io)?;
+            Ok(v)
+        };
+        let components = read(&mut r)?;
+        let adam = if time > 0 {
+            ComponentAdam { time: time as usize, moment_1: read(&mut r)?, moment_2: read(&mut r)? }
+        } else {
+            ComponentAdam::default()
+        };
         let header: CheckpointHeader = serde_json::from_slice(&header).map_err(|e| corrupt(&format!("header: {e}")))?;
-        Ok(Checkpoint { header, module, optimizers })
+        Ok(Checkpoint { header, layers, layers_optimizer, components, columns: columns as usize, adam })
     }
 }

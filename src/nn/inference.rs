@@ -5,6 +5,7 @@
 //! and features are `f64` at the interface (`N × 9` per shape, vertex-major).
 
 use std::path::Path;
+use std::sync::OnceLock;
 
 use burn::module::Module;
 use burn::store::ModuleRecord;
@@ -16,9 +17,9 @@ use super::config::AutoencoderConfig;
 use super::data::{WIDTH, shape_from_vcb, vcb_from_shapes};
 use super::engine::{self, Weights, Workspace};
 use super::kernels::padded_width;
-use super::model::AutoencoderModule;
+use super::model::{AutoencoderModule, MeshConv};
 use super::neighbors::NeighborIndex;
-use super::training::default_device;
+use super::training::{default_device, load_layers};
 use crate::artifact::write_atomic;
 use crate::error::{Error, Result};
 use crate::representation::Features;
@@ -46,13 +47,20 @@ const FORMAT: &str = "meshdeco-autoencoder-1";
 /// Shapes processed per inference pass.
 const INFER_BATCH: usize = 32;
 
+/// Codes decoded per pass of [`Autoencoder::analyze_components`] (few: it keeps only what it
+/// returns, and a pass's buffers grow with the number of codes).
+const ANALYSIS_BATCH: usize = 8;
+
 /// A trained mesh autoencoder.
+///
+/// The parameters are held once, as the plain arrays the kernels run on; the Burn module is
+/// built only when asked for ([`Self::module`]) or saved.
 #[derive(Debug)]
 pub struct Autoencoder {
     config: AutoencoderConfig,
-    module: AutoencoderModule,
     neighbors: NeighborIndex,
     weights: Weights,
+    module: OnceLock<AutoencoderModule>,
 }
 
 /// One latent dimension's extreme shape (see [`Autoencoder::analyze_components`]).
@@ -107,11 +115,18 @@ impl ComponentAnalysis {
 impl Autoencoder {
     /// Wraps trained parameters (errors if a parameter is not finite or sizes disagree).
     pub fn new(config: AutoencoderConfig, module: AutoencoderModule, neighbors: NeighborIndex) -> Result<Self> {
-        let mut weights = Weights::from_module(&module)?;
+        let weights = Weights::from_module(&module)?;
+        Self::from_weights(config, weights, neighbors)
+    }
+
+    /// Wraps trained parameters given as plain arrays (errors if a parameter is not finite or
+    /// sizes disagree).
+    pub fn from_weights(config: AutoencoderConfig, mut weights: Weights, neighbors: NeighborIndex) -> Result<Self> {
         weights.least_squares = config.encoder == super::config::EncoderKind::LeastSquares;
         if weights.n != neighbors.n_vertices()
             || weights.k != config.components
             || weights.layers.len() != config.layers
+            || weights.c.len() != weights.k * 9 * weights.n
         {
             return Err(Error::Invalid(format!(
                 "model parameters (N = {}, K = {}, L = {}) do not match the mesh (N = {}) / config (K = {}, L = {})",
@@ -123,7 +138,9 @@ impl Autoencoder {
                 config.layers
             )));
         }
-        Ok(Autoencoder { config, module, neighbors, weights })
+        weights.check_layers()?;
+        weights.check_components()?;
+        Ok(Autoencoder { config, neighbors, weights, module: OnceLock::new() })
     }
 
     /// Hyperparameters.
@@ -131,9 +148,27 @@ impl Autoencoder {
         &self.config
     }
 
-    /// The Burn module.
+    /// The parameters as a Burn module (built on first use: a copy of the parameters).
     pub fn module(&self) -> &AutoencoderModule {
-        &self.module
+        self.module.get_or_init(|| self.build_module())
+    }
+
+    fn build_module(&self) -> AutoencoderModule {
+        let device = default_device();
+        let w = &self.weights;
+        AutoencoderModule {
+            layers: w
+                .layers
+                .iter()
+                .map(|l| MeshConv::from_arrays(l.wp.as_flattened(), l.wn.as_flattened(), &l.b, &l.bd, &device))
+                .collect(),
+            components: AutoencoderModule::component_blocks(&w.c, w.n, &device),
+        }
+    }
+
+    /// The parameters as the plain arrays the kernels run on.
+    pub fn weights(&self) -> &Weights {
+        &self.weights
     }
 
     /// The neighbour index.
@@ -222,13 +257,20 @@ impl Autoencoder {
     /// # Shapes
     /// `codes`: F codes of K values → F × N × 9.
     pub fn decode(&self, codes: &[Vec<f64>]) -> Result<Features> {
+        let mut out = Features::zeros(codes.len(), self.weights.n, WIDTH);
+        self.decode_each(codes, INFER_BATCH, |f, v| out.frame_mut(f).copy_from_slice(&v))?;
+        Ok(out)
+    }
+
+    /// Decodes `codes` in passes of `batch` codes, handing each decoded frame (`N × 9`) to `each`
+    /// in order (so that no more than one pass's frames exist at a time).
+    fn decode_each(&self, codes: &[Vec<f64>], batch: usize, mut each: impl FnMut(usize, Vec<f64>)) -> Result<()> {
         let n = self.weights.n;
         let k = self.weights.k;
         if let Some((i, z)) = codes.iter().enumerate().find(|(_, z)| z.len() != k || z.iter().any(|v| !v.is_finite())) {
             return Err(Error::Invalid(format!("latent code {i} must be {k} finite numbers (got {} values)", z.len())));
         }
-        let mut out = Features::zeros(codes.len(), n, WIDTH);
-        for (ci, chunk) in codes.chunks(INFER_BATCH).enumerate() {
+        for (ci, chunk) in codes.chunks(batch).enumerate() {
             let b = chunk.len();
             let bp = padded_width(b);
             let mut ws = Workspace::new(n, k, self.weights.layers.len(), bp);
@@ -243,11 +285,10 @@ impl Autoencoder {
             }
             engine::decode(&mut ws, &self.weights, &self.neighbors, b);
             for j in 0..b {
-                let v = shape_from_vcb(ws.output(), bp, j);
-                out.frame_mut(ci * INFER_BATCH + j).copy_from_slice(&v);
+                each(ci * batch + j, shape_from_vcb(ws.output(), bp, j));
             }
         }
-        Ok(out)
+        Ok(())
     }
 
     /// Encode then decode.
@@ -285,23 +326,35 @@ impl Autoencoder {
                 codes.push(c);
             }
         }
-        let dec = self.decode(&codes)?;
-        let reference_features = dec.frame(0).to_vec();
+        // Decoded a few codes at a time (codes[0] is the reference, then lo and hi of every
+        // dimension): only the kept extremes' features are held, not all 2K + 1 decoded frames.
+        let change = |f: &[f64], r: &[f64]| -> Vec<f64> {
+            f.chunks_exact(WIDTH)
+                .zip(r.chunks_exact(WIDTH))
+                .map(|(a, b)| a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum::<f64>().sqrt())
+                .collect()
+        };
+        let norm = |c: &[f64]| c.iter().map(|v| v * v).sum::<f64>().sqrt();
         let centers = self.centers();
+        let mut reference_features = Vec::new();
+        let mut lo_frame: Option<(Vec<f64>, Vec<f64>)> = None;
         let mut comps = Vec::with_capacity(k);
-        for (kk, &(lo, hi)) in ranges.iter().enumerate() {
-            let change = |f: usize| -> Vec<f64> {
-                dec.frame(f)
-                    .chunks_exact(WIDTH)
-                    .zip(reference_features.chunks_exact(WIDTH))
-                    .map(|(a, b)| a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum::<f64>().sqrt())
-                    .collect()
-            };
-            let (c_lo, c_hi) = (change(1 + 2 * kk), change(2 + 2 * kk));
-            let norm = |c: &[f64]| c.iter().map(|v| v * v).sum::<f64>().sqrt();
-            let (d_lo, d_hi) = (norm(&c_lo), norm(&c_hi));
-            let (z_extreme, distance, frame, vertex_change) =
-                if d_hi >= d_lo { (hi, d_hi, 2 + 2 * kk, c_hi) } else { (lo, d_lo, 1 + 2 * kk, c_lo) };
+        self.decode_each(&codes, ANALYSIS_BATCH, |i, frame| {
+            if i == 0 {
+                reference_features = frame;
+                return;
+            }
+            let c = change(&frame, &reference_features);
+            if i % 2 == 1 {
+                lo_frame = Some((frame, c));
+                return;
+            }
+            let kk = (i - 2) / 2;
+            let (lo, hi) = ranges[kk];
+            let (f_lo, c_lo) = lo_frame.take().expect("lo decoded before hi");
+            let (d_lo, d_hi) = (norm(&c_lo), norm(&c));
+            let (z_extreme, distance, features, vertex_change) =
+                if d_hi >= d_lo { (hi, d_hi, frame, c) } else { (lo, d_lo, f_lo, c_lo) };
             let peak = vertex_change.iter().copied().fold(0.0, f64::max);
             let support_size = if peak > 0.0 { vertex_change.iter().filter(|&&v| v >= 0.1 * peak).count() } else { 0 };
             debug_assert_eq!(vertex_change.len(), n);
@@ -312,12 +365,12 @@ impl Autoencoder {
                 z_max: hi,
                 z_extreme,
                 distance,
-                features: dec.frame(frame).to_vec(),
+                features,
                 vertex_change,
                 center: centers[kk],
                 support_size,
             });
-        }
+        })?;
         comps.sort_by(|a, b| b.distance.total_cmp(&a.distance).then(a.dim.cmp(&b.dim)));
         for (r, c) in comps.iter_mut().enumerate() {
             c.rank = r;
@@ -370,12 +423,12 @@ impl Autoencoder {
     /// (hyperparameters and mesh fingerprint) into `dir` (created if needed), atomically.
     pub fn save(&self, dir: &Path) -> Result<()> {
         std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
-        let bytes = self
-            .module
-            .clone()
-            .into_record()
-            .into_bytes()
-            .map_err(|e| Error::Invalid(format!("module record: {e}")))?;
+        // A module built for the record is dropped right after (not kept beside the weights).
+        let module = match self.module.get() {
+            Some(m) => m.clone(),
+            None => self.build_module(),
+        };
+        let bytes = module.into_record().into_bytes().map_err(|e| Error::Invalid(format!("module record: {e}")))?;
         let meta = ModelMeta {
             format: FORMAT.into(),
             config: self.config.clone(),
@@ -408,7 +461,10 @@ impl Autoencoder {
     pub fn from_checkpoint(path: &Path, neighbors: NeighborIndex) -> Result<Self> {
         let ck = Checkpoint::load(path)?;
         Self::check_mesh(path, ck.header.n_vertices, ck.header.neighbor_fingerprint, &neighbors)?;
-        Self::from_record_bytes(path, ck.header.config, ck.module, neighbors)
+        let n = neighbors.n_vertices();
+        let layers = load_layers(path, &ck.header.config, n, ck.layers, &default_device())?;
+        let weights = Weights::from_parts(&layers, ck.components, n)?;
+        Self::from_weights(ck.header.config, weights, neighbors)
     }
 
     fn check_mesh(path: &Path, n: usize, fp: u64, neighbors: &NeighborIndex) -> Result<()> {

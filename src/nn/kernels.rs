@@ -464,6 +464,136 @@ pub fn weight_grad_rows(dy: &[f32], x: &[f32], m: &[f32], bp: usize) -> ConvGrad
 }
 
 // ---------------------------------------------------------------------------------------------
+// Latent products with a short inner dimension
+// ---------------------------------------------------------------------------------------------
+
+/// Output rows per register block of [`ct_times`].
+const CT_ROWS: usize = 8;
+
+#[inline(always)]
+fn ct_times_impl<M: MulAdd>(c: &[f32], stride: usize, k: usize, y: &[f32], out: &mut [f32], j0: usize, bp: usize) {
+    let nb = bp / LANES;
+    let (yv, _) = y.as_chunks::<LANES>();
+    let rows = out.len() / bp;
+    let mut j = 0;
+    while j < rows {
+        let t_n = CT_ROWS.min(rows - j);
+        for v in 0..nb {
+            let mut acc = [[0.0f32; LANES]; CT_ROWS];
+            if t_n == CT_ROWS {
+                for kk in 0..k {
+                    let yk = &yv[kk * nb + v];
+                    let s = kk * stride + j0 + j;
+                    let cr: &[f32; CT_ROWS] = c[s..s + CT_ROWS].try_into().unwrap();
+                    for (a, &w) in acc.iter_mut().zip(cr) {
+                        axpy::<M>(a, w, yk);
+                    }
+                }
+            } else {
+                for kk in 0..k {
+                    let yk = &yv[kk * nb + v];
+                    let s = kk * stride + j0 + j;
+                    for (a, &w) in acc.iter_mut().zip(&c[s..s + t_n]) {
+                        axpy::<M>(a, w, yk);
+                    }
+                }
+            }
+            for (t, a) in acc.iter().take(t_n).enumerate() {
+                let o = (j + t) * bp + v * LANES;
+                out[o..o + LANES].copy_from_slice(a);
+            }
+        }
+        j += t_n;
+    }
+}
+
+dispatch! {
+    fn ct_times_chunk(c: &[f32], stride: usize, k: usize, y: &[f32], out: &mut [f32], j0: usize, bp: usize) => ct_times_impl
+}
+
+/// `out = Cᵀ·Y` for `C` `[k, cols]` row-major and `Y` `[k, bp]` (row-major, lanes `b..bp`
+/// taken as zero): `out` is `[cols, bp]` row-major (VCB), every lane written (`+0` in lanes
+/// `b..bp`). Each entry is the multiply-add chain over `k` in ascending order from zero, which is
+/// what faer's GEMM computes for this shape when `3 ≤ k ≤ 512` (so the result is
+/// bit-identical); this kernel streams `C` once, in parallel over blocks of rows of `out`, and
+/// is faster than the GEMM for one SIMD block of lanes (`bp = LANES`).
+pub fn ct_times(c: &[f32], k: usize, cols: usize, y: &[f32], bp: usize, b: usize, out: &mut [f32]) {
+    assert!(bp.is_multiple_of(LANES) && b <= bp && c.len() == k * cols && y.len() >= k * bp && out.len() == cols * bp);
+    let mut yl = y[..k * bp].to_vec();
+    for row in yl.chunks_exact_mut(bp) {
+        row[b..].fill(0.0);
+    }
+    const CH: usize = 512;
+    out.par_chunks_mut(CH * bp).enumerate().for_each(|(ci, o)| ct_times_chunk(c, cols, k, &yl, o, ci * CH, bp));
+}
+
+/// Inner-dimension block of a GEMM with a long inner dimension: faer sums such a product in
+/// blocks of this many terms (one multiply-add chain each, from zero) and adds the blocks in
+/// order (measured for every shape the engine uses; [`block_chains`] reproduces it).
+pub const GEMM_INNER_BLOCK: usize = 512;
+
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn block_chains_rows<M: MulAdd, const R: usize>(
+    rows: &[&[f32]],
+    y: &[V],
+    nb: usize,
+    k0: usize,
+    k: usize,
+    parts: &mut [f32],
+    bp: usize,
+) {
+    let tw = rows[0].len();
+    let rows: [&[f32]; R] = std::array::from_fn(|r| &rows[r][..tw]);
+    for (bi, b0) in (0..tw).step_by(GEMM_INNER_BLOCK).enumerate() {
+        let bn = GEMM_INNER_BLOCK.min(tw - b0);
+        let rb: [&[f32]; R] = std::array::from_fn(|r| &rows[r][b0..b0 + bn]);
+        let yb = &y[b0 * nb..(b0 + bn) * nb];
+        for v in 0..nb {
+            let mut acc = [[0.0f32; LANES]; R];
+            for j in 0..bn {
+                let yj = &yb[j * nb + v];
+                for (a, row) in acc.iter_mut().zip(&rb) {
+                    axpy::<M>(a, row[j], yj);
+                }
+            }
+            for (r, a) in acc.iter().enumerate() {
+                let o = (bi * k + k0 + r) * bp + v * LANES;
+                parts[o..o + LANES].copy_from_slice(a);
+            }
+        }
+    }
+}
+
+#[inline(always)]
+fn block_chains_impl<M: MulAdd>(rows: &[&[f32]], y: &[f32], k0: usize, k: usize, parts: &mut [f32], bp: usize) {
+    let nb = bp / LANES;
+    let (yv, _) = y.as_chunks::<LANES>();
+    let mut r0 = 0;
+    while r0 + 8 <= rows.len() {
+        block_chains_rows::<M, 8>(&rows[r0..r0 + 8], yv, nb, k0 + r0, k, parts, bp);
+        r0 += 8;
+    }
+    while r0 + 2 <= rows.len() {
+        block_chains_rows::<M, 2>(&rows[r0..r0 + 2], yv, nb, k0 + r0, k, parts, bp);
+        r0 += 2;
+    }
+    while r0 < rows.len() {
+        block_chains_rows::<M, 1>(&rows[r0..r0 + 1], yv, nb, k0 + r0, k, parts, bp);
+        r0 += 1;
+    }
+}
+
+dispatch! {
+    /// Partial products of rows `k0..k0 + rows.len()` of `C·Y` over a range of the inner
+    /// dimension: `rows` are those rows' slices of `C` over the range (equal lengths), `y` the
+    /// range's rows of `Y` (VCB, `bp` lanes); for every [`GEMM_INNER_BLOCK`] of the range, the
+    /// multiply-add chain from zero goes to `parts[block][k][lane]` (`k` rows per block). Adding
+    /// the blocks of the whole inner dimension in order gives faer's GEMM result.
+    pub fn block_chains(rows: &[&[f32]], y: &[f32], k0: usize, k: usize, parts: &mut [f32], bp: usize) => block_chains_impl
+}
+
+// ---------------------------------------------------------------------------------------------
 // Elementwise
 // ---------------------------------------------------------------------------------------------
 
@@ -551,6 +681,31 @@ dispatch! {
 }
 
 #[inline(always)]
+fn group_sparsity_acc<M: MulAdd>(
+    row: &[f32],
+    sq_norms: &[f32],
+    lambda: &[f32],
+    eps2: f32,
+    scale: f32,
+    grad: &mut [f32],
+    total: &mut f64,
+) {
+    for (((v, g), &s), &l) in row.chunks_exact(9).zip(grad.chunks_exact_mut(9)).zip(sq_norms).zip(lambda) {
+        if l == 0.0 {
+            continue;
+        }
+        let nrm = s.max(eps2).sqrt();
+        *total += (l * nrm) as f64;
+        if s > eps2 {
+            let f = scale * l / nrm;
+            for (gq, &vq) in g.iter_mut().zip(v) {
+                *gq = M::mul_add(f, vq, *gq);
+            }
+        }
+    }
+}
+
+#[inline(always)]
 fn group_sparsity_impl<M: MulAdd>(
     row: &[f32],
     sq_norms: &[f32],
@@ -560,19 +715,7 @@ fn group_sparsity_impl<M: MulAdd>(
     grad: &mut [f32],
 ) -> f64 {
     let mut total = 0.0f64;
-    for (((v, g), &s), &l) in row.chunks_exact(9).zip(grad.chunks_exact_mut(9)).zip(sq_norms).zip(lambda) {
-        if l == 0.0 {
-            continue;
-        }
-        let nrm = s.max(eps2).sqrt();
-        total += (l * nrm) as f64;
-        if s > eps2 {
-            let f = scale * l / nrm;
-            for (gq, &vq) in g.iter_mut().zip(v) {
-                *gq = M::mul_add(f, vq, *gq);
-            }
-        }
-    }
+    group_sparsity_acc::<M>(row, sq_norms, lambda, eps2, scale, grad, &mut total);
     total
 }
 
@@ -580,6 +723,232 @@ dispatch! {
     /// One component's weighted group norm `Σ_i Λ_i ‖v_i‖_ε` (returned) and its gradient
     /// `grad_i += scale·Λ_i·v_i/‖v_i‖` (zero where `‖v_i‖² ≤ eps2`), for 9-vectors `v_i`.
     pub fn group_sparsity(row: &[f32], sq_norms: &[f32], lambda: &[f32], eps2: f32, scale: f32, grad: &mut [f32]) -> f64 => group_sparsity_impl
+}
+
+/// Vertices per block of the fused passes over `C` (the block's numbers stay in L1 between the
+/// update and the scan that follows it).
+const FUSED_VERTICES: usize = 128;
+
+#[inline(always)]
+fn group_sparsity_checked_impl<M: MulAdd>(
+    row: &[f32],
+    sq_norms: &[f32],
+    lambda: &[f32],
+    eps2: f32,
+    scale: f32,
+    grad: &mut [f32],
+) -> (f64, u32) {
+    let mut total = 0.0f64;
+    let mut exp = 0u32;
+    let w = 9 * FUSED_VERTICES;
+    for (((v, g), s), l) in
+        row.chunks(w).zip(grad.chunks_mut(w)).zip(sq_norms.chunks(FUSED_VERTICES)).zip(lambda.chunks(FUSED_VERTICES))
+    {
+        group_sparsity_acc::<M>(v, s, l, eps2, scale, g, &mut total);
+        exp = exp.max(max_exponent_impl::<M>(g));
+    }
+    (total, exp)
+}
+
+dispatch! {
+    /// [`group_sparsity`], and the largest exponent field of the updated `grad` (as
+    /// [`first_non_finite`] scans it: `0x7f80_0000` iff some entry is infinite or NaN), in the
+    /// same pass.
+    pub fn group_sparsity_checked(row: &[f32], sq_norms: &[f32], lambda: &[f32], eps2: f32, scale: f32, grad: &mut [f32]) -> (f64, u32) => group_sparsity_checked_impl
+}
+
+/// The exponent field of an `f32` that is infinite or NaN.
+pub const NON_FINITE_EXPONENT: u32 = 0x7f80_0000;
+
+/// Scalars of one Adam step with Burn's arithmetic ([`burn::optim::AdamConfig`], no weight
+/// decay, no AMSGrad), all in `f32`:
+/// `m ← β1·m + (1−β1)·g`, `v ← β2·v + (1−β2)·g²` (at the first step `m = (1−β1)·g`,
+/// `v = (1−β2)·g²`), `p ← p − lr·(m·c)/(√v + ε·s)` with `s = √(1 − β2ᵗ)`, `c = s/(1 − β1ᵗ)`.
+#[derive(Debug, Clone, Copy)]
+pub struct AdamScalars {
+    /// β1.
+    pub beta1: f32,
+    /// β2.
+    pub beta2: f32,
+    /// 1 − β1.
+    pub one_minus_beta1: f32,
+    /// 1 − β2.
+    pub one_minus_beta2: f32,
+    /// `c = √(1 − β2ᵗ)/(1 − β1ᵗ)`.
+    pub combined: f32,
+    /// `ε·√(1 − β2ᵗ)`.
+    pub eps: f32,
+    /// Step size.
+    pub lr: f32,
+    /// Whether this is the first step (the moments are then written, not read).
+    pub first: bool,
+}
+
+impl AdamScalars {
+    /// The scalars of step `time` (1-based), computed exactly as Burn's `AdaptiveMomentum` does.
+    pub fn new(beta1: f32, beta2: f32, epsilon: f32, lr: f64, time: usize) -> Self {
+        let t = time as i32;
+        let bias_correction2_sqrt = (1.0 - beta2.powi(t)).sqrt();
+        AdamScalars {
+            beta1,
+            beta2,
+            one_minus_beta1: 1.0 - beta1,
+            one_minus_beta2: 1.0 - beta2,
+            combined: bias_correction2_sqrt / (1.0 - beta1.powi(t)),
+            eps: epsilon * bias_correction2_sqrt,
+            lr: lr as f32,
+            first: time == 1,
+        }
+    }
+}
+
+#[inline(always)]
+fn adam_block(p: &mut [f32], g: &[f32], m: &mut [f32], v: &mut [f32], a: &AdamScalars) {
+    // Same operations in the same order as Burn's tensor ops (no fused multiply-add), so the
+    // result is bit-identical to Burn's Adam.
+    if a.first {
+        for (((p, &g), m), v) in p.iter_mut().zip(g).zip(m.iter_mut()).zip(v.iter_mut()) {
+            *m = g * a.one_minus_beta1;
+            *v = (g * g) * a.one_minus_beta2;
+            *p -= ((*m * a.combined) / (v.sqrt() + a.eps)) * a.lr;
+        }
+    } else {
+        for (((p, &g), m), v) in p.iter_mut().zip(g).zip(m.iter_mut()).zip(v.iter_mut()) {
+            *m = *m * a.beta1 + g * a.one_minus_beta1;
+            *v = *v * a.beta2 + (g * g) * a.one_minus_beta2;
+            *p -= ((*m * a.combined) / (v.sqrt() + a.eps)) * a.lr;
+        }
+    }
+}
+
+#[inline(always)]
+fn adam_norms_impl<M: MulAdd>(
+    p: &mut [f32],
+    g: &[f32],
+    m: &mut [f32],
+    v: &mut [f32],
+    a: &AdamScalars,
+    sq_norms: &mut [f32],
+) -> u32 {
+    let w = 9 * FUSED_VERTICES;
+    let mut exp = 0u32;
+    for ((((p, g), m), v), sq) in p
+        .chunks_mut(w)
+        .zip(g.chunks(w))
+        .zip(m.chunks_mut(w))
+        .zip(v.chunks_mut(w))
+        .zip(sq_norms.chunks_mut(FUSED_VERTICES))
+    {
+        adam_block(p, g, m, v, a);
+        vertex_sq_norms_impl::<M>(p, sq);
+        exp = exp.max(max_exponent_impl::<M>(p));
+    }
+    exp
+}
+
+dispatch! {
+    fn adam_norms_chunk(p: &mut [f32], g: &[f32], m: &mut [f32], v: &mut [f32], a: &AdamScalars, sq_norms: &mut [f32]) -> u32 => adam_norms_impl
+}
+
+/// Vertices per column tile of [`crate::nn::engine::update_components`]: the tile's gradient
+/// (`K × 9·512` numbers) stays in L2 between its GEMM and its update.
+pub const FUSED_TILE_VERTICES: usize = 512;
+const _: () = assert!((9 * FUSED_TILE_VERTICES).is_multiple_of(GEMM_INNER_BLOCK), "tiles hold whole inner blocks");
+
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn sparse_adam_norms_impl<M: MulAdd>(
+    p: &mut [f32],
+    g: &mut [f32],
+    m: &mut [f32],
+    v: &mut [f32],
+    a: &AdamScalars,
+    sq_norms: &mut [f32],
+    lambda: &[f32],
+    eps2: f32,
+    scale: f32,
+) -> u32 {
+    let w = 9 * FUSED_VERTICES;
+    let mut exp = 0u32;
+    for (((((p, g), m), v), sq), lam) in p
+        .chunks_mut(w)
+        .zip(g.chunks_mut(w))
+        .zip(m.chunks_mut(w))
+        .zip(v.chunks_mut(w))
+        .zip(sq_norms.chunks_mut(FUSED_VERTICES))
+        .zip(lambda.chunks(FUSED_VERTICES))
+    {
+        // The sparsity gradient from the norms of the C before the update (as group_sparsity):
+        // the factors of a block first (a loop over vertices that vectorises), then the
+        // multiply-adds of the vertices it applies to.
+        let mut f = [0.0f32; FUSED_VERTICES];
+        let mut on = [false; FUSED_VERTICES];
+        for (((f, on), &s), &l) in f.iter_mut().zip(on.iter_mut()).zip(sq.iter()).zip(lam) {
+            *f = scale * l / s.max(eps2).sqrt();
+            *on = l != 0.0 && s > eps2;
+        }
+        for (((pv, gv), &f), &on) in p.chunks_exact(9).zip(g.chunks_exact_mut(9)).zip(&f).zip(&on) {
+            if on {
+                for (gq, &vq) in gv.iter_mut().zip(pv) {
+                    *gq = M::mul_add(f, vq, *gq);
+                }
+            }
+        }
+        adam_block(p, g, m, v, a);
+        vertex_sq_norms_impl::<M>(p, sq);
+        exp = exp.max(max_exponent_impl::<M>(p));
+    }
+    exp
+}
+
+dispatch! {
+    /// One row of a column tile of `C`: adds the sparsity gradient `scale·Λ_i·c_i/‖c_i‖` (from the
+    /// squared norms `sq_norms` of the current `c`, as [`group_sparsity`]) to the dense gradient
+    /// `g`, applies one Adam step ([`AdamScalars`]) to `p`, then overwrites `sq_norms` with the
+    /// squared vertex norms of the new `p`. Returns the largest exponent field of the new `p`
+    /// ([`NON_FINITE_EXPONENT`] iff an entry is not finite).
+    #[allow(clippy::too_many_arguments)]
+    pub fn sparse_adam_norms(p: &mut [f32], g: &mut [f32], m: &mut [f32], v: &mut [f32], a: &AdamScalars, sq_norms: &mut [f32], lambda: &[f32], eps2: f32, scale: f32) -> u32 => sparse_adam_norms_impl
+}
+
+/// Largest exponent field of the values, in place (`NON_FINITE_EXPONENT` iff some value is
+/// infinite or NaN); parallel for long slices.
+pub fn max_exponent_of(v: &[f32]) -> u32 {
+    const CH: usize = 1 << 15;
+    if v.len() <= CH {
+        return max_exponent(v);
+    }
+    v.par_chunks(CH).map(max_exponent).max().unwrap_or(0)
+}
+
+/// One Adam step in place over `p` (see [`AdamScalars`]; `m`, `v` are the moments, same length
+/// as `p`), fused with [`vertex_sq_norms`] of the updated `p` into `sq_norms` (`p.len() / 9`
+/// values) and a finiteness scan of it. Returns whether every updated entry is finite.
+/// Bit-identical to Burn's Adam followed by [`vertex_sq_norms`].
+pub fn adam_step(
+    p: &mut [f32],
+    g: &[f32],
+    m: &mut [f32],
+    v: &mut [f32],
+    a: &AdamScalars,
+    sq_norms: &mut [f32],
+) -> bool {
+    assert!(p.len().is_multiple_of(9) && g.len() == p.len() && m.len() == p.len() && v.len() == p.len());
+    assert_eq!(sq_norms.len(), p.len() / 9);
+    // Parallel chunks of whole vertices.
+    const CH: usize = 9 * 4096;
+    let exps: Vec<u32> = p
+        .par_chunks_mut(CH)
+        .zip(m.par_chunks_mut(CH))
+        .zip(v.par_chunks_mut(CH))
+        .zip(sq_norms.par_chunks_mut(CH / 9))
+        .enumerate()
+        .map(|(ci, (((p, m), v), sq))| {
+            let s = ci * CH;
+            adam_norms_chunk(p, &g[s..s + p.len()], m, v, a, sq)
+        })
+        .collect();
+    exps.into_iter().max().unwrap_or(0) != NON_FINITE_EXPONENT
 }
 
 #[inline(always)]
@@ -610,7 +979,7 @@ dispatch! {
 /// position is searched only when there is one).
 pub fn first_non_finite(v: &[f32]) -> Option<usize> {
     const CH: usize = 1 << 15;
-    let bad = v.par_chunks(CH).any(|c| max_exponent(c) == 0x7f80_0000);
+    let bad = v.par_chunks(CH).any(|c| max_exponent(c) == NON_FINITE_EXPONENT);
     if !bad {
         return None;
     }
@@ -719,6 +1088,57 @@ mod tests {
             assert!((g.ws[o][a] - sx).abs() < 1e-4, "{} vs {sx}", g.ws[o][a]);
             assert!((g.wn[o][a] - sm).abs() < 1e-4);
             assert!((g.bias[o] - sb).abs() < 1e-4);
+        }
+    }
+
+    /// The multiply-add chain of [`ct_times`], one entry at a time.
+    fn ct_reference(c: &[f32], k: usize, cols: usize, y: &[f32], bp: usize, b: usize) -> Vec<f32> {
+        let mut out = vec![0.0f32; cols * bp];
+        for j in 0..cols {
+            for l in 0..b {
+                let mut a = 0.0f32;
+                for kk in 0..k {
+                    a = c[kk * cols + j].mul_add(y[kk * bp + l], a);
+                }
+                out[j * bp + l] = a;
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn ct_times_is_the_ordered_multiply_add_chain_and_equals_faer() {
+        let mut rng = Rng::new(12);
+        for (k, cols, bp, b) in [(3, 50, 8, 7), (50, 1203, 8, 7), (50, 1203, 8, 8), (17, 300, 16, 11), (64, 77, 40, 36)]
+        {
+            let mut c = rand_vec(&mut rng, k * cols);
+            let mut y = rand_vec(&mut rng, k * bp);
+            // Exact zeros (signs of zero must come out as faer's).
+            for i in (0..c.len()).step_by(7) {
+                c[i] = 0.0;
+            }
+            y[1] = -0.0;
+            let mut got = vec![f32::NAN; cols * bp];
+            ct_times(&c, k, cols, &y, bp, b, &mut got);
+            let want = ct_reference(&c, k, cols, &y, bp, b);
+            assert!(
+                got.iter().zip(&want).all(|(a, b)| a.to_bits() == b.to_bits()),
+                "k {k} bp {bp}: differs from the chain"
+            );
+            // faer's GEMM on the real lanes (the padding lanes stay as they were: zero).
+            let mut faer = vec![0.0f32; cols * bp];
+            faer::linalg::matmul::matmul(
+                faer::MatMut::from_row_major_slice_mut(&mut faer, cols, bp).subcols_mut(0, b),
+                faer::Accum::Replace,
+                faer::MatRef::from_row_major_slice(&c, k, cols).transpose(),
+                faer::MatRef::from_row_major_slice(&y, k, bp).subcols(0, b),
+                1.0f32,
+                faer::Par::Seq,
+            );
+            assert!(
+                got.iter().zip(&faer).all(|(a, b)| a.to_bits() == b.to_bits()),
+                "k {k} bp {bp}: differs from faer's GEMM (the engine's results would change)"
+            );
         }
     }
 

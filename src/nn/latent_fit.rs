@@ -45,7 +45,7 @@ struct Forward {
 impl DecoderVjp {
     /// Copies the parameters and neighbour index of a trained model.
     pub fn new(model: &Autoencoder) -> Result<Self> {
-        Ok(DecoderVjp { weights: Weights::from_module(model.module())?, neighbors: model.neighbors().clone() })
+        Ok(DecoderVjp { weights: model.weights().clone(), neighbors: model.neighbors().clone() })
     }
 
     /// Latent dimension K.

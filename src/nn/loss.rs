@@ -10,6 +10,9 @@
 //! constant (no gradient through it). The norm is ε-guarded: `‖v‖_ε = sqrt(max(‖v‖², ε²))`, with
 //! sub-gradient 0 where `‖v‖ ≤ ε`.
 
+use std::collections::HashMap;
+use std::sync::Arc;
+
 use burn::tensor::{Device, Tensor, TensorData};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -28,8 +31,9 @@ pub const ORTHO_EPS: f32 = 1e-12;
 /// Distances on the rest mesh from one centre vertex, normalised by the largest pairwise
 /// geodesic distance (so that the ramp `[d_min, d_max]` is scale-free).
 ///
-/// Implementations may cache; the trainer asks only when a component's centre changes.
-pub trait CenterDistances {
+/// Implementations may cache; the trainer asks only for centres whose rows it does not hold
+/// (several at a time, in parallel, hence `Sync`).
+pub trait CenterDistances: Sync {
     /// Normalised distance of every vertex to `center` (N values, `0` at the centre). Non-finite
     /// values (unreachable vertices) are treated as "far" (Λ = 1).
     fn distances(&self, center: usize) -> Vec<f64>;
@@ -146,16 +150,39 @@ impl LossTerms {
     }
 }
 
+/// The centres of a support-map update and the distance rows it needs (see
+/// [`SupportMaps::plan_update`]).
+#[derive(Debug, Clone)]
+pub struct CentreUpdate {
+    centers: Vec<usize>,
+    missing: Vec<usize>,
+}
+
+impl CentreUpdate {
+    /// Centres whose rows must be queried.
+    pub fn missing(&self) -> &[usize] {
+        &self.missing
+    }
+}
+
 /// Per-component centres and support weights Λ (`K × N`), refreshed from the current `C`.
+///
+/// Λ rows are kept per centre vertex: components with the same centre share one row, and the rows
+/// of recent centres stay cached (at most [`Self::cache_rows`] rows), so a centre that comes back
+/// costs no distance query.
 #[derive(Debug, Clone)]
 pub struct SupportMaps {
     k: usize,
     n: usize,
     centers: Vec<usize>,
-    weights: Vec<Vec<f32>>,
+    weights: Vec<Arc<[f32]>>,
     valid: Vec<bool>,
     /// `‖C_k,i‖²` of the `C` of the last update, `[K, N]`.
     sq_norms: Vec<f32>,
+    /// Λ rows by centre vertex, with the update count at which each was last used.
+    cache: HashMap<usize, (Arc<[f32]>, u64)>,
+    updates: u64,
+    queries: u64,
 }
 
 impl SupportMaps {
@@ -165,10 +192,23 @@ impl SupportMaps {
             k,
             n,
             centers: vec![0; k],
-            weights: vec![Vec::new(); k],
+            weights: vec![Arc::from(Vec::new()); k],
             valid: vec![false; k],
             sq_norms: vec![0.0; k * n],
+            cache: HashMap::new(),
+            updates: 0,
+            queries: 0,
         }
+    }
+
+    /// Most Λ rows kept (those of the current centres and of recent ones): `2K`.
+    pub fn cache_rows(&self) -> usize {
+        2 * self.k
+    }
+
+    /// Distance rows asked of the [`CenterDistances`] so far.
+    pub fn distance_queries(&self) -> u64 {
+        self.queries
     }
 
     /// Current centres `c_k` (valid after [`Self::update`]).
@@ -181,15 +221,45 @@ impl SupportMaps {
         &self.weights[k]
     }
 
+    /// `‖C_k,i‖²` of the last update, `[K, N]` (see [`Self::update_from_norms`]).
+    pub fn sq_norms(&self) -> &[f32] {
+        &self.sq_norms
+    }
+
+    /// The squared vertex norms (mutable) and the Λ rows, for an update of `C` that writes the
+    /// norms of the new `C` while it reads Λ.
+    pub fn norms_and_weights(&mut self) -> (&mut [f32], Vec<&[f32]>) {
+        (&mut self.sq_norms, self.weights.iter().map(|w| &w[..]).collect())
+    }
+
+    /// The squared vertex norms to fill before [`Self::update_from_norms`] (`[K, N]`).
+    pub fn sq_norms_mut(&mut self) -> &mut [f32] {
+        &mut self.sq_norms
+    }
+
     /// Recomputes the centres from `c` (`[K, 9N]`, vertex-major) and asks `dist` for the rows of
     /// the centres that changed.
     pub fn update(&mut self, c: &[f32], cfg: &AutoencoderConfig, dist: &dyn CenterDistances) -> Result<()> {
+        self.set_norms_from(c);
+        self.update_from_norms(cfg, dist)
+    }
+
+    /// Like [`Self::update`], with the squared vertex norms of the current `C` already in
+    /// [`Self::sq_norms_mut`] (the trainer's fused update writes them).
+    pub fn update_from_norms(&mut self, cfg: &AutoencoderConfig, dist: &dyn CenterDistances) -> Result<()> {
+        let plan = self.plan_update();
+        let rows = Self::query_rows(&plan, self.n, cfg, dist);
+        self.apply_update(plan, rows)
+    }
+
+    /// First part of [`Self::update_from_norms`]: the centres of the current norms and the
+    /// distance rows to ask for (neither held nor cached).
+    pub fn plan_update(&self) -> CentreUpdate {
         let n = self.n;
-        let centers: Vec<usize> = c
-            .par_chunks(9 * n)
-            .zip(self.sq_norms.par_chunks_mut(n))
-            .map(|(row, sq)| {
-                kernels::vertex_sq_norms(row, sq);
+        let centers: Vec<usize> = self
+            .sq_norms
+            .par_chunks(n.max(1))
+            .map(|sq| {
                 let mut best = (0usize, -1.0f32);
                 for (i, &s) in sq.iter().enumerate() {
                     if s > best.1 {
@@ -199,23 +269,84 @@ impl SupportMaps {
                 best.0
             })
             .collect();
-        for (k, &center) in centers.iter().enumerate() {
-            if self.valid[k] && self.centers[k] == center {
-                continue;
+        let mut missing: Vec<usize> = centers
+            .iter()
+            .enumerate()
+            .filter(|&(k, &c)| !((self.valid[k] && self.centers[k] == c) || self.cache.contains_key(&c)))
+            .map(|(_, &c)| c)
+            .collect();
+        missing.sort_unstable();
+        missing.dedup();
+        CentreUpdate { centers, missing }
+    }
+
+    /// Second part of [`Self::update_from_norms`]: the Λ rows of `plan`'s missing centres, from
+    /// distance queries in parallel (`n` vertices). Touches no map, so it may run beside other
+    /// work.
+    pub fn query_rows(
+        plan: &CentreUpdate,
+        n: usize,
+        cfg: &AutoencoderConfig,
+        dist: &dyn CenterDistances,
+    ) -> Vec<Result<Arc<[f32]>>> {
+        plan.missing
+            .par_iter()
+            .map(|&center| {
+                let d = dist.distances(center);
+                if d.len() != n {
+                    return Err(Error::Invalid(format!(
+                        "centre distances: expected {n} values for centre {center}, got {}",
+                        d.len()
+                    )));
+                }
+                Ok(d.iter().map(|&d| cfg.support_weight(d) as f32).collect::<Vec<f32>>().into())
+            })
+            .collect()
+    }
+
+    /// Last part of [`Self::update_from_norms`]: installs the rows of [`Self::query_rows`] and
+    /// the new centres.
+    pub fn apply_update(&mut self, plan: CentreUpdate, rows: Vec<Result<Arc<[f32]>>>) -> Result<()> {
+        self.updates += 1;
+        self.queries += plan.missing.len() as u64;
+        for (&center, row) in plan.missing.iter().zip(rows) {
+            self.cache.insert(center, (row?, self.updates));
+        }
+        for (k, &center) in plan.centers.iter().enumerate() {
+            let entry = self.cache.entry(center).or_insert_with(|| (self.weights[k].clone(), 0));
+            entry.1 = self.updates;
+            if !(self.valid[k] && self.centers[k] == center) {
+                self.weights[k] = entry.0.clone();
+                self.centers[k] = center;
+                self.valid[k] = true;
             }
-            let d = dist.distances(center);
-            if d.len() != n {
-                return Err(Error::Invalid(format!(
-                    "centre distances: expected {n} values for centre {}, got {}",
-                    center,
-                    d.len()
-                )));
+        }
+        // Forget the least recently used rows beyond the cache size.
+        let cap = self.cache_rows();
+        if self.cache.len() > cap {
+            let mut old: Vec<(u64, usize)> =
+                self.cache.iter().filter(|(_, e)| e.1 < self.updates).map(|(&c, e)| (e.1, c)).collect();
+            old.sort_unstable();
+            let excess = self.cache.len() - cap;
+            for (_, c) in old.into_iter().take(excess) {
+                self.cache.remove(&c);
             }
-            self.weights[k] = d.iter().map(|&d| cfg.support_weight(d) as f32).collect();
-            self.centers[k] = center;
-            self.valid[k] = true;
         }
         Ok(())
+    }
+
+    /// Vertices N.
+    pub fn n_vertices(&self) -> usize {
+        self.n
+    }
+
+    /// Computes the squared vertex norms of `c` (`[K, 9N]`) into the maps, for
+    /// [`Self::plan_update`].
+    pub fn set_norms_from(&mut self, c: &[f32]) {
+        let n = self.n;
+        c.par_chunks(9 * n.max(1))
+            .zip(self.sq_norms.par_chunks_mut(n.max(1)))
+            .for_each(|(row, sq)| kernels::vertex_sq_norms(row, sq));
     }
 
     /// Λ as a `[K, N]` tensor (for the Burn reference loss).
@@ -242,6 +373,24 @@ pub fn sparsity_with_grad(c: &[f32], maps: &SupportMaps, scale: f32, grad: &mut 
         .map(|(kk, ((g, row), sq))| kernels::group_sparsity(row, sq, &maps.weights[kk], NORM_EPS * NORM_EPS, scale, g))
         .collect();
     sums.iter().sum::<f64>() / k as f64
+}
+
+/// [`sparsity_with_grad`], and whether every entry of the updated `grad` is finite (checked in
+/// the same pass).
+pub fn sparsity_with_grad_checked(c: &[f32], maps: &SupportMaps, scale: f32, grad: &mut [f32]) -> (f64, bool) {
+    let n = maps.n;
+    let k = maps.k;
+    let parts: Vec<(f64, u32)> = grad
+        .par_chunks_mut(9 * n)
+        .zip(c.par_chunks(9 * n))
+        .zip(maps.sq_norms.par_chunks(n))
+        .enumerate()
+        .map(|(kk, ((g, row), sq))| {
+            kernels::group_sparsity_checked(row, sq, &maps.weights[kk], NORM_EPS * NORM_EPS, scale, g)
+        })
+        .collect();
+    let sum = parts.iter().map(|p| p.0).sum::<f64>() / k as f64;
+    (sum, parts.iter().all(|p| p.1 != kernels::NON_FINITE_EXPONENT))
 }
 
 /// The same loss as a Burn graph (reference for the gradient check; small problems only).

@@ -7,7 +7,7 @@
 //! - [`engine`] + [`kernels`]: the hand-written forward and backward pass used for training and
 //!   inference (f32, SIMD, rayon; checked against Burn autodiff in the tests).
 //! - [`data`]: training data and batching; [`neighbors`]: the 1-ring index.
-//! - [`training`]: [`Trainer`] (Burn's Adam, checkpoints, resume, stop flag).
+//! - [`training`]: [`Trainer`] (Adam, checkpoints, resume, stop flag); [`adam`]: Adam for `C`.
 //! - [`inference`]: [`Autoencoder`] (encode/decode, component analysis, synthesis,
 //!   interpolation, save/load).
 //!
@@ -34,12 +34,21 @@
 //!
 //! # Speed
 //! One training step is a hand-written forward and backward pass (kernels in VCB layout, latent
-//! products as faer GEMMs on the rayon pool), then Burn's Adam on the parameters (`C` is split
-//! into row blocks of [`model::COMPONENT_BLOCK`] components, each with its own optimizer, so the
-//! update runs in parallel). `cargo bench --bench autoencoder` times a step at SCAPE and horse
-//! size and prints where the time goes; `cargo run --release --example ae_synthetic -- --profile
-//! OBJ SHAPES STEPS` does the same for any mesh.
+//! products as faer GEMMs or equivalent hand kernels on the rayon pool), then Adam. The trainer
+//! holds `C` (`K × 9N`, by far the largest parameter) as one plain buffer, the only copy while it
+//! trains: its gradient is never stored whole but computed tile by tile, each tile followed at
+//! once by the sparsity gradient, Adam ([`adam`], Burn's arithmetic), the squared vertex norms of
+//! the new `C` (the next step's support centres) and, for a fixed full batch, the next step's
+//! latent product — one pass over `C` and its moments ([`engine::update_components`]). The
+//! distance queries of centres that moved run beside the forward and backward pass, and a
+//! support row is kept per centre vertex. A Burn module of the parameters is built only for
+//! checkpoints of the layers, the graph engine and the trained model. Every result is
+//! bit-identical to the straightforward computation (Burn's Adam on the stored gradient).
+//! `cargo bench --bench autoencoder` times a step at SCAPE, horse and face-poses size and prints
+//! where the time goes; `cargo run --release --example ae_synthetic -- --profile OBJ SHAPES
+//! STEPS` does the same for any mesh.
 
+pub mod adam;
 pub mod augment;
 pub mod checkpoint;
 pub mod config;

@@ -8,7 +8,8 @@
 //!   `[out, in]`;
 //! - encoder: L layers, tanh (the last one linear when L > 1); flatten vertex-major
 //!   (`f[i·9 + c] = x_i,c`); `z = C·f`, `C ∈ R^{K×9N}` (stored as row blocks of
-//!   [`COMPONENT_BLOCK`] components so that Burn's optimizer can update the blocks in parallel);
+//!   [`COMPONENT_BLOCK`] components: the layout of saved models; training keeps `C` as one plain
+//!   buffer, see [`super::training`]);
 //! - decoder: `f̂ = Cᵀz`, then the layers in reverse order with the transposed weights
 //!   (`y_i = W_pointᵀ·x_i + W_nbᵀ·mean x_j + b_dec`), tanh on every layer.
 
@@ -45,35 +46,41 @@ pub struct AutoencoderModule {
     pub components: Vec<Param<Tensor<2>>>,
 }
 
+/// Initial weights of one layer as plain arrays (`[out][in]` row-major): `W_point`, `W_nb`.
+pub type LayerInit = [Vec<f32>; 2];
+
 impl AutoencoderConfig {
-    /// Initialises the parameters for a mesh of `n_vertices` vertices: weights and `C` from
-    /// N(0, init_std²) drawn from the seeded generator (layer by layer `W_point`, `W_nb`, then
-    /// `C`), biases 0.
-    pub fn init(&self, n_vertices: usize, device: &Device) -> AutoencoderModule {
+    /// The initial parameters as plain arrays for a mesh of `n_vertices` vertices: weights and
+    /// `C` from N(0, init_std²) drawn from the seeded generator (layer by layer `W_point`,
+    /// `W_nb`, then `C` `[K, 9N]`); the biases start at 0.
+    pub fn init_arrays(&self, n_vertices: usize) -> (Vec<LayerInit>, Vec<f32>) {
         let mut rng = Rng::new(self.seed);
         let std = self.init_std;
-        let mut layers = Vec::with_capacity(self.layers);
-        for _ in 0..self.layers {
-            let wp = rng.normal_vec(81, std);
-            let wn = rng.normal_vec(81, std);
-            layers.push(MeshConv {
-                weight_point: Param::from_data(TensorData::new(wp, [9, 9]), device),
-                weight_neighbor: Param::from_data(TensorData::new(wn, [9, 9]), device),
-                bias: Param::from_data(TensorData::new(vec![0.0f32; 9], [9]), device),
-                decoder_bias: Param::from_data(TensorData::new(vec![0.0f32; 9], [9]), device),
-            });
-        }
+        let layers = (0..self.layers).map(|_| [rng.normal_vec(81, std), rng.normal_vec(81, std)]).collect();
         let c = rng.normal_vec(self.components * 9 * n_vertices, std);
-        let components = c
-            .chunks(COMPONENT_BLOCK * 9 * n_vertices)
-            .map(|rows| {
-                Param::from_data(
-                    TensorData::new(rows.to_vec(), [rows.len() / (9 * n_vertices), 9 * n_vertices]),
-                    device,
-                )
-            })
-            .collect();
-        AutoencoderModule { layers, components }
+        (layers, c)
+    }
+
+    /// Initialises the parameters for a mesh of `n_vertices` vertices (the values of
+    /// [`Self::init_arrays`]).
+    pub fn init(&self, n_vertices: usize, device: &Device) -> AutoencoderModule {
+        let (layers, c) = self.init_arrays(n_vertices);
+        AutoencoderModule {
+            layers: layers.iter().map(|[wp, wn]| MeshConv::from_arrays(wp, wn, &[0.0; 9], &[0.0; 9], device)).collect(),
+            components: AutoencoderModule::component_blocks(&c, n_vertices, device),
+        }
+    }
+}
+
+impl MeshConv {
+    /// A layer from plain arrays (`[out][in]` row-major weights).
+    pub fn from_arrays(wp: &[f32], wn: &[f32], bias: &[f32; 9], decoder_bias: &[f32; 9], device: &Device) -> Self {
+        MeshConv {
+            weight_point: Param::from_data(TensorData::new(wp.to_vec(), [9, 9]), device),
+            weight_neighbor: Param::from_data(TensorData::new(wn.to_vec(), [9, 9]), device),
+            bias: Param::from_data(TensorData::new(bias.to_vec(), [9]), device),
+            decoder_bias: Param::from_data(TensorData::new(decoder_bias.to_vec(), [9]), device),
+        }
     }
 }
 
@@ -163,6 +170,14 @@ impl AutoencoderModule {
             nc = c;
         }
         [k, nc]
+    }
+
+    /// `C` (`[K, 9N]` row-major) as fresh parameter blocks of [`COMPONENT_BLOCK`] rows (copies).
+    pub fn component_blocks(c: &[f32], n_vertices: usize, device: &Device) -> Vec<Param<Tensor<2>>> {
+        let nc = 9 * n_vertices;
+        c.chunks(COMPONENT_BLOCK * nc.max(1))
+            .map(|rows| Param::from_data(TensorData::new(rows.to_vec(), [rows.len() / nc.max(1), nc]), device))
+            .collect()
     }
 
     /// `C` as one tensor (the blocks concatenated).

@@ -1,11 +1,16 @@
-//! Training loop: hand-written loss and gradients ([`super::engine`]), Burn's Adam
-//! ([`burn::optim::AdamConfig`]) for the update, checkpoints, resume and a stop flag.
+//! Training loop: hand-written loss and gradients ([`super::engine`]), Adam for the update,
+//! checkpoints, resume and a stop flag.
 //!
-//! The gradients are handed to Burn through [`GradientsParams::register`] keyed by each
-//! parameter's [`burn::module::ParamId`], so the optimizer state lives in Burn and is saved with
-//! Burn's records. A run is deterministic for a given seed (fixed-order reductions), and a run
-//! resumed from a checkpoint reproduces the uninterrupted run.
+//! The trainer owns the latent map `C` as one plain `[K, 9N]` buffer (the only copy while it
+//! trains; the engine reads it in place) and updates it with [`ComponentAdam`], a fused in-place
+//! pass with Burn's Adam arithmetic. The small convolution layers stay Burn parameters: their
+//! hand-computed gradients are handed to Burn's Adam ([`burn::optim::AdamConfig`]) through
+//! [`GradientsParams::register`] keyed by each parameter's [`burn::module::ParamId`]. A Burn
+//! module holding every parameter is built only when asked for ([`Trainer::module`],
+//! [`Trainer::into_model`]). A run is deterministic for a given seed (fixed-order reductions),
+//! and a run resumed from a checkpoint reproduces the uninterrupted run.
 
+use std::cell::OnceCell;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -17,20 +22,20 @@ use burn::store::ModuleRecord;
 use burn::tensor::{Bytes, Device, Tensor, TensorData};
 use serde::Serialize;
 
+use super::adam::ComponentAdam;
 use super::augment::Augmenter;
-use super::checkpoint::{Checkpoint, CheckpointHeader};
+use super::checkpoint::{self, Checkpoint, CheckpointHeader, CheckpointParts};
 use super::config::{AutoencoderConfig, ComputeDevice, EncoderKind, Engine};
 use super::data::TrainingData;
-use super::engine::{self, Grads, Weights, Workspace};
+use super::engine::{self, Grads, Weights, Workspace, layer_weights, tensor_to_vec};
 use super::inference::Autoencoder;
 use super::kernels::padded_width;
 use super::loss::reference_loss;
 use super::loss::{CenterDistances, LossTerms, SupportMaps};
-use super::model::{AutoencoderModule, COMPONENT_BLOCK, NeighborTensors};
+use super::model::{AutoencoderModule, COMPONENT_BLOCK, MeshConv, NeighborTensors};
 use super::neighbors::NeighborIndex;
 use super::rng::Rng;
 use crate::error::{Error, Result};
-use rayon::prelude::*;
 
 /// The CPU device the parameters live on: Burn's ndarray backend (the project's default) with
 /// autodiff enabled, which Burn's optimizer requires of the parameters it updates. The
@@ -74,13 +79,15 @@ pub struct IterationReport {
 /// Wall time of the phases of the last step, seconds.
 #[derive(Debug, Clone, Copy, Default, Serialize)]
 pub struct StepTimings {
-    /// Reading the parameters out of Burn (and checking them).
+    /// Checking the parameters (the layers; `C` only when its last update did not).
     pub snapshot: f64,
-    /// Centres and support maps Λ (including distance queries).
+    /// Centres and support maps Λ. On the default (fused) path the distance queries of the
+    /// centres that moved run beside the forward and backward pass and count there.
     pub support: f64,
-    /// Hand-written forward and backward pass.
+    /// Hand-written forward and backward pass (all but `∂L/∂C` on the fused path).
     pub forward_backward: f64,
-    /// Gradients into Burn and Burn's Adam update.
+    /// The update: Burn's Adam on the layers, Adam on `C` (on the fused path with `∂L/∂C`
+    /// computed tile by tile, and the next step's encoder pass).
     pub optimizer: f64,
 }
 
@@ -117,7 +124,7 @@ struct Validation<'a> {
     x: Vec<f32>,
     workspace: Workspace,
     /// (step, error, parameters) of the lowest validation error so far.
-    best: Option<(usize, f64, AutoencoderModule)>,
+    best: Option<(usize, f64, Weights)>,
 }
 
 /// Mean over the `b` real lanes of the squared error between encode–decode of `x` and `x`.
@@ -143,11 +150,27 @@ pub struct Trainer<'a> {
     neighbors: &'a NeighborIndex,
     distances: &'a dyn CenterDistances,
     device: Device,
-    module: Option<AutoencoderModule>,
-    /// Adam for the convolution layers, and one Adam per row block of `C` (run in parallel).
+    /// The convolution layers as Burn parameters (updated by `optimizer`, Burn's Adam).
+    layers: Option<Vec<MeshConv>>,
     optimizer: ModuleOptimizer,
-    block_optimizers: Vec<ModuleOptimizer>,
+    /// Every parameter as plain arrays: `weights.c` is `C` itself (updated in place by `adam`),
+    /// `weights.layers` mirrors `layers`.
     weights: Weights,
+    /// Adam's state for `C`.
+    adam: ComponentAdam,
+    /// Whether every entry of `weights.c` is known to be finite (the fused update checks it;
+    /// otherwise it is scanned before it is used).
+    c_finite: bool,
+    /// Whether `maps` holds the squared vertex norms of the current `C` (written by the fused
+    /// update).
+    norms_current: bool,
+    /// Whether the workspace already holds the encoder pass of the next step's batch (done by
+    /// the last fused update; see [`engine::update_components`]).
+    encoded_ahead: bool,
+    /// All parameters as a Burn module, built on demand by [`Self::module`] (reset by a step).
+    module_view: OnceCell<AutoencoderModule>,
+    /// Never take the fused path (tests compare the two).
+    plain_updates: bool,
     iteration: usize,
     rng: Rng,
     maps: SupportMaps,
@@ -187,6 +210,11 @@ fn batch_rng(seed: u64) -> Rng {
     Rng::new(seed ^ 0xB47C_4000_0000_0001)
 }
 
+/// A Burn module of the layers only (no component blocks): what checkpoints record of them.
+fn layers_module(layers: Vec<MeshConv>) -> AutoencoderModule {
+    AutoencoderModule { layers, components: Vec::new() }
+}
+
 impl<'a> Trainer<'a> {
     /// A fresh run: validates the configuration and the sizes, initialises the parameters from
     /// `config.seed`.
@@ -196,6 +224,15 @@ impl<'a> Trainer<'a> {
         neighbors: &'a NeighborIndex,
         distances: &'a dyn CenterDistances,
     ) -> Result<Self> {
+        Self::check_sizes(&config, data, neighbors)?;
+        let device = training_device(config.device)?;
+        let (layers, c) = config.init_arrays(data.n_vertices());
+        let layers =
+            layers.iter().map(|[wp, wn]| MeshConv::from_arrays(wp, wn, &[0.0; 9], &[0.0; 9], &device)).collect();
+        Self::with_parameters(config, data, neighbors, distances, device, layers, c)
+    }
+
+    fn check_sizes(config: &AutoencoderConfig, data: &TrainingData, neighbors: &NeighborIndex) -> Result<()> {
         config.validate()?;
         if data.n_vertices() != neighbors.n_vertices() {
             return Err(Error::Invalid(format!(
@@ -204,31 +241,54 @@ impl<'a> Trainer<'a> {
                 neighbors.n_vertices()
             )));
         }
-        let device = training_device(config.device)?;
-        let module = config.init(data.n_vertices(), &device);
+        Ok(())
+    }
+
+    /// A run at step 0 with the given parameters (`c`: `[K, 9N]`).
+    fn with_parameters(
+        config: AutoencoderConfig,
+        data: &'a TrainingData,
+        neighbors: &'a NeighborIndex,
+        distances: &'a dyn CenterDistances,
+        device: Device,
+        layers: Vec<MeshConv>,
+        c: Vec<f32>,
+    ) -> Result<Self> {
+        let n = data.n_vertices();
         let b = config.batch_size.unwrap_or(data.n_shapes()).min(data.n_shapes());
         let bp = padded_width(b + config.augment);
-        let workspace = Workspace::new(data.n_vertices(), config.components, config.layers, bp);
+        let workspace = Workspace::new(n, config.components, config.layers, bp);
         let full_batch = (b == data.n_shapes()).then(|| data.batch_vcb_width(&(0..b).collect::<Vec<_>>(), bp));
         let augmenter = if config.augment > 0 {
-            Some(Augmenter::new(config.augment_mix, config.augment_radius, data.n_vertices(), distances, config.seed)?)
+            Some(Augmenter::new(config.augment_mix, config.augment_radius, n, distances, config.seed)?)
         } else {
             None
         };
-        let n_blocks = module.components.len();
+        let weights = Weights {
+            layers: layer_weights(&layers),
+            k: config.components,
+            n,
+            c,
+            least_squares: config.encoder == EncoderKind::LeastSquares,
+        };
         Ok(Trainer {
             optimizer: adam(&config),
-            block_optimizers: (0..n_blocks).map(|_| adam(&config)).collect(),
-            weights: Weights { layers: Vec::new(), c: Vec::new(), k: 0, n: 0, least_squares: false },
+            layers: Some(layers),
+            weights,
+            adam: ComponentAdam::default(),
+            c_finite: false,
+            norms_current: false,
+            encoded_ahead: false,
+            module_view: OnceCell::new(),
+            plain_updates: false,
             rng: batch_rng(config.seed),
-            maps: SupportMaps::new(config.components, data.n_vertices()),
+            maps: SupportMaps::new(config.components, n),
             grads: Grads { layers: Vec::new(), c: Vec::new() },
             config,
             data,
             neighbors,
             distances,
             device,
-            module: Some(module),
             iteration: 0,
             workspace,
             full_batch,
@@ -264,15 +324,27 @@ impl<'a> Trainer<'a> {
         Ok(self)
     }
 
+    /// Errors (naming the first) if a parameter is not finite; `C` is scanned only when the
+    /// last update did not already check it.
+    fn check_parameters(&self) -> Result<()> {
+        self.weights.check_layers()?;
+        if !self.c_finite {
+            self.weights.check_components()?;
+        }
+        Ok(())
+    }
+
     /// Measures the validation error of the current parameters and keeps them if best.
     fn validate(&mut self) -> Result<Option<f64>> {
-        let Some(v) = self.validation.as_mut() else { return Ok(None) };
-        let module = self.module.as_ref().expect("module present between steps");
-        let mut w = Weights::from_module(module)?;
-        w.least_squares = self.config.encoder == EncoderKind::LeastSquares;
-        let err = feature_error(&mut v.workspace, &w, self.neighbors, &v.x, v.data.n_shapes());
+        if self.validation.is_none() {
+            return Ok(None);
+        }
+        self.check_parameters()?;
+        self.c_finite = true;
+        let v = self.validation.as_mut().expect("validation present");
+        let err = feature_error(&mut v.workspace, &self.weights, self.neighbors, &v.x, v.data.n_shapes());
         if v.best.as_ref().is_none_or(|b| err < b.1) {
-            v.best = Some((self.iteration, err, module.clone()));
+            v.best = Some((self.iteration, err, self.weights.clone()));
         }
         Ok(Some(err))
     }
@@ -303,33 +375,29 @@ impl<'a> Trainer<'a> {
                 data.n_shapes()
             )));
         }
-        let mut t = Trainer::new(config, data, neighbors, distances)?;
-        let record = ModuleRecord::from_bytes(Bytes::from_bytes_vec(ck.module))
-            .map_err(|e| Error::parse(checkpoint, None, format!("module record: {e}")))?;
-        let module = t
-            .module
-            .take()
-            .unwrap()
-            .try_load_record(record)
-            .map_err(|e| Error::parse(checkpoint, None, format!("module record: {e}")))?;
-        t.module = Some(module);
-        if ck.optimizers.len() != 1 + t.block_optimizers.len() {
+        Self::check_sizes(&config, data, neighbors)?;
+        let n = neighbors.n_vertices();
+        if ck.columns != 9 * n || ck.components.len() != config.components * 9 * n {
             return Err(Error::parse(
                 checkpoint,
                 None,
-                format!("expected {} optimizer records, found {}", 1 + t.block_optimizers.len(), ck.optimizers.len()),
+                format!(
+                    "components: {} numbers in rows of {}, expected {} × {}",
+                    ck.components.len(),
+                    ck.columns,
+                    config.components,
+                    9 * n
+                ),
             ));
         }
-        let mut records = ck.optimizers.into_iter();
-        let load = |bytes: Vec<u8>, cfg: &AutoencoderConfig| {
-            adam(cfg)
-                .from_bytes(Bytes::from_bytes_vec(bytes))
-                .map_err(|e| Error::parse(checkpoint, None, format!("optimizer record: {e}")))
-        };
-        t.optimizer = load(records.next().unwrap(), &t.config)?;
-        for (o, r) in t.block_optimizers.iter_mut().zip(records) {
-            *o = load(r, &t.config)?;
-        }
+        let device = training_device(config.device)?;
+        let layers = load_layers(checkpoint, &config, n, ck.layers, &device)?;
+        let optimizer = adam(&config)
+            .from_bytes(Bytes::from_bytes_vec(ck.layers_optimizer))
+            .map_err(|e| Error::parse(checkpoint, None, format!("optimizer record: {e}")))?;
+        let mut t = Self::with_parameters(config, data, neighbors, distances, device, layers, ck.components)?;
+        t.optimizer = optimizer;
+        t.adam = ck.adam;
         t.iteration = ck.header.iteration;
         t.rng = Rng { state: ck.header.rng_state };
         t.last_loss = ck.header.last_loss;
@@ -346,9 +414,21 @@ impl<'a> Trainer<'a> {
         &self.config
     }
 
-    /// The current parameters.
+    /// The current parameters as a Burn module (built on first use after a step: a copy of `C`).
     pub fn module(&self) -> &AutoencoderModule {
-        self.module.as_ref().expect("module present between steps")
+        self.module_view.get_or_init(|| AutoencoderModule {
+            layers: self.layers().clone(),
+            components: AutoencoderModule::component_blocks(&self.weights.c, self.weights.n, &self.device),
+        })
+    }
+
+    /// The current parameters as plain arrays (`C` is the trainer's own buffer).
+    pub fn weights(&self) -> &Weights {
+        &self.weights
+    }
+
+    fn layers(&self) -> &Vec<MeshConv> {
+        self.layers.as_ref().expect("layers present between steps")
     }
 
     /// Current component centres (after at least one step).
@@ -360,23 +440,34 @@ impl<'a> Trainer<'a> {
     /// gradient is not finite.
     pub fn step(&mut self) -> Result<LossTerms> {
         let t0 = Instant::now();
-        let mut w = std::mem::replace(
-            &mut self.weights,
-            Weights { layers: Vec::new(), c: Vec::new(), k: 0, n: 0, least_squares: false },
-        );
-        w.least_squares = self.config.encoder == EncoderKind::LeastSquares;
-        let (module, read) = w.read_module_owned(self.module.take().expect("module present between steps"));
-        self.module = Some(module);
-        read.map_err(|e| Error::Numerical(format!("before iteration {}: {e}", self.iteration + 1)))?;
+        self.weights.least_squares = self.config.encoder == EncoderKind::LeastSquares;
+        self.check_parameters()
+            .map_err(|e| Error::Numerical(format!("before iteration {}: {e}", self.iteration + 1)))?;
+        self.c_finite = true;
         let t1 = Instant::now();
-        self.maps.update(&w.c, &self.config, self.distances)?;
+        let queries = self.maps.distance_queries();
+        if !self.norms_current {
+            self.maps.set_norms_from(&self.weights.c);
+            self.norms_current = true;
+        }
+        let plan = self.maps.plan_update();
+        let fused = self.config.engine == Engine::Hand
+            && engine::fused_update_applies(&self.weights, &self.config)
+            && !self.plain_updates;
+        // The fused path runs the distance queries beside the forward/backward pass (which does
+        // not read the maps); otherwise the maps are complete before it.
+        let mut plan = Some(plan);
+        if !fused {
+            let plan = plan.take().expect("plan");
+            let rows = SupportMaps::query_rows(&plan, self.maps.n_vertices(), &self.config, self.distances);
+            self.maps.apply_update(plan, rows)?;
+        }
         let t2 = Instant::now();
         let n_shapes = self.data.n_shapes();
         let b = self.config.batch_size.unwrap_or(n_shapes).min(n_shapes);
         if self.config.engine == Engine::Graph {
             let idx: Vec<usize> =
                 if b == n_shapes { (0..n_shapes).collect() } else { self.rng.sample_distinct(n_shapes, b) };
-            self.weights = w;
             let terms = self.graph_step(&idx)?;
             self.iteration += 1;
             self.last_loss = Some(terms);
@@ -387,6 +478,7 @@ impl<'a> Trainer<'a> {
                 forward_backward: (t3 - t2).as_secs_f64(),
                 optimizer: 0.0,
             };
+            self.count_step(queries);
             return Ok(terms);
         }
         let bp = self.workspace.width();
@@ -405,28 +497,58 @@ impl<'a> Trainer<'a> {
                 aug.draw(&|s| data.shape(s), n_shapes, &mut self.rng, |row, v| x[row * bp + b + j] = v);
             }
         }
-        let terms = engine::loss_and_grad(
-            &mut self.workspace,
-            &w,
-            self.neighbors,
-            x,
-            b + m,
-            &self.maps,
-            &self.config,
-            &mut self.grads,
-        );
-        let t3 = Instant::now();
+        let terms = match plan {
+            Some(plan) => {
+                let (ws, w, nb, grads, cfg) =
+                    (&mut self.workspace, &self.weights, self.neighbors, &mut self.grads, &self.config);
+                let (dist, n) = (self.distances, self.maps.n_vertices());
+                let encoded = std::mem::take(&mut self.encoded_ahead);
+                let (rows, partial) = rayon::join(
+                    || SupportMaps::query_rows(&plan, n, cfg, dist),
+                    || engine::loss_and_layer_grads(ws, w, nb, x, b + m, cfg, grads, encoded),
+                );
+                self.maps.apply_update(plan, rows)?;
+                engine::finish_loss(partial, &self.maps, &self.config)
+            }
+            None => engine::loss_and_grad(
+                &mut self.workspace,
+                &self.weights,
+                self.neighbors,
+                x,
+                b + m,
+                &self.maps,
+                &self.config,
+                &mut self.grads,
+            ),
+        };
         if !terms.is_finite() {
             return Err(non_finite_loss(self.iteration + 1, &terms));
         }
-        if let Some(p) = self.grads.first_non_finite() {
+        // With the fused update, ∂L/∂C is never stored: it is computed while C is updated, which
+        // is safe when a bound proves every entry finite; otherwise it is stored and checked.
+        let stream =
+            fused && engine::components_gradient_bound(&self.workspace, &self.weights, &self.config).is_finite();
+        if fused && !stream {
+            engine::components_gradient(&mut self.workspace, &self.weights, &self.maps, &self.config, &mut self.grads);
+        }
+        let bad = if stream || self.workspace.gradient_c_finite() {
+            // Only the layers' gradients are left to check.
+            self.grads.first_non_finite_layer()
+        } else {
+            self.grads.first_non_finite()
+        };
+        if let Some(p) = bad {
             return Err(Error::Numerical(format!(
                 "a gradient is not finite at iteration {} ({p}); training stopped and no checkpoint was written for it",
                 self.iteration + 1
             )));
         }
-        self.weights = w;
-        self.apply_gradients();
+        let t3 = Instant::now();
+        self.apply_gradients(stream);
+        if stream {
+            // Nothing keeps the full gradient of C.
+            self.grads.c = Vec::new();
+        }
         self.iteration += 1;
         self.last_loss = Some(terms);
         let t4 = Instant::now();
@@ -436,7 +558,20 @@ impl<'a> Trainer<'a> {
             forward_backward: (t3 - t2).as_secs_f64(),
             optimizer: (t4 - t3).as_secs_f64(),
         };
+        self.count_step(queries);
         Ok(terms)
+    }
+
+    /// Adds the last step's phases to the command's counters (printed with `-v`).
+    fn count_step(&self, queries_before: u64) {
+        let us = |s: f64| (s * 1e6).round() as u64;
+        let t = &self.timings;
+        crate::timing::count("autoencoder steps", 1);
+        crate::timing::count("autoencoder step µs, snapshot", us(t.snapshot));
+        crate::timing::count("autoencoder step µs, support maps", us(t.support));
+        crate::timing::count("autoencoder step µs, forward/backward", us(t.forward_backward));
+        crate::timing::count("autoencoder step µs, optimizer", us(t.optimizer));
+        crate::timing::count("autoencoder distance queries", self.maps.distance_queries() - queries_before);
     }
 
     /// Phase timings of the last completed step.
@@ -449,7 +584,9 @@ impl<'a> Trainer<'a> {
     /// and leaves the parameters untouched when the loss is not finite.
     fn graph_step(&mut self, idx: &[usize]) -> Result<LossTerms> {
         let nb = self.graph_neighbors.get_or_insert_with(|| NeighborTensors::new(self.neighbors, &self.device));
-        let module = self.module.take().expect("module present between steps");
+        let layers = self.layers.take().expect("layers present between steps");
+        let components = AutoencoderModule::component_blocks(&self.weights.c, self.weights.n, &self.device);
+        let module = AutoencoderModule { layers, components };
         let x = match &self.augmenter {
             None => self.data.batch_tensor(idx, &self.device),
             Some(aug) => {
@@ -470,34 +607,49 @@ impl<'a> Trainer<'a> {
         };
         let (loss, terms) = reference_loss(&module, x, nb, &self.maps, &self.config);
         if !terms.is_finite() {
-            self.module = Some(module);
+            self.layers = Some(module.layers);
             return Err(non_finite_loss(self.iteration + 1, &terms));
         }
         let mut grads = GradientsParams::from_grads(loss.backward(), &module);
         let AutoencoderModule { layers, components } = module;
-        let lr = self.config.learning_rate_at(self.iteration);
-        let mut blocks = Vec::with_capacity(components.len());
-        for (p, o) in components.into_iter().zip(self.block_optimizers.iter_mut()) {
+        // C's gradient into the flat buffer the fused update reads.
+        let nc = 9 * self.weights.n;
+        self.grads.c.resize(self.weights.c.len(), 0.0);
+        for (p, dst) in components.iter().zip(self.grads.c.chunks_mut(COMPONENT_BLOCK * nc.max(1))) {
             match grads.remove::<2>(p.id) {
-                Some(g) => {
-                    let mut gp = GradientsParams::new();
-                    gp.register(p.id, g);
-                    blocks.push(o.step(lr, p, gp));
-                }
-                None => blocks.push(p),
+                Some(g) => dst.copy_from_slice(&tensor_to_vec(g)),
+                None => dst.fill(0.0),
             }
         }
+        drop(components);
+        let lr = self.config.learning_rate_at(self.iteration);
         let layers = self.optimizer.step(lr, layers, grads);
-        self.module = Some(AutoencoderModule { layers, components: blocks });
+        self.set_layers(layers);
+        self.update_components(lr);
         Ok(terms)
     }
 
-    /// Registers the hand-computed gradients with Burn and runs Burn's Adam: the layers and
-    /// every row block of `C` are separate modules for separate optimizers, stepped in parallel.
-    fn apply_gradients(&mut self) {
+    /// The layers from Burn's optimizer: kept, and mirrored into the plain weights.
+    fn set_layers(&mut self, layers: Vec<MeshConv>) {
+        self.weights.layers = layer_weights(&layers);
+        self.layers = Some(layers);
+    }
+
+    /// Adam on `C` from `self.grads.c`, in place, with the squared vertex norms of the result
+    /// written for the next step's support maps.
+    fn update_components(&mut self, lr: f64) {
+        self.c_finite = self.adam.step(&self.config, lr, &mut self.weights.c, &self.grads.c, self.maps.sq_norms_mut());
+        self.norms_current = true;
+        self.module_view = OnceCell::new();
+    }
+
+    /// Registers the hand-computed gradients of the layers with Burn and runs Burn's Adam on
+    /// them; then Adam on `C`: from `grads.c`, or with `stream` computing `∂L/∂C` tile by tile
+    /// as it updates ([`engine::update_components`]).
+    fn apply_gradients(&mut self, stream: bool) {
         let dev = self.device.clone().inner();
         let lr = self.config.learning_rate_at(self.iteration);
-        let AutoencoderModule { layers, components } = self.module.take().expect("module present between steps");
+        let layers = self.layers.take().expect("layers present between steps");
         let mut gp = GradientsParams::new();
         let t9x9 = |a: &[[f64; 9]; 9]| -> Tensor<2> {
             let v: Vec<f32> = a.iter().flatten().map(|&x| x as f32).collect();
@@ -512,64 +664,89 @@ impl<'a> Trainer<'a> {
             gp.register(layer.bias.id, t9(&g.b));
             gp.register(layer.decoder_bias.id, t9(&g.bd));
         }
-        let nc = 9 * self.neighbors.n_vertices();
-        let grad_c = &self.grads.c;
-        let opt = &mut self.optimizer;
-        let (layers, components) = rayon::join(
-            || opt.step(lr, layers, gp),
-            || {
-                components
-                    .into_par_iter()
-                    .zip(self.block_optimizers.par_iter_mut())
-                    .enumerate()
-                    .map(|(j, (p, o))| {
-                        let rows = p.lazy_shape().dims::<2>()[0];
-                        let start = j * COMPONENT_BLOCK * nc;
-                        let g = grad_c[start..start + rows * nc].to_vec();
-                        let mut gp = GradientsParams::new();
-                        gp.register(p.id, Tensor::<2>::from_data(TensorData::new(g, [rows, nc]), &dev));
-                        o.step(lr, p, gp)
-                    })
-                    .collect::<Vec<_>>()
-            },
-        );
-        self.module = Some(AutoencoderModule { layers, components });
+        let layers = self.optimizer.step(lr, layers, gp);
+        self.set_layers(layers);
+        if stream {
+            let a = self.adam.begin_step(&self.config, lr, self.weights.c.len());
+            // The next step's batch is this one (full batch, nothing synthetic): encode it with
+            // the new parameters during the update.
+            let next = self
+                .full_batch
+                .as_deref()
+                .filter(|_| self.config.augment == 0 && engine::encode_next_applies(&self.workspace, &self.weights));
+            let mut c = std::mem::take(&mut self.weights.c);
+            self.c_finite = engine::update_components(
+                &mut self.workspace,
+                &self.weights,
+                &mut c,
+                &mut self.adam.moment_1,
+                &mut self.adam.moment_2,
+                &a,
+                &mut self.maps,
+                &self.config,
+                next,
+            );
+            self.weights.c = c;
+            self.encoded_ahead = next.is_some();
+            self.norms_current = true;
+            self.module_view = OnceCell::new();
+        } else {
+            self.update_components(lr);
+        }
     }
 
-    /// The current state as a checkpoint (errors if a parameter is not finite).
-    pub fn checkpoint(&self) -> Result<Checkpoint> {
-        // Never write NaN: the snapshot check covers every parameter.
-        Weights::from_module(self.module())
-            .map_err(|e| Error::Numerical(format!("refusing to write a checkpoint: {e}")))?;
-        let module = self
-            .module()
-            .clone()
+    fn header(&self) -> CheckpointHeader {
+        CheckpointHeader {
+            iteration: self.iteration,
+            rng_state: self.rng.state,
+            config: self.config.clone(),
+            n_vertices: self.neighbors.n_vertices(),
+            n_shapes: self.data.n_shapes(),
+            neighbor_fingerprint: self.neighbors.fingerprint(),
+            last_loss: self.last_loss,
+        }
+    }
+
+    /// The layers' module and optimizer records (burnpack bytes), after checking that every
+    /// parameter is finite (never write NaN).
+    fn layer_records(&self) -> Result<(Vec<u8>, Vec<u8>)> {
+        self.check_parameters().map_err(|e| Error::Numerical(format!("refusing to write a checkpoint: {e}")))?;
+        let layers = layers_module(self.layers().clone())
             .into_record()
             .into_bytes()
             .map_err(|e| Error::Invalid(format!("module record: {e}")))?;
-        let mut optimizers = Vec::with_capacity(1 + self.block_optimizers.len());
-        for o in std::iter::once(&self.optimizer).chain(&self.block_optimizers) {
-            let b = o.into_bytes().map_err(|e| Error::Invalid(format!("optimizer record: {e}")))?;
-            optimizers.push(b.to_vec());
-        }
+        let optimizer = self.optimizer.into_bytes().map_err(|e| Error::Invalid(format!("optimizer record: {e}")))?;
+        Ok((layers.to_vec(), optimizer.to_vec()))
+    }
+
+    /// The current state as a checkpoint (errors if a parameter is not finite). This copies `C`
+    /// and Adam's moments; [`Self::save_checkpoint`] writes them without a copy.
+    pub fn checkpoint(&self) -> Result<Checkpoint> {
+        let (layers, layers_optimizer) = self.layer_records()?;
         Ok(Checkpoint {
-            header: CheckpointHeader {
-                iteration: self.iteration,
-                rng_state: self.rng.state,
-                config: self.config.clone(),
-                n_vertices: self.neighbors.n_vertices(),
-                n_shapes: self.data.n_shapes(),
-                neighbor_fingerprint: self.neighbors.fingerprint(),
-                last_loss: self.last_loss,
-            },
-            module: module.to_vec(),
-            optimizers,
+            header: self.header(),
+            layers,
+            layers_optimizer,
+            components: self.weights.c.clone(),
+            columns: 9 * self.weights.n,
+            adam: self.adam.clone(),
         })
     }
 
-    /// Writes a checkpoint atomically to `path`.
+    /// Writes a checkpoint atomically to `path` (streamed from the trainer's buffers).
     pub fn save_checkpoint(&self, path: &Path) -> Result<()> {
-        self.checkpoint()?.save(path)
+        let (layers, layers_optimizer) = self.layer_records()?;
+        checkpoint::write(
+            path,
+            &CheckpointParts {
+                header: &self.header(),
+                layers: &layers,
+                layers_optimizer: &layers_optimizer,
+                components: &self.weights.c,
+                columns: 9 * self.weights.n,
+                adam: &self.adam,
+            },
+        )
     }
 
     /// Runs until `config.iterations` steps are done or the stop flag is set, calling
@@ -622,13 +799,90 @@ impl<'a> Trainer<'a> {
         })
     }
 
-    /// The trained model for inference.
+    /// The trained model for inference (the parameters of the best validation step, if any).
     pub fn into_model(self) -> Result<Autoencoder> {
-        let module = match self.validation.and_then(|v| v.best) {
+        let Trainer { config, neighbors, weights, validation, .. } = self;
+        // Everything else of the run (Adam's moments, gradients, buffers) is freed here.
+        let weights = match validation.and_then(|v| v.best) {
             Some((_, _, best)) => best,
-            None => self.module.unwrap(),
+            None => weights,
         };
-        let module = module.to_device(&default_device());
-        Autoencoder::new(self.config, module, self.neighbors.clone())
+        Autoencoder::from_weights(config, weights, neighbors.clone())
+    }
+}
+
+/// The layers stored in a checkpoint's module record.
+pub(crate) fn load_layers(
+    path: &Path,
+    config: &AutoencoderConfig,
+    n_vertices: usize,
+    bytes: Vec<u8>,
+    device: &Device,
+) -> Result<Vec<MeshConv>> {
+    let record = ModuleRecord::from_bytes(Bytes::from_bytes_vec(bytes))
+        .map_err(|e| Error::parse(path, None, format!("module record: {e}")))?;
+    let (init, _) = AutoencoderConfig { components: 0, ..config.clone() }.init_arrays(n_vertices);
+    let layers = init.iter().map(|[wp, wn]| MeshConv::from_arrays(wp, wn, &[0.0; 9], &[0.0; 9], device)).collect();
+    let module = layers_module(layers)
+        .try_load_record(record)
+        .map_err(|e| Error::parse(path, None, format!("module record: {e}")))?;
+    Ok(module.layers)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::nn::loss::HopDistances;
+    use crate::representation::Features;
+
+    fn grid(nx: usize, ny: usize) -> (usize, Vec<[usize; 3]>) {
+        let mut f = Vec::new();
+        for y in 0..ny - 1 {
+            for x in 0..nx - 1 {
+                let v = y * nx + x;
+                f.push([v, v + 1, v + nx + 1]);
+                f.push([v, v + nx + 1, v + nx]);
+            }
+        }
+        (nx * ny, f)
+    }
+
+    /// The default step (∂L/∂C streamed into the update, the next encoder pass done ahead, the
+    /// distance queries beside the backward pass) gives the same bits as the plain one (the
+    /// stored gradient of `loss_and_grad`, then Adam): loss terms, parameters and Adam's state.
+    #[test]
+    fn fused_steps_equal_plain_steps_bit_for_bit() {
+        let (n, faces) = grid(13, 11);
+        let nb = NeighborIndex::from_faces(n, &faces).unwrap();
+        let dist = HopDistances::new(&nb);
+        // Full batch of one SIMD block (encoded ahead), of two, and mini-batches.
+        for (shapes, batch_size) in [(6, None), (11, None), (9, Some(4))] {
+            let mut rng = Rng::new(shapes as u64);
+            let mut feats = Features::zeros(shapes, n, 9);
+            for v in feats.data.iter_mut() {
+                *v = rng.uniform() * 1.8 - 0.9;
+            }
+            let data = TrainingData::from_features(&feats).unwrap();
+            let cfg = AutoencoderConfig { components: 6, iterations: 8, batch_size, seed: 5, ..Default::default() };
+            let mut fused = Trainer::new(cfg.clone(), &data, &nb, &dist).unwrap();
+            let mut plain = Trainer::new(cfg, &data, &nb, &dist).unwrap();
+            plain.plain_updates = true;
+            for step in 0..8 {
+                let (a, b) = (fused.step().unwrap(), plain.step().unwrap());
+                assert_eq!(a, b, "{shapes} shapes, step {step}: loss terms differ");
+            }
+            let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(&fused.weights.c), bits(&plain.weights.c), "{shapes} shapes: C differs");
+            assert_eq!(bits(&fused.adam.moment_1), bits(&plain.adam.moment_1));
+            assert_eq!(bits(&fused.adam.moment_2), bits(&plain.adam.moment_2));
+            for (la, lb) in fused.weights.layers.iter().zip(&plain.weights.layers) {
+                assert_eq!(bits(la.wp.as_flattened()), bits(lb.wp.as_flattened()));
+                assert_eq!(bits(la.wn.as_flattened()), bits(lb.wn.as_flattened()));
+                assert_eq!(bits(&la.b), bits(&lb.b));
+                assert_eq!(bits(&la.bd), bits(&lb.bd));
+            }
+            assert_eq!(fused.centers(), plain.centers());
+            assert!(fused.grads.c.is_empty(), "the fused path stored the gradient of C");
+        }
     }
 }
