@@ -122,7 +122,7 @@ fn profile(obj: &str, shapes: usize, steps: usize) {
     let per_step = t0.elapsed().as_secs_f64() / steps as f64;
     let ms = |v: f64| v / steps as f64 * 1e3;
     println!(
-        "N = {n}, {shapes} shapes, K = 50: {:.2} ms/step (snapshot {:.2}, support maps {:.2}, forward/backward {:.2}, Burn Adam {:.2})",
+        "N = {n}, {shapes} shapes, K = 50: {:.2} ms/step (snapshot {:.2}, support maps {:.2}, forward/backward {:.2}, update: Adam and the streamed ∂L/∂C {:.2})",
         per_step * 1e3,
         ms(sum[0]),
         ms(sum[1]),
