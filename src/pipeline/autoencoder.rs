@@ -149,10 +149,7 @@ impl AeArtifact {
         let (own, translations) = self.representation.split_pieces(&self.representation.encode(&scaled)?)?;
         let xs = self.header.scaling.apply(&own)?;
         let mut codes = self.model.encode(&xs)?;
-        let pieces = translated_pieces(&self.representation);
-        for (z, t) in codes.iter_mut().zip(&translations) {
-            z.extend(pieces.iter().flat_map(|&p| t[p]));
-        }
+        append_translations(&self.representation, &mut codes, &translations);
         Ok(codes)
     }
 
@@ -444,6 +441,15 @@ pub fn translated_pieces(representation: &Representation) -> Vec<usize> {
     representation.pieces().map(|(p, _)| (0..p.n_pieces()).filter(|&q| q != p.anchor()).collect()).unwrap_or_default()
 }
 
+/// Appends to each network code its frame's translations of the translated pieces (the code
+/// layout of the module docs; nothing on a mesh in one piece).
+fn append_translations(representation: &Representation, codes: &mut [Vec<f64>], translations: &[Vec<Vec3>]) {
+    let pieces = translated_pieces(representation);
+    for (z, t) in codes.iter_mut().zip(translations) {
+        z.extend(pieces.iter().flat_map(|&p| t[p]));
+    }
+}
+
 /// Summaries of the piece-translation dimensions (after the K network ones): extremes over the
 /// training translations, ranked after the network's, centred on the piece's vertex nearest its
 /// rest centroid.
@@ -590,10 +596,7 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
 
     progress.stage("measuring", 0);
     let mut train_codes = model.encode(&xs_train)?;
-    let pieces = translated_pieces(&representation);
-    for (z, t) in train_codes.iter_mut().zip(&train_t) {
-        z.extend(pieces.iter().flat_map(|&p| t[p]));
-    }
+    append_translations(&representation, &mut train_codes, &train_t);
     let analysis = model.analyze_components(&xs_train, 0)?;
     let mut summaries: Vec<ComponentSummary> = analysis
         .components

@@ -357,39 +357,20 @@ impl Representation {
                 self.width()
             )));
         }
-        let Some((placement, element_piece)) = &self.pieces else {
-            return match &self.codec {
-                Codec::Displacement(d) => d.decode_frame(features),
-                Codec::TriangleGradient(t) => t.decode_frame(features),
-                Codec::Acap(a) => a.decode_frame(features),
-            };
+        let own_decode = |own: &[f64]| match &self.codec {
+            Codec::Displacement(d) => d.decode_frame(own),
+            Codec::TriangleGradient(tg) => tg.decode_frame(own),
+            Codec::Acap(a) => a.decode_frame(own),
         };
-        // Split off the translations; each piece's is the mean over its elements.
-        let (w0, w) = (self.kind.width(), self.width());
-        let mut own = Vec::with_capacity(element_piece.len() * w0);
-        let mut t = vec![[0.0; 3]; placement.n_pieces()];
-        let mut count = vec![0usize; placement.n_pieces()];
-        for (e, &p) in element_piece.iter().enumerate() {
-            let f = &features[e * w..(e + 1) * w];
-            own.extend_from_slice(&f[..w0]);
-            if p != usize::MAX {
-                count[p] += 1;
-                for k in 0..3 {
-                    t[p][k] += f[w0 + k];
-                }
-            }
-        }
-        for (tp, &n) in t.iter_mut().zip(&count) {
-            *tp = tp.map(|v| v / n.max(1) as f64);
-        }
+        let Some((placement, _)) = &self.pieces else {
+            return own_decode(features);
+        };
+        let mut own = Vec::with_capacity(self.n_elements() * self.kind.width());
+        let t = self.split_frame(features, &mut own);
         if let Some((p, _)) = t.iter().enumerate().find(|(_, tp)| tp.iter().any(|v| !v.is_finite())) {
             return Err(Error::Invalid(format!("{} decode: non-finite translation of piece {p}", self.kind.name())));
         }
-        let mut positions = match &self.codec {
-            Codec::Displacement(d) => d.decode_frame(&own),
-            Codec::TriangleGradient(tg) => tg.decode_frame(&own),
-            Codec::Acap(a) => a.decode_frame(&own),
-        }?;
+        let mut positions = own_decode(&own)?;
         placement.place(&mut positions, &t);
         Ok(positions)
     }
@@ -420,42 +401,54 @@ impl Representation {
         Ok(out)
     }
 
+    /// One frame of a multi-piece representation's features (E × (W + 3) numbers): appends the
+    /// kind's own E × W to `own` and returns the P piece translations, each the mean of its
+    /// elements' three extra numbers. Only called when there are pieces.
+    fn split_frame(&self, frame: &[f64], own: &mut Vec<f64>) -> Vec<Vec3> {
+        let Some((placement, element_piece)) = &self.pieces else { return Vec::new() };
+        let (w0, w) = (self.kind.width(), self.width());
+        let mut t = vec![[0.0; 3]; placement.n_pieces()];
+        let mut count = vec![0usize; placement.n_pieces()];
+        for (e, &p) in element_piece.iter().enumerate() {
+            let x = &frame[e * w..(e + 1) * w];
+            own.extend_from_slice(&x[..w0]);
+            if p != usize::MAX {
+                count[p] += 1;
+                for k in 0..3 {
+                    t[p][k] += x[w0 + k];
+                }
+            }
+        }
+        t.iter().zip(&count).map(|(tp, &n)| tp.map(|v| v / n.max(1) as f64)).collect()
+    }
+
     /// Splits features of this representation (width W + 3 on a multi-piece mesh) into the
     /// kind's own features (width W) and, per frame, the P translations `t_p` (the mean of each
     /// piece's elements' three extra numbers). Without pieces: the features and no translations.
     pub fn split_pieces(&self, features: &Features) -> Result<(Features, Vec<Vec<Vec3>>)> {
-        let Some((placement, element_piece)) = &self.pieces else {
+        let Some((_, element_piece)) = &self.pieces else {
             return Ok((features.clone(), Vec::new()));
         };
         let (w0, w) = (self.kind.width(), self.width());
-        if features.width != w || features.n_elements != element_piece.len() {
+        if features.width != w
+            || features.n_elements != element_piece.len()
+            || features.data.len() != features.n_frames * features.n_elements * w
+        {
             return Err(Error::Invalid(format!(
-                "features are {} elements × {}, the {} representation of this mesh has {} × {}",
+                "features are {} elements × {} ({} numbers for {} frames), the {} representation of this mesh has {} × {}",
                 features.n_elements,
                 features.width,
+                features.data.len(),
+                features.n_frames,
                 self.kind.name(),
                 element_piece.len(),
                 w
             )));
         }
-        let mut own = Features::zeros(features.n_frames, features.n_elements, w0);
-        let mut translations = Vec::with_capacity(features.n_frames);
-        for f in 0..features.n_frames {
-            let mut t = vec![[0.0; 3]; placement.n_pieces()];
-            let mut count = vec![0usize; placement.n_pieces()];
-            let dst = own.frame_mut(f);
-            for (e, &p) in element_piece.iter().enumerate() {
-                let x = features.element(f, e);
-                dst[e * w0..(e + 1) * w0].copy_from_slice(&x[..w0]);
-                if p != usize::MAX {
-                    count[p] += 1;
-                    for k in 0..3 {
-                        t[p][k] += x[w0 + k];
-                    }
-                }
-            }
-            translations.push(t.iter().zip(&count).map(|(tp, &n)| tp.map(|v| v / n.max(1) as f64)).collect());
-        }
+        let mut own = Features::zeros(0, features.n_elements, w0);
+        own.n_frames = features.n_frames;
+        own.data.reserve(features.n_frames * features.n_elements * w0);
+        let translations = (0..features.n_frames).map(|f| self.split_frame(features.frame(f), &mut own.data)).collect();
         Ok((own, translations))
     }
 
