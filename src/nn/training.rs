@@ -835,16 +835,10 @@ mod tests {
     use crate::nn::loss::HopDistances;
     use crate::representation::Features;
 
+    /// `nx × ny` vertices (the library's criss-cross grid): vertex count and faces.
     fn grid(nx: usize, ny: usize) -> (usize, Vec<[usize; 3]>) {
-        let mut f = Vec::new();
-        for y in 0..ny - 1 {
-            for x in 0..nx - 1 {
-                let v = y * nx + x;
-                f.push([v, v + 1, v + nx + 1]);
-                f.push([v, v + nx + 1, v + nx]);
-            }
-        }
-        (nx * ny, f)
+        let m = crate::mesh::primitives::grid(nx - 1, ny - 1, 1.0);
+        (m.n_vertices(), m.faces)
     }
 
     /// The default step (∂L/∂C streamed into the update, the next encoder pass done ahead, the
