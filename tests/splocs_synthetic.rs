@@ -22,19 +22,9 @@ fn lcg(seed: u64) -> impl FnMut() -> f64 {
     }
 }
 
-/// Grid vertices (unit square, z = 0) and triangles.
+/// Grid vertices (unit square, z = 0) and triangles: the tests' [`common::unit_grid`], N × N.
 fn grid() -> (Vec<[f64; 3]>, Vec<[usize; 3]>) {
-    let h = 1.0 / (N - 1) as f64;
-    let pos = (0..N * N).map(|i| [(i % N) as f64 * h, (i / N) as f64 * h, 0.0]).collect();
-    let mut faces = Vec::new();
-    for y in 0..N - 1 {
-        for x in 0..N - 1 {
-            let v = y * N + x;
-            faces.push([v, v + 1, v + N + 1]);
-            faces.push([v, v + N + 1, v + N]);
-        }
-    }
-    (pos, faces)
+    common::unit_grid(N, N)
 }
 
 /// Dijkstra distances along mesh edges (Euclidean edge lengths): the library's [`EdgeGraph`] as
