@@ -210,7 +210,7 @@ impl Representation {
         };
         let pieces = match kind {
             RepresentationKind::Displacement => None,
-            _ => PiecePlacement::new(rest).map(|p| {
+            _ => PiecePlacement::new(rest, &topo).map(|p| {
                 let of_vertex = p.piece_of_vertex();
                 let element_piece = match kind.element() {
                     Element::Vertex => of_vertex.to_vec(),

@@ -51,9 +51,9 @@ pub struct PiecePlacement {
 
 impl PiecePlacement {
     /// The placement of `rest`'s pieces, or `None` when the face-referenced vertices form one
-    /// connected piece (nothing to carry).
-    pub fn new(rest: &TriMesh) -> Option<Self> {
-        let (piece_of_vertex, n_pieces) = Topology::new(rest.n_vertices(), &rest.faces).components();
+    /// connected piece (nothing to carry). `topology` is `rest`'s.
+    pub fn new(rest: &TriMesh, topology: &Topology) -> Option<Self> {
+        let (piece_of_vertex, n_pieces) = topology.components();
         if n_pieces < 2 {
             return None;
         }
@@ -182,6 +182,10 @@ impl PiecePlacement {
 mod tests {
     use super::*;
 
+    fn topo(m: &TriMesh) -> Topology {
+        Topology::new(m.n_vertices(), &m.faces)
+    }
+
     fn two_tetras() -> TriMesh {
         let tet = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
         let mut positions: Vec<Vec3> = tet.to_vec();
@@ -197,8 +201,8 @@ mod tests {
     fn one_piece_needs_nothing_and_rest_is_zero() {
         let m = two_tetras();
         let one = TriMesh::new(m.positions[..4].to_vec(), m.faces[..4].to_vec());
-        assert!(PiecePlacement::new(&one).is_none());
-        let p = PiecePlacement::new(&m).unwrap();
+        assert!(PiecePlacement::new(&one, &topo(&one)).is_none());
+        let p = PiecePlacement::new(&m, &topo(&m)).unwrap();
         assert_eq!((p.n_pieces(), p.counts()), (2, &[4usize, 4][..]));
         assert_eq!(p.piece_of_vertex()[8], usize::MAX);
         for t in p.translations(&m.positions) {
@@ -209,7 +213,7 @@ mod tests {
     #[test]
     fn translations_round_trip_up_to_one_global_shift() {
         let m = two_tetras();
-        let p = PiecePlacement::new(&m).unwrap();
+        let p = PiecePlacement::new(&m, &topo(&m)).unwrap();
         // Piece 1 slides by (0.5, −0.25, 2); the whole mesh also moves by (10, 20, 30).
         let mut x = m.positions.clone();
         for (i, q) in x.iter_mut().enumerate() {
