@@ -261,9 +261,9 @@ fn least_squares_encoder_gradients_match_finite_differences() {
     let mut g = Grads::default();
     let loss = |w: &Weights, ws: &mut Workspace| {
         let mut scratch = Grads::default();
-        engine::loss_and_grad(ws, w, &nb, &x, b, &maps, &cfg, &mut scratch).total
+        engine::loss_and_grad(ws, w, &nb, &x, b, &maps, &cfg, &mut scratch, None).total
     };
-    engine::loss_and_grad(&mut ws, &w, &nb, &x, b, &maps, &cfg, &mut g);
+    engine::loss_and_grad(&mut ws, &w, &nb, &x, b, &maps, &cfg, &mut g, None);
     // The entries of C with the largest gradients, and W_point[0][0].
     let mut order: Vec<usize> = (0..g.c.len()).collect();
     order.sort_by(|&i, &j| g.c[j].abs().total_cmp(&g.c[i].abs()));

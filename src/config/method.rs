@@ -364,6 +364,18 @@ pub struct AutoencoderMethod {
     /// Weight of the decorrelation term on the rows of C (0: none).
     #[serde(skip_serializing_if = "is_zero_f64")]
     pub lambda_orthogonal: f64,
+    /// Weight of the vertex term (0: none).
+    #[serde(skip_serializing_if = "is_zero_f64")]
+    pub lambda_vertex: f64,
+    /// Shapes per step the vertex term sees (default 0: all).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub vertex_batch: Option<usize>,
+    /// Fraction of the iterations over which the vertex term's weight ramps up (default 0).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub vertex_warmup: Option<f64>,
+    /// Cap on the vertex term's gradient, in multiples of the feature error's (default 0: none).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub vertex_clip: Option<f64>,
 }
 
 fn is_tied(e: &EncoderKind) -> bool {
@@ -408,6 +420,10 @@ impl Default for AutoencoderMethod {
             validation: d.validation,
             validate_every: None,
             lambda_orthogonal: d.lambda_orthogonal,
+            lambda_vertex: d.lambda_vertex,
+            vertex_batch: None,
+            vertex_warmup: None,
+            vertex_clip: None,
             encoder: d.encoder,
         }
     }
@@ -441,6 +457,10 @@ impl AutoencoderMethod {
             validation: self.validation,
             validate_every: self.validate_every.unwrap_or(d.validate_every),
             lambda_orthogonal: self.lambda_orthogonal,
+            lambda_vertex: self.lambda_vertex,
+            vertex_batch: self.vertex_batch.unwrap_or(d.vertex_batch),
+            vertex_warmup: self.vertex_warmup.unwrap_or(d.vertex_warmup),
+            vertex_clip: self.vertex_clip.unwrap_or(d.vertex_clip),
             encoder: self.encoder,
             ..d
         }

@@ -69,6 +69,26 @@ pub struct AutoencoderConfig {
     /// (0: none, the paper). With near-orthogonal rows the tied encoder `z = C·f` inverts the
     /// decoder `f̂ = Cᵀz` for every code, not only the training shapes' codes.
     pub lambda_orthogonal: f64,
+    /// Weight λv of the vertex term: the squared distance between the ACAP reconstructions of
+    /// each decoded shape and of its input, summed over the vertices, in units of the rest
+    /// bounding-box diagonal (0: none, the paper, which measures the error in feature space
+    /// only). The trainer needs an [`super::output_loss::OutputLoss`] for it
+    /// ([`super::Trainer::with_output_loss`]); only the hand engine computes it.
+    pub lambda_vertex: f64,
+    /// Shapes of each step's batch (synthetic ones included) that the vertex term sees, drawn
+    /// afresh every step (its cost is two sparse solves per shape); 0 or at least the batch:
+    /// all of them.
+    pub vertex_batch: usize,
+    /// Fraction of `iterations` over which the vertex term's weight rises linearly from 0 to
+    /// `lambda_vertex` (in [0, 1]; 0: the full weight from the first step). Early decodings are
+    /// far from any shape, and their vertex error can swamp the feature error.
+    pub vertex_warmup: f64,
+    /// Cap on the vertex term's gradient (with respect to the decoded features, in norm over the
+    /// batch): at most this many times the feature error's (≥ 0; 0: no cap). The term is stiff
+    /// (a rotation error at a joint moves a whole limb) and can take over the step and run away
+    /// (horse gallop, 5 shapes, λv = 3: the loss rose from 2 to 33 000 in 25 steps); on SCAPE
+    /// a cap of 2 binds often and costs accuracy.
+    pub vertex_clip: f64,
 }
 
 /// How a training step computes the loss and the gradients.
@@ -158,12 +178,24 @@ impl Default for AutoencoderConfig {
             validation: 0,
             validate_every: 50,
             lambda_orthogonal: 0.0,
+            lambda_vertex: 0.0,
+            vertex_batch: 0,
+            vertex_warmup: 0.0,
+            vertex_clip: 0.0,
             encoder: EncoderKind::Tied,
         }
     }
 }
 
 impl AutoencoderConfig {
+    /// Weight of the vertex term at 0-based step `t`: `lambda_vertex`, ramped up linearly over
+    /// the first `vertex_warmup · iterations` steps (a function of the step number only, so
+    /// `--resume` is unaffected).
+    pub fn lambda_vertex_at(&self, t: usize) -> f64 {
+        let ramp = self.vertex_warmup * self.iterations as f64;
+        if ramp <= 0.0 { self.lambda_vertex } else { self.lambda_vertex * ((t + 1) as f64 / ramp).min(1.0) }
+    }
+
     /// Adam step size of 0-based step `t` (see [`AutoencoderConfig::learning_rate_final`]).
     pub fn learning_rate_at(&self, t: usize) -> f64 {
         match self.learning_rate_final {
@@ -219,6 +251,11 @@ impl AutoencoderConfig {
         nonneg("lambda1", self.lambda1)?;
         nonneg("lambda2", self.lambda2)?;
         nonneg("lambda_orthogonal", self.lambda_orthogonal)?;
+        nonneg("lambda_vertex", self.lambda_vertex)?;
+        nonneg("vertex_clip", self.vertex_clip)?;
+        if !(self.vertex_warmup.is_finite() && (0.0..=1.0).contains(&self.vertex_warmup)) {
+            return Err(bad("vertex_warmup", format!("{} must be in [0, 1]", self.vertex_warmup)));
+        }
         nonneg("theta", self.theta)?;
         nonneg("d_min", self.d_min)?;
         nonneg("d_max", self.d_max)?;
@@ -240,6 +277,12 @@ impl AutoencoderConfig {
                 "encoder",
                 "encoder = \"least-squares\" needs engine = \"hand\" (the graph engine has the tied encoder only)"
                     .into(),
+            ));
+        }
+        if self.lambda_vertex > 0.0 && self.engine == Engine::Graph {
+            return Err(bad(
+                "lambda_vertex",
+                format!("{} needs engine = \"hand\" (the graph engine has no vertex term)", self.lambda_vertex),
             ));
         }
         if self.device == ComputeDevice::Wgpu {

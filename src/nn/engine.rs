@@ -16,6 +16,7 @@ use super::kernels::{self, Acc9, Mat9, transpose9};
 use super::loss::{LossTerms, NORM_EPS, SupportMaps, sparsity_with_grad_checked};
 use super::model::{AutoencoderModule, COMPONENT_BLOCK};
 use super::neighbors::NeighborIndex;
+use super::output_loss::OutputTerm;
 use crate::error::{Error, Result};
 
 /// Weights of one layer as plain arrays.
@@ -461,6 +462,9 @@ fn acc9_add_transposed(dst: &mut Acc9, src: &Acc9) {
 struct Partial {
     reconstruction: f64,
     hinge: f64,
+    /// The [`OutputLoss`] term (0 without one) and its weight this step.
+    vertex: f64,
+    vertex_weight: f64,
     /// The least-squares encoder's `−(u·zᵀ + z·uᵀ)` (`[K, K]`), whose product with `C` is part
     /// of `∂L/∂C`.
     sym: Option<Vec<f32>>,
@@ -481,6 +485,7 @@ fn backward_except_components(
     cfg: &AutoencoderConfig,
     grads: &mut Grads,
     encoded: bool,
+    output_term: Option<OutputTerm<'_>>,
 ) -> Partial {
     let (n, bp, k) = (ws.n, ws.bp, ws.k);
     let r = 9 * bp;
@@ -499,6 +504,27 @@ fn backward_except_components(
     // Reconstruction: dG_L = (2/B)(X̂ − X) on real lanes.
     let sse = kernels::squared_error(&ws.dec[l], x, &ws.mask, (2.0 * inv_b) as f32, &mut ws.d_a);
     let reconstruction = sse * inv_b;
+    // The caller's term on the decoded shapes (the vertex term): the mean over the lanes it
+    // sees (all, or a sample of them), with this step's weight. Its gradient goes through
+    // ws.d_b (free until the decoder backward) so that its norm can be capped at
+    // `vertex_clip` times the feature error's.
+    let (vertex, vertex_weight) = match output_term {
+        Some((o, lanes, weight)) if weight > 0.0 && !lanes.is_empty() => {
+            assert!(lanes.iter().all(|&j| j < b_real), "output-loss lanes beyond the batch");
+            let inv = 1.0 / lanes.len() as f64;
+            ws.d_b.fill(0.0);
+            let v = o.add_loss_and_grad(x, &ws.dec[l], bp, lanes, (weight * inv) as f32, &mut ws.d_b) * inv;
+            let norm = |a: &[f32]| a.iter().map(|&g| g as f64 * g as f64).sum::<f64>().sqrt();
+            let (f, g) = (norm(&ws.d_a), norm(&ws.d_b));
+            let c =
+                if cfg.vertex_clip > 0.0 && g > cfg.vertex_clip * f { (cfg.vertex_clip * f / g) as f32 } else { 1.0 };
+            for (a, b) in ws.d_a.iter_mut().zip(&ws.d_b) {
+                *a += c * b;
+            }
+            (v, weight)
+        }
+        _ => (0.0, 0.0),
+    };
 
     // Decoder backward. ws.d_a holds ∂L/∂G_{d+1}.
     grads.layers.resize(l, LayerGrads { wp: [[0.0; 9]; 9], wn: [[0.0; 9]; 9], b: [0.0; 9], bd: [0.0; 9] });
@@ -599,7 +625,7 @@ fn backward_except_components(
             std::mem::swap(&mut ws.d_a, &mut ws.d_b);
         }
     }
-    Partial { reconstruction, hinge, sym }
+    Partial { reconstruction, hinge, vertex, vertex_weight, sym }
 }
 
 /// Loss and gradients for one batch.
@@ -616,8 +642,9 @@ pub fn loss_and_grad(
     maps: &SupportMaps,
     cfg: &AutoencoderConfig,
     grads: &mut Grads,
+    output_term: Option<OutputTerm<'_>>,
 ) -> LossTerms {
-    let part = backward_except_components(ws, w, nb, x, b_real, cfg, grads, false);
+    let part = backward_except_components(ws, w, nb, x, b_real, cfg, grads, false, output_term);
     component_gradient(ws, w, b_real, part.sym.as_deref(), grads);
     let (sparsity, orthogonality) = component_penalties(ws, w, maps, cfg, grads);
     terms(cfg, &part, sparsity, orthogonality)
@@ -628,11 +655,13 @@ fn terms(cfg: &AutoencoderConfig, part: &Partial, sparsity: f64, orthogonality: 
         total: part.reconstruction
             + cfg.lambda1 * sparsity
             + cfg.lambda2 * part.hinge
-            + cfg.lambda_orthogonal * orthogonality,
+            + cfg.lambda_orthogonal * orthogonality
+            + part.vertex_weight * part.vertex,
         reconstruction: part.reconstruction,
         sparsity,
         hinge: part.hinge,
         orthogonality,
+        vertex: part.vertex,
     }
 }
 
@@ -691,6 +720,8 @@ fn component_penalties(
 pub struct PartialLoss {
     reconstruction: f64,
     hinge: f64,
+    vertex: f64,
+    vertex_weight: f64,
 }
 
 /// The loss of one batch (but its sparsity term) and the gradients of the layers, with `∂L/∂C`
@@ -710,18 +741,30 @@ pub fn loss_and_layer_grads(
     cfg: &AutoencoderConfig,
     grads: &mut Grads,
     encoded: bool,
+    output_term: Option<OutputTerm<'_>>,
 ) -> PartialLoss {
     assert!(fused_update_applies(w, cfg), "the fused update needs the linear encoder and lambda_orthogonal = 0");
     assert!(!encoded || b_real == ws.b_real, "the batch encoded ahead has another width");
-    let part = backward_except_components(ws, w, nb, x, b_real, cfg, grads, encoded);
+    let part = backward_except_components(ws, w, nb, x, b_real, cfg, grads, encoded, output_term);
     ws.b_real = b_real;
-    PartialLoss { reconstruction: part.reconstruction, hinge: part.hinge }
+    PartialLoss {
+        reconstruction: part.reconstruction,
+        hinge: part.hinge,
+        vertex: part.vertex,
+        vertex_weight: part.vertex_weight,
+    }
 }
 
 /// The loss terms of [`loss_and_layer_grads`] with the sparsity term from the squared vertex
 /// norms in `maps` (updated for the current `C`).
 pub fn finish_loss(p: PartialLoss, maps: &SupportMaps, cfg: &AutoencoderConfig) -> LossTerms {
-    let part = Partial { reconstruction: p.reconstruction, hinge: p.hinge, sym: None };
+    let part = Partial {
+        reconstruction: p.reconstruction,
+        hinge: p.hinge,
+        vertex: p.vertex,
+        vertex_weight: p.vertex_weight,
+        sym: None,
+    };
     terms(cfg, &part, sparsity_from_norms(maps), 0.0)
 }
 

@@ -137,6 +137,11 @@ pub struct LossTerms {
     /// `(1/K) Σ_{k≠l} (C_k·C_l)² / (‖C_k‖² ‖C_l‖²)` (computed only when `lambda_orthogonal > 0`).
     #[serde(default)]
     pub orthogonality: f64,
+    /// `(1/B) Σ_b Σ_i ‖p_i(X̂_b) − p_i(X_b)‖² / d²`: the decoded and the input features'
+    /// reconstructed vertices p, d the rest bounding-box diagonal (computed only when
+    /// `lambda_vertex > 0`).
+    #[serde(default)]
+    pub vertex: f64,
 }
 
 impl LossTerms {
@@ -147,6 +152,7 @@ impl LossTerms {
             && self.sparsity.is_finite()
             && self.hinge.is_finite()
             && self.orthogonality.is_finite()
+            && self.vertex.is_finite()
     }
 }
 
@@ -438,6 +444,7 @@ pub fn reference_loss(
         sparsity: scalar(sparsity.detach()),
         hinge: scalar(hinge.detach()),
         orthogonality: orthogonality.map(|o| scalar(o.detach())).unwrap_or(0.0),
+        vertex: 0.0,
     };
     (total, terms)
 }

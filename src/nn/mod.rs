@@ -6,6 +6,8 @@
 //! - [`loss`]: the loss terms, the support maps Λ and the [`CenterDistances`] trait.
 //! - [`engine`] + [`kernels`]: the hand-written forward and backward pass used for training and
 //!   inference (f32, SIMD, rayon; checked against Burn autodiff in the tests).
+//! - [`output_loss`]: [`OutputLoss`], a caller's loss on the decoded features (the vertex
+//!   term).
 //! - [`data`]: training data and batching; [`neighbors`]: the 1-ring index.
 //! - [`training`]: [`Trainer`] (Adam, checkpoints, resume, stop flag); [`adam`]: Adam for `C`.
 //! - [`inference`]: [`Autoencoder`] (encode/decode, component analysis, synthesis,
@@ -60,6 +62,7 @@ pub mod latent_fit;
 pub mod loss;
 pub mod model;
 pub mod neighbors;
+pub mod output_loss;
 pub use crate::rng;
 pub mod training;
 
@@ -69,4 +72,5 @@ pub use inference::{Autoencoder, ComponentAnalysis, ComponentExtreme};
 pub use loss::{CenterDistances, EuclideanDistances, HopDistances, LossTerms};
 pub use model::AutoencoderModule;
 pub use neighbors::NeighborIndex;
+pub use output_loss::OutputLoss;
 pub use training::{IterationReport, RunOptions, RunSummary, StepTimings, Trainer};

@@ -34,6 +34,7 @@ use super::loss::reference_loss;
 use super::loss::{CenterDistances, LossTerms, SupportMaps};
 use super::model::{AutoencoderModule, COMPONENT_BLOCK, MeshConv, NeighborTensors};
 use super::neighbors::NeighborIndex;
+use super::output_loss::OutputLoss;
 use super::rng::Rng;
 use crate::error::{Error, Result};
 
@@ -186,6 +187,10 @@ pub struct Trainer<'a> {
     /// The mini-batch buffer (VCB, padded width of batch + synthetic shapes).
     batch_buf: Vec<f32>,
     validation: Option<Validation<'a>>,
+    /// The caller's term on the decoded shapes (`lambda_vertex`).
+    output_loss: Option<&'a dyn OutputLoss>,
+    /// The lanes the vertex term sees this step (all, or `vertex_batch` drawn each step).
+    vertex_lanes: Vec<usize>,
 }
 
 fn adam(cfg: &AutoencoderConfig) -> ModuleOptimizer {
@@ -298,7 +303,16 @@ impl<'a> Trainer<'a> {
             augmenter,
             batch_buf: Vec::new(),
             validation: None,
+            output_loss: None,
+            vertex_lanes: Vec::new(),
         })
+    }
+
+    /// Gives the run the vertex term's loss (`lambda_vertex > 0` needs one; it is weighted by
+    /// `lambda_vertex` and sees the same lanes as the feature error, synthetic shapes included).
+    pub fn with_output_loss(mut self, loss: &'a dyn OutputLoss) -> Self {
+        self.output_loss = Some(loss);
+        self
     }
 
     /// Gives the run held-out shapes (`config.validation > 0`): every `validate_every` steps
@@ -440,6 +454,15 @@ impl<'a> Trainer<'a> {
     /// gradient is not finite.
     pub fn step(&mut self) -> Result<LossTerms> {
         let t0 = Instant::now();
+        if self.config.lambda_vertex > 0.0 && self.output_loss.is_none() {
+            return Err(Error::config(
+                "lambda_vertex",
+                format!(
+                    "{} needs the vertex loss of the representation (Trainer::with_output_loss)",
+                    self.config.lambda_vertex
+                ),
+            ));
+        }
         self.weights.least_squares = self.config.encoder == EncoderKind::LeastSquares;
         self.check_parameters()
             .map_err(|e| Error::Numerical(format!("before iteration {}: {e}", self.iteration + 1)))?;
@@ -497,15 +520,28 @@ impl<'a> Trainer<'a> {
                 aug.draw(&|s| data.shape(s), n_shapes, &mut self.rng, |row, v| x[row * bp + b + j] = v);
             }
         }
+        if self.output_loss.is_some() {
+            let lanes = b + m;
+            let v = self.config.vertex_batch;
+            self.vertex_lanes = if v == 0 || v >= lanes {
+                (0..lanes).collect()
+            } else {
+                let mut l = self.rng.sample_distinct(lanes, v);
+                l.sort_unstable();
+                l
+            };
+        }
         let terms = match plan {
             Some(plan) => {
                 let (ws, w, nb, grads, cfg) =
                     (&mut self.workspace, &self.weights, self.neighbors, &mut self.grads, &self.config);
+                let weight = self.config.lambda_vertex_at(self.iteration);
+                let output_term = self.output_loss.map(|o| (o, &self.vertex_lanes[..], weight));
                 let (dist, n) = (self.distances, self.maps.n_vertices());
                 let encoded = std::mem::take(&mut self.encoded_ahead);
                 let (rows, partial) = rayon::join(
                     || SupportMaps::query_rows(&plan, n, cfg, dist),
-                    || engine::loss_and_layer_grads(ws, w, nb, x, b + m, cfg, grads, encoded),
+                    || engine::loss_and_layer_grads(ws, w, nb, x, b + m, cfg, grads, encoded, output_term),
                 );
                 self.maps.apply_update(plan, rows)?;
                 engine::finish_loss(partial, &self.maps, &self.config)
@@ -519,6 +555,7 @@ impl<'a> Trainer<'a> {
                 &self.maps,
                 &self.config,
                 &mut self.grads,
+                self.output_loss.map(|o| (o, &self.vertex_lanes[..], self.config.lambda_vertex_at(self.iteration))),
             ),
         };
         if !terms.is_finite() {

@@ -37,10 +37,10 @@ use serde::{Deserialize, Serialize};
 
 use super::autoencoder::AeArtifact;
 use crate::error::{Error, Result};
-use crate::math::mat3::{Mat3, exp_so3, mat_mul, unskew};
+use crate::math::mat3::Mat3;
 use crate::mesh::Vec3;
 use crate::nn::latent_fit::DecoderVjp;
-use crate::representation::acap::Acap;
+use crate::representation::acap::{Acap, feature_transform, feature_transform_jacobian};
 
 /// Hyperparameters of [`AePoser`].
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -104,45 +104,6 @@ pub struct AePoser<'a> {
     config: AePoseConfig,
 }
 
-/// T = exp(logR)·S from the 9 unscaled ACAP features of one vertex (DESIGN.md layout).
-fn transform(f: &[f64]) -> Mat3 {
-    let r = exp_so3(unskew(&[[0.0, f[0], f[1]], [-f[0], 0.0, f[2]], [-f[1], -f[2], 0.0]]));
-    let s = [[f[3], f[4], f[5]], [f[4], f[6], f[7]], [f[5], f[7], f[8]]];
-    mat_mul(&r, &s)
-}
-
-/// ∂T/∂f_q for q = 0..9 (rotation part by central differences, S part exact).
-fn transform_jacobian(f: &[f64]) -> [Mat3; 9] {
-    const H: f64 = 1e-6;
-    let mut out = [[[0.0; 3]; 3]; 9];
-    let mut fp = [0.0; 9];
-    fp.copy_from_slice(&f[..9]);
-    for (q, o) in out.iter_mut().enumerate().take(3) {
-        let mut a = fp;
-        let mut b = fp;
-        a[q] += H;
-        b[q] -= H;
-        let (ta, tb) = (transform(&a), transform(&b));
-        for i in 0..3 {
-            for j in 0..3 {
-                o[i][j] = (ta[i][j] - tb[i][j]) / (2.0 * H);
-            }
-        }
-    }
-    let r = exp_so3(unskew(&[[0.0, f[0], f[1]], [-f[0], 0.0, f[2]], [-f[1], -f[2], 0.0]]));
-    // S entries: (q, [(row, col)]) of the symmetric matrix.
-    let pos: [&[(usize, usize)]; 6] =
-        [&[(0, 0)], &[(0, 1), (1, 0)], &[(0, 2), (2, 0)], &[(1, 1)], &[(1, 2), (2, 1)], &[(2, 2)]];
-    for (q, cells) in pos.iter().enumerate() {
-        let mut ds = [[0.0; 3]; 3];
-        for &(i, j) in cells.iter() {
-            ds[i][j] = 1.0;
-        }
-        out[q + 3] = mat_mul(&r, &ds);
-    }
-    out
-}
-
 impl<'a> AePoser<'a> {
     /// Prepares posing of `artifact` with the constrained `vertices` (indices into the rest
     /// mesh, distinct or not). Runs one adjoint solve per vertex. Errors on an empty or
@@ -179,11 +140,11 @@ impl<'a> AePoser<'a> {
             kappa.push(zero_t[v]);
         }
         // Feature scaling x̂ = (f − c)·a per dimension: recover (1/a, c) from the inverse map.
-        let mut zero = vec![0.0; 9];
-        let mut one = vec![1.0; 9];
-        artifact.header.scaling.invert_in_place(&mut zero)?;
-        artifact.header.scaling.invert_in_place(&mut one)?;
-        let unscale = std::array::from_fn(|q| (one[q] - zero[q], zero[q]));
+        let inverse = artifact.header.scaling.inverse_affine();
+        if inverse.len() != 9 {
+            return Err(Error::Invalid(format!("the model's feature scaling has width {}, not 9", inverse.len())));
+        }
+        let unscale = std::array::from_fn(|q| inverse[q]);
         let pieces = super::autoencoder::translated_pieces(&artifact.representation);
         let piece_derivatives = match artifact.representation.pieces() {
             Some((placement, _)) => {
@@ -223,7 +184,7 @@ impl<'a> AePoser<'a> {
     /// Constrained positions (model units) from scaled features.
     fn positions(&self, xs: &[f64]) -> Vec<Vec3> {
         let f = self.unscaled(xs);
-        let t: Vec<Mat3> = f.chunks_exact(9).map(transform).collect();
+        let t: Vec<Mat3> = f.chunks_exact(9).map(feature_transform).collect();
         self.g
             .iter()
             .zip(&self.kappa)
@@ -274,7 +235,7 @@ impl<'a> AePoser<'a> {
             let n = f.len() / 9;
             let mut u = vec![vec![0.0; 9 * n]; 3 * nv];
             for i in 0..n {
-                let dt = transform_jacobian(&f[9 * i..9 * i + 9]);
+                let dt = feature_transform_jacobian(&f[9 * i..9 * i + 9]);
                 for (a, g) in self.g.iter().enumerate() {
                     let gi = g[i];
                     if gi == [0.0; 3] {

@@ -28,6 +28,7 @@ use serde::{Deserialize, Serialize};
 
 use super::ae_fit::AeFitEncoder;
 use super::ae_pose::AePoser;
+use super::ae_vertex_loss::AcapVertexLoss;
 use super::geodesic_support::GeodesicSupport;
 use super::linear::{rest_from_arrays, rest_to_arrays};
 use super::pose::{PoseOptions, PoseResult, single_frame};
@@ -540,6 +541,16 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
         (all, None)
     };
 
+    // The vertex term (`lambda_vertex`): the decoded shapes' error on the reconstructed vertices.
+    let vertex_loss = if ae_cfg.lambda_vertex > 0.0 {
+        let acap = representation
+            .acap()
+            .ok_or_else(|| Error::Invalid("lambda_vertex needs the ACAP representation".into()))?;
+        Some(AcapVertexLoss::new(acap, &scaling)?)
+    } else {
+        None
+    };
+
     std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
     let mut trainer = if ctx.resume {
         Trainer::resume(&checkpoint, ae_cfg.clone(), &data, &neighbors, &distances)?
@@ -548,6 +559,9 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
     };
     if let Some(val) = &held_out {
         trainer = trainer.with_validation(val)?;
+    }
+    if let Some(v) = &vertex_loss {
+        trainer = trainer.with_output_loss(v);
     }
     let log_path = out.join(LOG_FILE);
     let mut log = std::fs::OpenOptions::new()
@@ -565,13 +579,20 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
     let summary = trainer.run(&RunOptions { checkpoint: Some(checkpoint.clone()), stop: ctx.stop.clone() }, |r| {
         let l = &r.loss;
         let line = format!(
-            "{{\"iteration\":{},\"loss\":{},\"reconstruction\":{},\"sparsity\":{},\"hinge\":{},\"orthogonality\":{},\"step_seconds\":{},\"checkpoint\":{}}}\n",
-            r.iteration, l.total, l.reconstruction, l.sparsity, l.hinge, l.orthogonality, r.step_seconds, r.checkpointed
+            "{{\"iteration\":{},\"loss\":{},\"reconstruction\":{},\"sparsity\":{},\"hinge\":{},\"orthogonality\":{},\"vertex\":{},\"step_seconds\":{},\"checkpoint\":{}}}\n",
+            r.iteration, l.total, l.reconstruction, l.sparsity, l.hinge, l.orthogonality, l.vertex, r.step_seconds, r.checkpointed
         );
         if let Err(e) = log.write_all(line.as_bytes()) {
             log_error.get_or_insert(e);
         }
-        progress.step(r.iteration as u64, &format!("loss {:.4} (rec {:.4}, sparse {:.4}, hinge {:.4})", l.total, l.reconstruction, l.sparsity, l.hinge));
+        let vertex = if l.vertex > 0.0 { format!(", vertex {:.4}", l.vertex) } else { String::new() };
+        progress.step(
+            r.iteration as u64,
+            &format!(
+                "loss {:.4} (rec {:.4}, sparse {:.4}, hinge {:.4}{vertex})",
+                l.total, l.reconstruction, l.sparsity, l.hinge
+            ),
+        );
     })?;
     let train_seconds = t_train.elapsed().as_secs_f64();
     if let Some((it, err)) = summary.best {

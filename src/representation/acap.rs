@@ -35,9 +35,9 @@
 
 pub use crate::math::mat3::Mat3;
 use crate::math::mat3::{
-    IDENTITY, add_outer, axis_angle, exp_so3, inverse, mat_mul, polar_decomposition, skew, unskew,
+    IDENTITY, add_outer, axis_angle, exp_so3, inverse, mat_mul, polar_decomposition, skew, transpose, unskew,
 };
-use crate::math::vec3::{dist, dot, norm, scale, sub};
+use crate::math::vec3::{cross, dist, dot, norm, scale, sub};
 use crate::mesh::normals::{NormalWeighting, vertex_normals};
 use crate::mesh::{Topology, TriMesh, Vec3};
 use crate::representation::Features;
@@ -460,14 +460,7 @@ impl Acap {
                 k % WIDTH
             )));
         }
-        let t: Vec<Mat3> = features
-            .chunks_exact(WIDTH)
-            .map(|f| {
-                let r = exp_so3(unskew(&[[0.0, f[0], f[1]], [-f[0], 0.0, f[2]], [-f[1], -f[2], 0.0]]));
-                let s = [[f[3], f[4], f[5]], [f[4], f[6], f[7]], [f[5], f[7], f[8]]];
-                mat_mul(&r, &s)
-            })
-            .collect();
+        let t: Vec<Mat3> = features.chunks_exact(WIDTH).map(feature_transform).collect();
         self.decode_transforms(&t)
     }
 
@@ -516,6 +509,90 @@ impl Acap {
     }
 }
 
+/// T = exp(logR)·S of one vertex from its 9 unscaled ACAP features (layout in the module docs).
+pub fn feature_transform(f: &[f64]) -> Mat3 {
+    let r = exp_so3(unskew(&[[0.0, f[0], f[1]], [-f[0], 0.0, f[2]], [-f[1], -f[2], 0.0]]));
+    let s = [[f[3], f[4], f[5]], [f[4], f[6], f[7]], [f[5], f[7], f[8]]];
+    mat_mul(&r, &s)
+}
+
+/// ∂T/∂f_q of [`feature_transform`] for q = 0..9 (rotation part by central differences of
+/// Rodrigues' formula, step 1e-6; S part exact).
+pub fn feature_transform_jacobian(f: &[f64]) -> [Mat3; 9] {
+    const H: f64 = 1e-6;
+    let mut out = [[[0.0; 3]; 3]; 9];
+    let mut fp = [0.0; 9];
+    fp.copy_from_slice(&f[..9]);
+    for (q, o) in out.iter_mut().enumerate().take(3) {
+        let mut a = fp;
+        let mut b = fp;
+        a[q] += H;
+        b[q] -= H;
+        let (ta, tb) = (feature_transform(&a), feature_transform(&b));
+        for i in 0..3 {
+            for j in 0..3 {
+                o[i][j] = (ta[i][j] - tb[i][j]) / (2.0 * H);
+            }
+        }
+    }
+    let r = exp_so3(unskew(&[[0.0, f[0], f[1]], [-f[0], 0.0, f[2]], [-f[1], -f[2], 0.0]]));
+    // S entries: (q, [(row, col)]) of the symmetric matrix.
+    let pos: [&[(usize, usize)]; 6] =
+        [&[(0, 0)], &[(0, 1), (1, 0)], &[(0, 2), (2, 0)], &[(1, 1)], &[(1, 2), (2, 1)], &[(2, 2)]];
+    for (q, cells) in pos.iter().enumerate() {
+        let mut ds = [[0.0; 3]; 3];
+        for &(i, j) in cells.iter() {
+            ds[i][j] = 1.0;
+        }
+        out[q + 3] = mat_mul(&r, &ds);
+    }
+    out
+}
+
+/// The vector–Jacobian product of [`feature_transform`]: `⟨A, ∂T/∂f_q⟩` (Frobenius) for
+/// q = 0..9, i.e. the gradient with respect to the 9 unscaled features of a loss whose gradient
+/// with respect to T is A. Closed form (Gallego & Yezzi 2015 for the rotation:
+/// `∂R/∂ω_i = [u_i]×R`, `u_i = (ω_i ω + ω × (I − R)e_i)/‖ω‖²`); below a rotation angle of 1e-4
+/// it contracts [`feature_transform_jacobian`] instead.
+pub fn feature_transform_vjp(f: &[f64], a: &Mat3) -> [f64; 9] {
+    let w = unskew(&[[0.0, f[0], f[1]], [-f[0], 0.0, f[2]], [-f[1], -f[2], 0.0]]);
+    let t2 = dot(w, w);
+    let mut out = [0.0; 9];
+    if t2 < 1e-8 {
+        let jac = feature_transform_jacobian(f);
+        for (o, jq) in out.iter_mut().zip(&jac) {
+            *o = (0..3).map(|r| (0..3).map(|c| a[r][c] * jq[r][c]).sum::<f64>()).sum();
+        }
+        return out;
+    }
+    let r = exp_so3(w);
+    let s = [[f[3], f[4], f[5]], [f[4], f[6], f[7]], [f[5], f[7], f[8]]];
+    let rt = transpose(&r);
+    // Stretch: ⟨A, R·∂S⟩ = ⟨RᵀA, ∂S⟩.
+    let b = mat_mul(&rt, a);
+    out[3] = b[0][0];
+    out[4] = b[0][1] + b[1][0];
+    out[5] = b[0][2] + b[2][0];
+    out[6] = b[1][1];
+    out[7] = b[1][2] + b[2][1];
+    out[8] = b[2][2];
+    // Rotation: ⟨A, [u]×R·S⟩ = ⟨A·S·Rᵀ, [u]×⟩ = u · vee(W − Wᵀ).
+    let wm = mat_mul(&mat_mul(a, &s), &rt);
+    let axial = [wm[2][1] - wm[1][2], wm[0][2] - wm[2][0], wm[1][0] - wm[0][1]];
+    let mut dw = [0.0; 3];
+    for (i, d) in dw.iter_mut().enumerate() {
+        let col = [IDENTITY[0][i] - r[0][i], IDENTITY[1][i] - r[1][i], IDENTITY[2][i] - r[2][i]];
+        let x = cross(w, col);
+        let u: Vec3 = std::array::from_fn(|c| (w[i] * w[c] + x[c]) / t2);
+        *d = dot(u, axial);
+    }
+    // f = (−ω2, ω1, −ω0) (the layout of the module docs).
+    out[0] = -dw[2];
+    out[1] = dw[1];
+    out[2] = -dw[0];
+    out
+}
+
 fn check_finite(p: &[Vec3], what: &str) -> Result<()> {
     if let Some(v) = p.iter().position(|x| !x.iter().all(|c| c.is_finite())) {
         return Err(Error::Invalid(format!("{what}: vertex {v} has a non-finite position {:?}", p[v])));
@@ -526,6 +603,35 @@ fn check_finite(p: &[Vec3], what: &str) -> Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The closed-form vector–Jacobian product agrees with the contracted finite-difference
+    /// Jacobian, for rotation angles from 1e-5 (the series fallback) to near π.
+    #[test]
+    fn feature_transform_vjp_matches_the_jacobian() {
+        let mut rng = crate::rng::Rng::new(11);
+        for (trial, angle) in [1e-5, 1e-3, 0.3, 1.5, 3.0].into_iter().enumerate() {
+            let dir: Vec<f64> = (0..3).map(|_| rng.normal_vec(1, 1.0)[0] as f64).collect();
+            let len = dir.iter().map(|d| d * d).sum::<f64>().sqrt();
+            let mut f: Vec<f64> = rng.normal_vec(9, 0.2).iter().map(|&v| v as f64).collect();
+            for q in 0..3 {
+                f[q] = dir[q] / len * angle;
+            }
+            f[3] += 1.0;
+            f[6] += 1.0;
+            f[8] += 1.0;
+            let a: Mat3 = std::array::from_fn(|_| std::array::from_fn(|_| rng.normal_vec(1, 1.0)[0] as f64));
+            let got = feature_transform_vjp(&f, &a);
+            let jac = feature_transform_jacobian(&f);
+            for q in 0..9 {
+                let want: f64 = (0..3).map(|r| (0..3).map(|c| a[r][c] * jac[q][r][c]).sum::<f64>()).sum();
+                assert!(
+                    (got[q] - want).abs() < 1e-6 * (1.0 + want.abs()),
+                    "trial {trial}, q {q}: {} vs {want}",
+                    got[q]
+                );
+            }
+        }
+    }
 
     /// A closed octahedron.
     fn octahedron() -> TriMesh {

@@ -174,6 +174,17 @@ impl FeatureScaling {
         hi - lo <= CONSTANT_TOL * (1.0 + lo.abs().max(hi.abs()))
     }
 
+    /// Per dimension `k`: `(1/a_k, c_k)` of the inverse `x = y/a + c`, i.e. `∂x/∂y` and the
+    /// centre (what a chain rule through [`FeatureScaling::invert_in_place`] needs).
+    pub fn inverse_affine(&self) -> Vec<(f64, f64)> {
+        (0..self.width)
+            .map(|k| {
+                let (c, a) = self.affine(k);
+                (1.0 / a, c)
+            })
+            .collect()
+    }
+
     /// `(c_k, a_k)` of dimension `k`: `y = (x − c)·a`.
     fn affine(&self, k: usize) -> (f64, f64) {
         if self.is_constant(k) {

@@ -1,0 +1,120 @@
+//! The autoencoder's vertex term (`lambda_vertex`): the error of a decoded shape measured where
+//! the user measures it, on the reconstructed vertices, rather than on the ACAP features.
+//!
+//! For each shape of a training batch (lane j), with x the input's scaled features and x̂ the
+//! decoder's output,
+//!
+//! ```text
+//! ℓ_j = Σ_i ‖p_i(x̂) − p_i(x)‖² / d²,    p = ACAP-decode(T(unscale(·)))
+//! ```
+//!
+//! where d is the rest mesh's bounding-box diagonal (so ℓ is dimensionless) and T_i =
+//! exp(logR_i)·S_i. Both reconstructions have the reference's centroid, so ℓ_j·d²/N is the
+//! centroid-aligned mean squared vertex error of the network on that shape (the quantity Erms
+//! measures), where the feature error weighs a rotation error at a joint the same as one at a
+//! fingertip although the first moves a whole limb.
+//!
+//! **Gradient.** The decoding is affine in the T_i ([`Acap::decode_transforms`]): with
+//! ΔT_i = T_i(x̂) − T_i(x), p(x̂) − p(x) = A₀ΔT (one solve), and ∂ℓ/∂T = A₀ᵀ(2(p(x̂) − p(x))/d²)
+//! (one adjoint solve, [`Acap::decode_transforms_adjoint`]); then per vertex through T_i(f_i)
+//! ([`feature_transform_vjp`], closed form) and the scaling's inverse. Two solves with the decoder's
+//! factor per shape and step; the lanes run in parallel.
+
+use rayon::prelude::*;
+
+use crate::error::{Error, Result};
+use crate::math::mat3::Mat3;
+use crate::mesh::{Vec3, bounding_box};
+use crate::nn::OutputLoss;
+use crate::representation::acap::{Acap, feature_transform, feature_transform_vjp};
+use crate::representation::scaling::FeatureScaling;
+
+/// The vertex term of one ACAP decoder and feature scaling (see the module docs).
+pub struct AcapVertexLoss<'a> {
+    acap: &'a Acap,
+    /// Per feature dimension: (∂f/∂x̂, centre) of the scaling's inverse.
+    unscale: [(f64, f64); 9],
+    /// The decoding of T = 0 (the affine map's constant part).
+    offset: Vec<Vec3>,
+    /// 1/d².
+    inv_d2: f64,
+}
+
+impl<'a> AcapVertexLoss<'a> {
+    /// The term for features scaled by `scaling` (width 9) and decoded by `acap`, whose rest
+    /// mesh sets the unit d (its bounding-box diagonal; must be positive).
+    pub fn new(acap: &'a Acap, scaling: &FeatureScaling) -> Result<Self> {
+        let inverse = scaling.inverse_affine();
+        if inverse.len() != 9 {
+            return Err(Error::Invalid(format!("vertex term: feature scaling of width {}, not 9", inverse.len())));
+        }
+        let (lo, hi) = bounding_box(acap.reference());
+        let d2: f64 = (0..3).map(|c| (hi[c] - lo[c]) * (hi[c] - lo[c])).sum();
+        if !(d2.is_finite() && d2 > 0.0) {
+            return Err(Error::Invalid("vertex term: the rest mesh has no extent".into()));
+        }
+        let offset = acap.decode_transforms(&vec![[[0.0; 3]; 3]; acap.n_vertices()])?;
+        Ok(AcapVertexLoss { acap, unscale: std::array::from_fn(|q| inverse[q]), offset, inv_d2: 1.0 / d2 })
+    }
+
+    /// ℓ of one lane and ∂ℓ/∂x̂ (9N, vertex-major).
+    fn lane(&self, x: &[f32], xhat: &[f32], bp: usize, j: usize) -> Result<(f64, Vec<f32>)> {
+        let n = self.acap.n_vertices();
+        let u = &self.unscale;
+        let at = |src: &[f32], i: usize| -> [f64; 9] {
+            std::array::from_fn(|q| src[(i * 9 + q) * bp + j] as f64 * u[q].0 + u[q].1)
+        };
+        let mut fh = Vec::with_capacity(n);
+        let dt: Vec<Mat3> = (0..n)
+            .map(|i| {
+                let (a, t) = (at(xhat, i), at(x, i));
+                let (ta, tt) = (feature_transform(&a), feature_transform(&t));
+                fh.push(a);
+                std::array::from_fn(|r| std::array::from_fn(|c| ta[r][c] - tt[r][c]))
+            })
+            .collect();
+        let p = self.acap.decode_transforms(&dt)?;
+        let mut loss = 0.0;
+        let g: Vec<Vec3> = p
+            .iter()
+            .zip(&self.offset)
+            .map(|(p, o)| {
+                let d: Vec3 = std::array::from_fn(|c| p[c] - o[c]);
+                loss += d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+                std::array::from_fn(|c| 2.0 * self.inv_d2 * d[c])
+            })
+            .collect();
+        let adj = self.acap.decode_transforms_adjoint(&g)?;
+        let mut out = vec![0.0f32; 9 * n];
+        for (i, (f, a)) in fh.iter().zip(&adj).enumerate() {
+            let v = feature_transform_vjp(f, a);
+            for q in 0..9 {
+                out[i * 9 + q] = (v[q] * u[q].0) as f32;
+            }
+        }
+        Ok((loss * self.inv_d2, out))
+    }
+}
+
+impl OutputLoss for AcapVertexLoss<'_> {
+    fn add_loss_and_grad(
+        &self,
+        x: &[f32],
+        xhat: &[f32],
+        bp: usize,
+        lanes: &[usize],
+        scale: f32,
+        grad: &mut [f32],
+    ) -> f64 {
+        let done: Vec<Result<(f64, Vec<f32>)>> = lanes.par_iter().map(|&j| self.lane(x, xhat, bp, j)).collect();
+        let mut total = 0.0;
+        for (&j, lane) in lanes.iter().zip(done) {
+            let Ok((l, g)) = lane else { return f64::NAN };
+            total += l;
+            for (row, v) in g.iter().enumerate() {
+                grad[row * bp + j] += scale * v;
+            }
+        }
+        total
+    }
+}
