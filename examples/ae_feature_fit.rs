@@ -67,6 +67,21 @@ fn main() {
         }
         zf.push(z);
     }
+    // Residual re-encoding: z ← z + E(x) − E(D(z)) (the network's own passes, no fitting).
+    let ex = art.model.encode(&xs).unwrap();
+    let mut zr = z0.clone();
+    let mut passes = Vec::new();
+    for _ in 0..3 {
+        let dec = art.model.decode(&zr).unwrap();
+        let ed = art.model.encode(&dec).unwrap();
+        for ((z, a), b) in zr.iter_mut().zip(&ex).zip(&ed) {
+            for k in 0..z.len() {
+                z[k] += a[k] - b[k];
+            }
+        }
+        passes.push(erms(&test.frames, &art.decode_codes(&zr).unwrap(), Alignment::Centroid).unwrap());
+    }
+    println!("re-encoded residual, 1-3 passes: {passes:.3?}");
     let truth = &test.frames;
     let enc = art.decode_codes(&z0).unwrap();
     let fit = art.decode_codes(&zf).unwrap();

@@ -185,3 +185,51 @@ fn vertex_keys_are_checked_by_name_default_to_the_paper_and_ramp_up() {
     let n0 = meshdeco::nn::AutoencoderConfig { vertex_warmup: 0.0, lambda_vertex: 2.0, ..Default::default() };
     assert_eq!(n0.lambda_vertex_at(0), 2.0);
 }
+
+/// `encoder_passes`: the residual passes z ← z + E(x) − E(D(z)) of the network's own encoder
+/// and decoder. On the tube's unseen frames they lower the feature error of the reconstruction
+/// (what each pass corrects) and the vertex Erms; `metrics.json` reports the one-pass Erms
+/// beside; 0 passes is the one-pass encoder exactly; a trained model's passes can be changed
+/// without retraining (`Autoencoder::encode_with_passes`). Measured (K = 2, 400 iterations,
+/// seed 1): test Erms 14.23 with one pass, 13.92 with two; feature error 2031.9 → 2002.8 →
+/// 1998.4.
+#[test]
+fn residual_encoder_passes_lower_the_unseen_shapes_error_and_are_reported() {
+    use meshdeco::config::Config;
+    use meshdeco::pipeline::autoencoder::AeArtifact;
+    use meshdeco::pipeline::{Silent, TrainOptions, train};
+    let base = std::env::temp_dir().join(format!("meshdeco-ae-passes-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&base);
+    let cfg = Config::from_toml(
+        "name = \"tube-ae\"\n[data]\npath = \"synthetic:tube\"\ntrain = \"every:3\"\ntest = \"rest\"\n\
+         [method]\nkind = \"autoencoder\"\ncomponents = 2\niterations = 400\nlearning_rate = 0.005\nseed = 1\n\
+         fit_test = false\nencoder_passes = 2\n",
+    )
+    .unwrap();
+    let o = train(&cfg, &base, &TrainOptions::default(), &mut Silent).unwrap();
+    let (two, one) = (o.metrics.test_erms.unwrap(), o.metrics.test_erms_one_pass.unwrap());
+    let art = AeArtifact::load(&base).unwrap();
+    assert_eq!(art.model.config().encoder_passes, 2);
+    let prep = meshdeco::preprocess::prepare(&cfg.data).unwrap();
+    let test = prep.test_sequence();
+    let (own, _) = art.representation.split_pieces(&art.representation.encode(&test).unwrap()).unwrap();
+    let xs = art.header.scaling.apply(&own).unwrap();
+    let feature_error = |passes: usize| {
+        let z = art.model.encode_with_passes(&xs, passes).unwrap();
+        let d = art.model.decode(&z).unwrap();
+        d.data.iter().zip(&xs.data).map(|(a, b)| (a - b) * (a - b)).sum::<f64>()
+    };
+    let (e0, e1, e2) = (feature_error(0), feature_error(1), feature_error(2));
+    eprintln!(
+        "tube K = 2, unseen frames: test Erms one pass {one:.3}, two residual passes {two:.3}; \
+         feature error {e0:.3} → {e1:.3} → {e2:.3}"
+    );
+    assert!(e1 < e0 && e2 <= e1 * 1.001, "feature error by passes: {e0} {e1} {e2}");
+    assert!(two < one, "two passes {two} vs one pass {one}");
+    // 0 passes is the plain encoder; the one-pass Erms in metrics.json is that encoder's.
+    let plain = art.encode_frames_with_passes(&test, 0).unwrap();
+    let rec = art.decode_codes(&plain).unwrap();
+    let e = meshdeco::metrics::erms::erms(&test.frames, &rec, meshdeco::metrics::erms::Alignment::Centroid).unwrap();
+    assert!((e - one).abs() <= 1e-9 * one, "one-pass Erms {e} vs metrics.json {one}");
+    let _ = std::fs::remove_dir_all(&base);
+}

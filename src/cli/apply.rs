@@ -106,7 +106,14 @@ pub fn encode(a: EncodeArgs) -> Result<()> {
     if let Some(o) = &refine {
         println!("fitting codes to min({}, {}) vertices per frame", o.points, seq.n_vertices());
     }
+    let t = std::time::Instant::now();
     let e = model::encode_frames(m.as_ref(), &seq, &a.path, refine.as_ref())?;
+    println!(
+        "encoded {} frames in {:.1} ms ({})",
+        seq.n_frames(),
+        t.elapsed().as_secs_f64() * 1e3,
+        m.encoder_description()
+    );
     if refine.is_some() && !e.refined {
         println!("a {} model has no refined encoding: least-squares weights", m.kind().name());
     }

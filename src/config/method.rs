@@ -376,6 +376,9 @@ pub struct AutoencoderMethod {
     /// Cap on the vertex term's gradient, in multiples of the feature error's (default 0: none).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub vertex_clip: Option<f64>,
+    /// Residual passes of the encoder at inference (0: the paper's one pass).
+    #[serde(skip_serializing_if = "is_zero")]
+    pub encoder_passes: usize,
 }
 
 fn is_tied(e: &EncoderKind) -> bool {
@@ -424,6 +427,7 @@ impl Default for AutoencoderMethod {
             vertex_batch: None,
             vertex_warmup: None,
             vertex_clip: None,
+            encoder_passes: d.encoder_passes,
             encoder: d.encoder,
         }
     }
@@ -461,6 +465,7 @@ impl AutoencoderMethod {
             vertex_batch: self.vertex_batch.unwrap_or(d.vertex_batch),
             vertex_warmup: self.vertex_warmup.unwrap_or(d.vertex_warmup),
             vertex_clip: self.vertex_clip.unwrap_or(d.vertex_clip),
+            encoder_passes: self.encoder_passes,
             encoder: self.encoder,
             ..d
         }

@@ -117,6 +117,10 @@ pub struct CellResult {
     /// Autoencoder only: STED temporal part with fitted codes (ordered datasets).
     #[serde(default)]
     pub sted_temporal_fitted: Option<f64>,
+    /// Autoencoder with `encoder_passes > 0` only: test Erms of the plain one-pass encoder
+    /// (`metrics.json`'s `test_erms_one_pass`; `test_erms` has the residual passes).
+    #[serde(default)]
+    pub test_erms_one_pass: Option<f64>,
 }
 
 /// A cell whose training or measuring failed: recorded, shown in the tables and the report,
@@ -272,6 +276,10 @@ fn measure(cell: &Cell, cfg: &EvalConfig, ds: &DatasetData, trained: &TrainOutco
         support_regions: median(&regions),
         seconds: metrics.train_seconds,
         test_erms_fitted: metrics.test_erms_fitted.map(|x| check_finite("fitted test Erms", &name, x)).transpose()?,
+        test_erms_one_pass: metrics
+            .test_erms_one_pass
+            .map(|x| check_finite("one-pass test Erms", &name, x))
+            .transpose()?,
         train_frames: ds.prep.train.len(),
         test_frames: ds.test.len(),
         sted_skipped_edges: sted.skipped_edges,

@@ -111,6 +111,16 @@ pub trait Model {
     /// least squares honouring the weight constraint; region PCA: Eq. 6/7; the autoencoder: its
     /// encoder network).
     fn encode(&self, frames: &MeshSequence) -> Result<Vec<Vec<f64>>>;
+    /// How [`Model::encode`] encodes, in words (printed by `meshdeco encode`).
+    fn encoder_description(&self) -> String {
+        "least-squares weights".into()
+    }
+    /// The encoder's plain one-pass encoding, where [`Model::encode`] does more (the
+    /// autoencoder with `encoder_passes > 0`); `None` otherwise. Reported beside it.
+    fn encode_one_pass(&self, frames: &MeshSequence) -> Result<Option<Vec<Vec<f64>>>> {
+        let _ = frames;
+        Ok(None)
+    }
     /// A refined encoding from `start` weights, with its reconstructions, where the method has
     /// one (the autoencoder's codes fitted through the decoder); `None` when the own encoding is
     /// already the best fit (linear least squares). `done(i)` is called after frame i.

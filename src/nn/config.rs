@@ -89,6 +89,11 @@ pub struct AutoencoderConfig {
     /// (horse gallop, 5 shapes, λv = 3: the loss rose from 2 to 33 000 in 25 steps); on SCAPE
     /// a cap of 2 binds often and costs accuracy.
     pub vertex_clip: f64,
+    /// Residual passes of the encoder at inference (0: the paper's one pass `z = E(x)`): each
+    /// pass sets `z ← z + E(x) − E(D(z))`, re-encoding what the decoding of the current code
+    /// misses, with the network's own encoder and decoder (no fitting, no vertices; each pass
+    /// costs one decode and one encode). Training does not use it.
+    pub encoder_passes: usize,
 }
 
 /// How a training step computes the loss and the gradients.
@@ -182,6 +187,7 @@ impl Default for AutoencoderConfig {
             vertex_batch: 0,
             vertex_warmup: 0.0,
             vertex_clip: 0.0,
+            encoder_passes: 0,
             encoder: EncoderKind::Tied,
         }
     }
@@ -253,6 +259,9 @@ impl AutoencoderConfig {
         nonneg("lambda_orthogonal", self.lambda_orthogonal)?;
         nonneg("lambda_vertex", self.lambda_vertex)?;
         nonneg("vertex_clip", self.vertex_clip)?;
+        if self.encoder_passes > 16 {
+            return Err(bad("encoder_passes", format!("{} must be in 0..=16", self.encoder_passes)));
+        }
         if !(self.vertex_warmup.is_finite() && (0.0..=1.0).contains(&self.vertex_warmup)) {
             return Err(bad("vertex_warmup", format!("{} must be in [0, 1]", self.vertex_warmup)));
         }
@@ -312,6 +321,9 @@ impl AutoencoderConfig {
         b.iterations = 0;
         a.checkpoint_every = 0;
         b.checkpoint_every = 0;
+        // Inference only.
+        a.encoder_passes = 0;
+        b.encoder_passes = 0;
         // Both engines compute the same step; a run may switch between them.
         (a.engine, a.device) = (Engine::Hand, ComputeDevice::Cpu);
         (b.engine, b.device) = (Engine::Hand, ComputeDevice::Cpu);

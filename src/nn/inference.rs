@@ -227,11 +227,36 @@ impl Autoencoder {
         Ok(())
     }
 
-    /// Latent codes of every frame.
+    /// Latent codes of every frame: the encoder with the model's
+    /// [`AutoencoderConfig::encoder_passes`] residual passes.
     ///
     /// # Shapes
     /// `features`: F × N × 9 → output F codes of K values.
     pub fn encode(&self, features: &Features) -> Result<Vec<Vec<f64>>> {
+        self.encode_with_passes(features, self.config.encoder_passes)
+    }
+
+    /// Latent codes with `passes` residual passes: `z₀ = E(x)`, then `passes` times
+    /// `z ← z + E(x) − E(D(z))` (0: the paper's one-pass encoder).
+    ///
+    /// # Shapes
+    /// `features`: F × N × 9 → output F codes of K values.
+    pub fn encode_with_passes(&self, features: &Features, passes: usize) -> Result<Vec<Vec<f64>>> {
+        let ex = self.encode_once(features)?;
+        let mut z = ex.clone();
+        for _ in 0..passes {
+            let ed = self.encode_once(&self.decode(&z)?)?;
+            for ((zf, a), b) in z.iter_mut().zip(&ex).zip(&ed) {
+                for ((v, x), y) in zf.iter_mut().zip(a).zip(b) {
+                    *v += x - y;
+                }
+            }
+        }
+        Ok(z)
+    }
+
+    /// The network encoder's one pass `z = C·f(x)`.
+    fn encode_once(&self, features: &Features) -> Result<Vec<Vec<f64>>> {
         self.check_features(features)?;
         let n = self.weights.n;
         let k = self.weights.k;

@@ -17,8 +17,12 @@
 //! **Gradient.** The decoding is affine in the T_i ([`Acap::decode_transforms`]): with
 //! ΔT_i = T_i(x̂) − T_i(x), p(x̂) − p(x) = A₀ΔT (one solve), and ∂ℓ/∂T = A₀ᵀ(2(p(x̂) − p(x))/d²)
 //! (one adjoint solve, [`Acap::decode_transforms_adjoint`]); then per vertex through T_i(f_i)
-//! ([`feature_transform_vjp`], closed form) and the scaling's inverse. Two solves with the decoder's
-//! factor per shape and step; the lanes run in parallel.
+//! ([`crate::representation::acap::feature_transform_vjp`], closed form) and the scaling's inverse. Two solves with the decoder's
+//! factor per shape and step; the lanes run in parallel. T(x) of an input seen before (the
+//! training shapes of a full batch, every step) comes from a cache.
+
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex};
 
 use rayon::prelude::*;
 
@@ -26,7 +30,9 @@ use crate::error::{Error, Result};
 use crate::math::mat3::Mat3;
 use crate::mesh::{Vec3, bounding_box};
 use crate::nn::OutputLoss;
-use crate::representation::acap::{Acap, feature_transform, feature_transform_vjp};
+use crate::representation::acap::{
+    Acap, feature_rotation, feature_transform, feature_transform_vjp_with, feature_transform_with,
+};
 use crate::representation::scaling::FeatureScaling;
 
 /// The vertex term of one ACAP decoder and feature scaling (see the module docs).
@@ -38,7 +44,14 @@ pub struct AcapVertexLoss<'a> {
     offset: Vec<Vec3>,
     /// 1/d².
     inv_d2: f64,
+    /// T(x) of inputs seen before, by a hash of the lane's bits (the bits are kept and compared).
+    cache: Mutex<HashMap<u64, CachedInput>>,
+    /// Most inputs cached (about 64 MB).
+    cache_entries: usize,
 }
+
+/// A cached input: its bits and its transforms.
+type CachedInput = (Vec<u32>, Arc<Vec<Mat3>>);
 
 impl<'a> AcapVertexLoss<'a> {
     /// The term for features scaled by `scaling` (width 9) and decoded by `acap`, whose rest
@@ -54,23 +67,65 @@ impl<'a> AcapVertexLoss<'a> {
             return Err(Error::Invalid("vertex term: the rest mesh has no extent".into()));
         }
         let offset = acap.decode_transforms(&vec![[[0.0; 3]; 3]; acap.n_vertices()])?;
-        Ok(AcapVertexLoss { acap, unscale: std::array::from_fn(|q| inverse[q]), offset, inv_d2: 1.0 / d2 })
+        let entry_bytes = acap.n_vertices() * (9 * 4 + 9 * 8);
+        Ok(AcapVertexLoss {
+            acap,
+            unscale: std::array::from_fn(|q| inverse[q]),
+            offset,
+            inv_d2: 1.0 / d2,
+            cache: Mutex::new(HashMap::new()),
+            cache_entries: (64 << 20) / entry_bytes.max(1),
+        })
+    }
+
+    /// T(x) of one lane's input (N transforms), from the cache when this exact input was seen
+    /// before (the training shapes of a full batch come back every step).
+    fn input_transforms(&self, x: &[f32], bp: usize, j: usize) -> Arc<Vec<Mat3>> {
+        let n = self.acap.n_vertices();
+        let column: Vec<u32> = (0..9 * n).map(|r| x[r * bp + j].to_bits()).collect();
+        let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+        for &v in &column {
+            h = (h ^ v as u64).wrapping_mul(0x0100_0000_01b3);
+        }
+        if let Ok(cache) = self.cache.lock()
+            && let Some((col, t)) = cache.get(&h)
+            && *col == column
+        {
+            return t.clone();
+        }
+        let u = &self.unscale;
+        let t: Arc<Vec<Mat3>> = Arc::new(
+            column
+                .chunks_exact(9)
+                .map(|v| {
+                    let f: [f64; 9] = std::array::from_fn(|q| f32::from_bits(v[q]) as f64 * u[q].0 + u[q].1);
+                    feature_transform(&f)
+                })
+                .collect(),
+        );
+        if let Ok(mut cache) = self.cache.lock()
+            && cache.len() < self.cache_entries
+        {
+            cache.insert(h, (column, t.clone()));
+        }
+        t
     }
 
     /// ℓ of one lane and ∂ℓ/∂x̂ (9N, vertex-major).
     fn lane(&self, x: &[f32], xhat: &[f32], bp: usize, j: usize) -> Result<(f64, Vec<f32>)> {
         let n = self.acap.n_vertices();
         let u = &self.unscale;
-        let at = |src: &[f32], i: usize| -> [f64; 9] {
-            std::array::from_fn(|q| src[(i * 9 + q) * bp + j] as f64 * u[q].0 + u[q].1)
-        };
-        let mut fh = Vec::with_capacity(n);
-        let dt: Vec<Mat3> = (0..n)
-            .map(|i| {
-                let (a, t) = (at(xhat, i), at(x, i));
-                let (ta, tt) = (feature_transform(&a), feature_transform(&t));
-                fh.push(a);
-                std::array::from_fn(|r| std::array::from_fn(|c| ta[r][c] - tt[r][c]))
+        let tx = self.input_transforms(x, bp, j);
+        let fh: Vec<[f64; 9]> =
+            (0..n).map(|i| std::array::from_fn(|q| xhat[(i * 9 + q) * bp + j] as f64 * u[q].0 + u[q].1)).collect();
+        let rh: Vec<Mat3> = fh.iter().map(|f| feature_rotation(f)).collect();
+        let dt: Vec<Mat3> = fh
+            .iter()
+            .zip(&rh)
+            .zip(tx.iter())
+            .map(|((f, r), tt)| {
+                let ta = feature_transform_with(f, r);
+                std::array::from_fn(|a| std::array::from_fn(|c| ta[a][c] - tt[a][c]))
             })
             .collect();
         let p = self.acap.decode_transforms(&dt)?;
@@ -86,8 +141,8 @@ impl<'a> AcapVertexLoss<'a> {
             .collect();
         let adj = self.acap.decode_transforms_adjoint(&g)?;
         let mut out = vec![0.0f32; 9 * n];
-        for (i, (f, a)) in fh.iter().zip(&adj).enumerate() {
-            let v = feature_transform_vjp(f, a);
+        for (i, ((f, r), a)) in fh.iter().zip(&rh).zip(&adj).enumerate() {
+            let v = feature_transform_vjp_with(f, r, a);
             for q in 0..9 {
                 out[i * 9 + q] = (v[q] * u[q].0) as f32;
             }

@@ -141,15 +141,21 @@ impl AeArtifact {
         Ok(AeArtifact { header, rest, representation, model, train_codes })
     }
 
-    /// Codes (K each) of frames given in data units.
+    /// Codes (K each) of frames given in data units: the encoder with the model's residual
+    /// passes (`encoder_passes`).
     pub fn encode_frames(&self, frames: &MeshSequence) -> Result<Vec<Vec<f64>>> {
+        self.encode_frames_with_passes(frames, self.model.config().encoder_passes)
+    }
+
+    /// [`Self::encode_frames`] with `passes` residual passes (0: the network's one pass).
+    pub fn encode_frames_with_passes(&self, frames: &MeshSequence, passes: usize) -> Result<Vec<Vec<f64>>> {
         let mut scaled = frames.clone();
         for p in scaled.frames.iter_mut().flatten() {
             *p = self.header.unit_box.apply(*p);
         }
         let (own, translations) = self.representation.split_pieces(&self.representation.encode(&scaled)?)?;
         let xs = self.header.scaling.apply(&own)?;
-        let mut codes = self.model.encode(&xs)?;
+        let mut codes = self.model.encode_with_passes(&xs, passes)?;
         append_translations(&self.representation, &mut codes, &translations);
         Ok(codes)
     }
@@ -397,6 +403,18 @@ impl Model for AeArtifact {
     }
     fn encode(&self, frames: &MeshSequence) -> Result<Vec<Vec<f64>>> {
         self.encode_frames(frames)
+    }
+    fn encoder_description(&self) -> String {
+        match self.model.config().encoder_passes {
+            0 => "the network encoder, one pass".into(),
+            p => format!("the network encoder and {p} residual passes z ← z + E(x) − E(D(z)), no fitting"),
+        }
+    }
+    fn encode_one_pass(&self, frames: &MeshSequence) -> Result<Option<Vec<Vec<f64>>>> {
+        if self.model.config().encoder_passes == 0 {
+            return Ok(None);
+        }
+        Ok(Some(self.encode_frames_with_passes(frames, 0)?))
     }
     fn refine(
         &self,

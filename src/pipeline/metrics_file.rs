@@ -23,6 +23,10 @@ pub struct Metrics {
     /// nonlinear counterpart of the linear models' least-squares weights. Absent otherwise.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub test_erms_fitted: Option<f64>,
+    /// Autoencoder with `encoder_passes > 0` only: Erms over the test frames with the network's
+    /// plain one-pass codes (`test_erms` has the residual passes). Absent otherwise.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub test_erms_one_pass: Option<f64>,
     /// How results were aligned to the ground truth before measuring: `none` or `centroid`
     /// (representations that drop translation are centroid-aligned).
     pub erms_alignment: String,

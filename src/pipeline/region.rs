@@ -300,6 +300,9 @@ impl Model for RegionArtifact {
     fn encode(&self, frames: &MeshSequence) -> Result<Vec<Vec<f64>>> {
         self.encode_frames(frames)
     }
+    fn encoder_description(&self) -> String {
+        "region weights by least squares (Eq. 6/7)".into()
+    }
     fn start_weights(&self, from: Option<&[Vec3]>) -> Result<Vec<f64>> {
         match from {
             None => Ok(vec![0.0; self.model.n_components()]),

@@ -109,11 +109,15 @@ fn fit_measure_write(
     let train_erms = erms(&train_truth, &train_rec, alignment)?;
     let (mut test_erms, mut test_erms_fitted, mut test_reconstruction) = (None, None, Vec::new());
     let mut test_reconstruction_fitted = Vec::new();
+    let mut test_erms_one_pass = None;
     if !prep.test.is_empty() {
         let test = MeshSequence { faces, frames: frames_in_data_units(prep, &prep.test), names: Vec::new() };
         let codes = model.encode(&test)?;
         test_reconstruction = model.decode(&codes)?;
         test_erms = Some(erms(&test.frames, &test_reconstruction, alignment)?);
+        if let Some(plain) = model.encode_one_pass(&test)? {
+            test_erms_one_pass = Some(erms(&test.frames, &model.decode(&plain)?, alignment)?);
+        }
         if stats.refine_test {
             progress.stage("fitting test codes", test.n_frames() as u64);
             let opts = RefineOptions { points: usize::MAX, gamma: DEFAULT_FIT_GAMMA };
@@ -133,6 +137,7 @@ fn fit_measure_write(
         train_erms,
         test_erms,
         test_erms_fitted,
+        test_erms_one_pass,
         erms_alignment: alignment.to_string(),
         train_seconds: stats.train_seconds,
         representation_seconds: stats.representation_seconds,

@@ -509,11 +509,20 @@ impl Acap {
     }
 }
 
+/// R = exp(logR) of one vertex from its 9 unscaled ACAP features (layout in the module docs).
+pub fn feature_rotation(f: &[f64]) -> Mat3 {
+    exp_so3(unskew(&[[0.0, f[0], f[1]], [-f[0], 0.0, f[2]], [-f[1], -f[2], 0.0]]))
+}
+
 /// T = exp(logR)·S of one vertex from its 9 unscaled ACAP features (layout in the module docs).
 pub fn feature_transform(f: &[f64]) -> Mat3 {
-    let r = exp_so3(unskew(&[[0.0, f[0], f[1]], [-f[0], 0.0, f[2]], [-f[1], -f[2], 0.0]]));
+    feature_transform_with(f, &feature_rotation(f))
+}
+
+/// [`feature_transform`] with the rotation `r` = [`feature_rotation`]`(f)` already known.
+pub fn feature_transform_with(f: &[f64], r: &Mat3) -> Mat3 {
     let s = [[f[3], f[4], f[5]], [f[4], f[6], f[7]], [f[5], f[7], f[8]]];
-    mat_mul(&r, &s)
+    mat_mul(r, &s)
 }
 
 /// ∂T/∂f_q of [`feature_transform`] for q = 0..9 (rotation part by central differences of
@@ -555,6 +564,12 @@ pub fn feature_transform_jacobian(f: &[f64]) -> [Mat3; 9] {
 /// `∂R/∂ω_i = [u_i]×R`, `u_i = (ω_i ω + ω × (I − R)e_i)/‖ω‖²`); below a rotation angle of 1e-4
 /// it contracts [`feature_transform_jacobian`] instead.
 pub fn feature_transform_vjp(f: &[f64], a: &Mat3) -> [f64; 9] {
+    feature_transform_vjp_with(f, &feature_rotation(f), a)
+}
+
+/// [`feature_transform_vjp`] with the rotation `r` = [`feature_rotation`]`(f)` already known
+/// (the same numbers, one exponential less).
+pub fn feature_transform_vjp_with(f: &[f64], r: &Mat3, a: &Mat3) -> [f64; 9] {
     let w = unskew(&[[0.0, f[0], f[1]], [-f[0], 0.0, f[2]], [-f[1], -f[2], 0.0]]);
     let t2 = dot(w, w);
     let mut out = [0.0; 9];
@@ -565,9 +580,8 @@ pub fn feature_transform_vjp(f: &[f64], a: &Mat3) -> [f64; 9] {
         }
         return out;
     }
-    let r = exp_so3(w);
     let s = [[f[3], f[4], f[5]], [f[4], f[6], f[7]], [f[5], f[7], f[8]]];
-    let rt = transpose(&r);
+    let rt = transpose(r);
     // Stretch: ⟨A, R·∂S⟩ = ⟨RᵀA, ∂S⟩.
     let b = mat_mul(&rt, a);
     out[3] = b[0][0];
