@@ -17,9 +17,10 @@
 //! **Gradient.** The decoding is affine in the T_i ([`Acap::decode_transforms`]): with
 //! ΔT_i = T_i(x̂) − T_i(x), p(x̂) − p(x) = A₀ΔT (one solve), and ∂ℓ/∂T = A₀ᵀ(2(p(x̂) − p(x))/d²)
 //! (one adjoint solve, [`Acap::decode_transforms_adjoint`]); then per vertex through T_i(f_i)
-//! ([`crate::representation::acap::feature_transform_vjp`], closed form) and the scaling's inverse. Two solves with the decoder's
-//! factor per shape and step; the lanes run in parallel. T(x) of an input seen before (the
-//! training shapes of a full batch, every step) comes from a cache.
+//! ([`crate::representation::acap::feature_transform_vjp`], closed form) and the scaling's
+//! inverse. Two solves with the decoder's factor per shape and step; the lanes run in parallel.
+//! T(x) of an input seen before (the training shapes of a full batch, every step) comes from a
+//! cache.
 
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
