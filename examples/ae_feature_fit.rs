@@ -18,7 +18,8 @@ fn main() {
     let prep = meshdeco::preprocess::prepare(&cfg.data).expect("data");
     let art = AeArtifact::load(Path::new(&args[2])).expect("model");
     let test = prep.test_sequence();
-    let z0 = art.encode_frames(&test).expect("encode");
+    // The one-pass encoder's codes (whatever `encoder_passes` the model was trained with).
+    let z0 = art.encode_frames_with_passes(&test, 0).expect("encode");
     let mut scaled = test.clone();
     for p in scaled.frames.iter_mut().flatten() {
         *p = art.header.unit_box.apply(*p);
@@ -68,19 +69,12 @@ fn main() {
         zf.push(z);
     }
     // Residual re-encoding: z ← z + E(x) − E(D(z)) (the network's own passes, no fitting).
-    let ex = art.model.encode(&xs).unwrap();
-    let mut zr = z0.clone();
-    let mut passes = Vec::new();
-    for _ in 0..3 {
-        let dec = art.model.decode(&zr).unwrap();
-        let ed = art.model.encode(&dec).unwrap();
-        for ((z, a), b) in zr.iter_mut().zip(&ex).zip(&ed) {
-            for k in 0..z.len() {
-                z[k] += a[k] - b[k];
-            }
-        }
-        passes.push(erms(&test.frames, &art.decode_codes(&zr).unwrap(), Alignment::Centroid).unwrap());
-    }
+    let passes: Vec<f64> = (1..=3)
+        .map(|p| {
+            let z = art.encode_frames_with_passes(&test, p).unwrap();
+            erms(&test.frames, &art.decode_codes(&z).unwrap(), Alignment::Centroid).unwrap()
+        })
+        .collect();
     println!("re-encoded residual, 1-3 passes: {passes:.3?}");
     let truth = &test.frames;
     let enc = art.decode_codes(&z0).unwrap();

@@ -505,23 +505,28 @@ fn backward_except_components(
     let sse = kernels::squared_error(&ws.dec[l], x, &ws.mask, (2.0 * inv_b) as f32, &mut ws.d_a);
     let reconstruction = sse * inv_b;
     // The caller's term on the decoded shapes (the vertex term): the mean over the lanes it
-    // sees (all, or a sample of them), with this step's weight. Its gradient goes through
-    // ws.d_b (free until the decoder backward) so that its norm can be capped at
-    // `vertex_clip` times the feature error's.
+    // sees (all, or a sample of them), with this step's weight. With `vertex_clip`, its
+    // gradient goes through ws.d_b (free until the decoder backward) so that its norm can be
+    // capped at that many times the feature error's; otherwise straight into ws.d_a.
     let (vertex, vertex_weight) = match output_term {
         Some((o, lanes, weight)) if weight > 0.0 && !lanes.is_empty() => {
             assert!(lanes.iter().all(|&j| j < b_real), "output-loss lanes beyond the batch");
             let inv = 1.0 / lanes.len() as f64;
-            ws.d_b.fill(0.0);
-            let v = o.add_loss_and_grad(x, &ws.dec[l], bp, lanes, (weight * inv) as f32, &mut ws.d_b) * inv;
-            let norm = |a: &[f32]| a.iter().map(|&g| g as f64 * g as f64).sum::<f64>().sqrt();
-            let (f, g) = (norm(&ws.d_a), norm(&ws.d_b));
-            let c =
-                if cfg.vertex_clip > 0.0 && g > cfg.vertex_clip * f { (cfg.vertex_clip * f / g) as f32 } else { 1.0 };
-            for (a, b) in ws.d_a.iter_mut().zip(&ws.d_b) {
-                *a += c * b;
-            }
-            (v, weight)
+            let scale = (weight * inv) as f32;
+            let v = if cfg.vertex_clip > 0.0 {
+                ws.d_b.fill(0.0);
+                let v = o.add_loss_and_grad(x, &ws.dec[l], bp, lanes, scale, &mut ws.d_b);
+                let norm = |a: &[f32]| a.iter().map(|&g| g as f64 * g as f64).sum::<f64>().sqrt();
+                let (f, g) = (norm(&ws.d_a), norm(&ws.d_b));
+                let c = if g > cfg.vertex_clip * f { (cfg.vertex_clip * f / g) as f32 } else { 1.0 };
+                for (a, b) in ws.d_a.iter_mut().zip(&ws.d_b) {
+                    *a += c * b;
+                }
+                v
+            } else {
+                o.add_loss_and_grad(x, &ws.dec[l], bp, lanes, scale, &mut ws.d_a)
+            };
+            (v * inv, weight)
         }
         _ => (0.0, 0.0),
     };

@@ -140,11 +140,7 @@ impl<'a> AePoser<'a> {
             kappa.push(zero_t[v]);
         }
         // Feature scaling x̂ = (f − c)·a per dimension: recover (1/a, c) from the inverse map.
-        let inverse = artifact.header.scaling.inverse_affine();
-        if inverse.len() != 9 {
-            return Err(Error::Invalid(format!("the model's feature scaling has width {}, not 9", inverse.len())));
-        }
-        let unscale = std::array::from_fn(|q| inverse[q]);
+        let unscale = artifact.header.scaling.inverse_affine_array::<9>()?;
         let pieces = super::autoencoder::translated_pieces(&artifact.representation);
         let piece_derivatives = match artifact.representation.pieces() {
             Some((placement, _)) => {

@@ -58,10 +58,7 @@ impl<'a> AcapVertexLoss<'a> {
     /// The term for features scaled by `scaling` (width 9) and decoded by `acap`, whose rest
     /// mesh sets the unit d (its bounding-box diagonal; must be positive).
     pub fn new(acap: &'a Acap, scaling: &FeatureScaling) -> Result<Self> {
-        let inverse = scaling.inverse_affine();
-        if inverse.len() != 9 {
-            return Err(Error::Invalid(format!("vertex term: feature scaling of width {}, not 9", inverse.len())));
-        }
+        let unscale = scaling.inverse_affine_array::<9>()?;
         let (lo, hi) = bounding_box(acap.reference());
         let d2: f64 = (0..3).map(|c| (hi[c] - lo[c]) * (hi[c] - lo[c])).sum();
         if !(d2.is_finite() && d2 > 0.0) {
@@ -71,7 +68,7 @@ impl<'a> AcapVertexLoss<'a> {
         let entry_bytes = acap.n_vertices() * (9 * 4 + 9 * 8);
         Ok(AcapVertexLoss {
             acap,
-            unscale: std::array::from_fn(|q| inverse[q]),
+            unscale,
             offset,
             inv_d2: 1.0 / d2,
             cache: Mutex::new(HashMap::new()),

@@ -185,6 +185,14 @@ impl FeatureScaling {
             .collect()
     }
 
+    /// [`Self::inverse_affine`] as an array of the expected width `W` (an error naming both
+    /// widths otherwise).
+    pub fn inverse_affine_array<const W: usize>(&self) -> Result<[(f64, f64); W]> {
+        let v = self.inverse_affine();
+        <[(f64, f64); W]>::try_from(v.as_slice())
+            .map_err(|_| Error::Invalid(format!("the feature scaling has width {}, not {W}", v.len())))
+    }
+
     /// `(c_k, a_k)` of dimension `k`: `y = (x − c)·a`.
     fn affine(&self, k: usize) -> (f64, f64) {
         if self.is_constant(k) {
