@@ -94,9 +94,10 @@ fn synthetic_shapes_are_valid_blends_of_two_training_shapes() {
     let dist = HopDistances::new(&nb);
     let data = random_shapes(5, n, 3);
     let mut rng = Rng::new(4);
-    for mix in [AugmentMix::Local, AugmentMix::Blend] {
+    for mix in [AugmentMix::Local, AugmentMix::Blend, AugmentMix::Mixed] {
         let aug = Augmenter::new(mix, [0.1, 0.3], n, &dist, 7).unwrap();
         let (mut inside, mut outside) = (0usize, 0usize);
+        let (mut wholes, mut locals) = (0usize, 0usize);
         for draw in 0..40 {
             let mut y = vec![f32::NAN; n * 9];
             aug.draw(&|s| data.shape(s), data.n_shapes(), &mut rng, |row, v| y[row] = v);
@@ -105,10 +106,20 @@ fn synthetic_shapes_are_valid_blends_of_two_training_shapes() {
                 explain(&y, &data).unwrap_or_else(|| panic!("{mix:?} draw {draw}: not a blend of two shapes"));
             assert_ne!(a, b);
             assert!(ts.iter().all(|t| (-1e-3..=1.0 + 1e-3).contains(t)), "{mix:?}: blend outside [0, 1]");
+            let spread = ts.iter().fold(0.0f32, |m, t| m.max((t - ts[0]).abs()));
             match mix {
                 AugmentMix::Blend => {
-                    let spread = ts.iter().fold(0.0f32, |m, t| m.max((t - ts[0]).abs()));
                     assert!(spread < 1e-3, "a convex blend uses one t for all vertices (spread {spread})");
+                }
+                AugmentMix::Mixed => {
+                    // Either kind: one t everywhere, or a transplanted region (t = 1) in t = 0.
+                    let local = ts.iter().any(|t| (*t - 1.0).abs() < 1e-4) && ts.iter().any(|t| t.abs() < 1e-4);
+                    assert!(spread < 1e-3 || local, "mixed draw {draw}: neither a blend nor a local mix");
+                    if spread < 1e-3 {
+                        wholes += 1;
+                    } else {
+                        locals += 1;
+                    }
                 }
                 AugmentMix::Local => {
                     // A region of b (t = 1) inside the rest of a (t = 0).
@@ -118,6 +129,9 @@ fn synthetic_shapes_are_valid_blends_of_two_training_shapes() {
                     assert!(ts.iter().any(|t| t.abs() < 1e-4), "local mix transplanted the whole shape");
                 }
             }
+        }
+        if mix == AugmentMix::Mixed {
+            assert!(wholes >= 8 && locals >= 8, "mixed: {wholes} blends and {locals} local mixes in 40 draws");
         }
         if mix == AugmentMix::Local {
             eprintln!("local mixes: {inside} vertices transplanted, {outside} kept (40 draws, {n} vertices)");
@@ -261,9 +275,9 @@ fn least_squares_encoder_gradients_match_finite_differences() {
     let mut g = Grads::default();
     let loss = |w: &Weights, ws: &mut Workspace| {
         let mut scratch = Grads::default();
-        engine::loss_and_grad(ws, w, &nb, &x, b, &maps, &cfg, &mut scratch, None).total
+        engine::loss_and_grad(ws, w, &nb, &x, None, b, &maps, &cfg, &mut scratch, None).total
     };
-    engine::loss_and_grad(&mut ws, &w, &nb, &x, b, &maps, &cfg, &mut g, None);
+    engine::loss_and_grad(&mut ws, &w, &nb, &x, None, b, &maps, &cfg, &mut g, None);
     // The entries of C with the largest gradients, and W_point[0][0].
     let mut order: Vec<usize> = (0..g.c.len()).collect();
     order.sort_by(|&i, &j| g.c[j].abs().total_cmp(&g.c[i].abs()));
@@ -306,6 +320,8 @@ fn new_keys_are_checked_by_name_and_default_to_the_paper() {
         ("augment_radius = [0.0, 0.1]", "method.augment_radius"),
         ("lambda_orthogonal = -1.0", "method.lambda_orthogonal"),
         ("augment_mix = \"swap\"", "augment_mix"),
+        ("input_noise = -0.1", "method.input_noise"),
+        ("input_noise = 0.05\nengine = \"graph\"", "method.input_noise"),
         ("encoder = \"untied\"", "encoder"),
         ("validation = 2\nvalidate_every = 0", "method.validate_every"),
     ] {
@@ -313,11 +329,93 @@ fn new_keys_are_checked_by_name_and_default_to_the_paper() {
         assert!(e.contains(needle), "`{needle}` not in `{e}`");
     }
     let c = Config::from_toml(&format!(
-        "{base}augment = 3\naugment_mix = \"blend\"\nvalidation = 2\nlambda_orthogonal = 10.0\nencoder = \"least-squares\"\n"
+        "{base}augment = 3\naugment_mix = \"mixed\"\nvalidation = 2\nlambda_orthogonal = 10.0\nencoder = \"least-squares\"\ninput_noise = 0.05\n"
     ))
     .unwrap();
     let MethodConfig::Autoencoder(m) = &c.method else { panic!("kind") };
     let n = m.network_config();
-    assert_eq!((n.augment, n.augment_mix, n.validation), (3, AugmentMix::Blend, 2));
+    assert_eq!((n.augment, n.augment_mix, n.validation), (3, AugmentMix::Mixed, 2));
+    assert_eq!(n.input_noise, 0.05);
     assert_eq!((n.lambda_orthogonal, n.validate_every), (10.0, 50));
+}
+
+/// `input_noise`: the encoder reads the noisy shapes, the loss compares the decoding with the
+/// clean ones, and the gradients are those of that loss.
+#[test]
+fn denoising_compares_with_the_clean_shapes_and_its_gradients_match_finite_differences() {
+    use meshdeco::nn::engine::{self, Grads};
+    use meshdeco::nn::loss::SupportMaps;
+    let (nb, feats) = planted(9, 8, 10, 11);
+    let dist = HopDistances::new(&nb);
+    let data = TrainingData::from_features(&feats).unwrap();
+    let cfg = AutoencoderConfig {
+        components: 6,
+        lambda1: 0.0,
+        lambda2: 0.0,
+        learning_rate: 1e-2,
+        input_noise: 0.05,
+        seed: 4,
+        ..Default::default()
+    };
+    let mut t = Trainer::new(cfg.clone(), &data, &nb, &dist).unwrap();
+    let mut plain = Trainer::new(AutoencoderConfig { input_noise: 0.0, ..cfg.clone() }, &data, &nb, &dist).unwrap();
+    let mut differs = false;
+    for _ in 0..30 {
+        let (a, b) = (t.step().unwrap(), plain.step().unwrap());
+        assert!(a.total.is_finite());
+        differs |= (a.reconstruction - b.reconstruction).abs() > 1e-9;
+    }
+    assert!(differs, "input_noise = 0.05 gave the same losses as no noise");
+    let w = Weights::from_module(t.module()).unwrap();
+    let (n, k, b) = (nb.n_vertices(), cfg.components, data.n_shapes());
+    let bp = padded_width(b);
+    let clean = data.batch_vcb_width(&(0..b).collect::<Vec<_>>(), bp);
+    let mut rng = Rng::new(9);
+    let mut noisy = clean.clone();
+    for row in noisy.chunks_exact_mut(bp) {
+        for v in &mut row[..b] {
+            *v += (0.05 * rng.normal()) as f32;
+        }
+    }
+    let mut maps = SupportMaps::new(k, n);
+    maps.update(&w.c, &cfg, &dist).unwrap();
+    let mut ws = Workspace::new(n, k, 1, bp);
+    let mut g = Grads::default();
+    let terms = engine::loss_and_grad(&mut ws, &w, &nb, &noisy, Some(&clean), b, &maps, &cfg, &mut g, None);
+    // The reconstruction term is the mean squared distance of the decoding to the clean shapes.
+    let out = ws.output();
+    let mut sse = 0.0f64;
+    for (ro, rc) in out.chunks_exact(bp).zip(clean.chunks_exact(bp)) {
+        for j in 0..b {
+            sse += ((ro[j] - rc[j]) as f64).powi(2);
+        }
+    }
+    let expect = sse / b as f64;
+    assert!((terms.reconstruction - expect).abs() <= 1e-4 * expect, "{} vs {expect}", terms.reconstruction);
+    // Not the noisy shapes': comparing with the input gives another value.
+    let mut scratch = Grads::default();
+    let self_target = engine::loss_and_grad(&mut ws, &w, &nb, &noisy, None, b, &maps, &cfg, &mut scratch, None);
+    assert!((self_target.reconstruction - expect).abs() > 1e-3 * expect, "the target did not matter");
+    let loss = |w: &Weights, ws: &mut Workspace| {
+        let mut scratch = Grads::default();
+        engine::loss_and_grad(ws, w, &nb, &noisy, Some(&clean), b, &maps, &cfg, &mut scratch, None).total
+    };
+    let mut order: Vec<usize> = (0..g.c.len()).collect();
+    order.sort_by(|&i, &j| g.c[j].abs().total_cmp(&g.c[i].abs()));
+    for &i in order.iter().take(6) {
+        let h = 1e-2 * w.c[i].abs().max(1e-2);
+        let (mut wp, mut wm) = (w.clone(), w.clone());
+        wp.c[i] += h;
+        wm.c[i] -= h;
+        let fd = (loss(&wp, &mut ws) - loss(&wm, &mut ws)) / (2.0 * h as f64);
+        let an = g.c[i] as f64;
+        assert!((fd - an).abs() <= 0.05 * an.abs().max(1e-3), "dL/dC[{i}]: analytic {an}, finite difference {fd}");
+    }
+    let h = 1e-3f32;
+    let (mut wp, mut wm) = (w.clone(), w.clone());
+    wp.layers[0].wp[0][0] += h;
+    wm.layers[0].wp[0][0] -= h;
+    let fd = (loss(&wp, &mut ws) - loss(&wm, &mut ws)) / (2.0 * h as f64);
+    let an = g.layers[0].wp[0][0];
+    assert!((fd - an).abs() <= 0.05 * an.abs().max(1e-3), "dL/dW_point[0][0]: analytic {an}, finite difference {fd}");
 }

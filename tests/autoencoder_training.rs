@@ -78,7 +78,7 @@ fn gradient_check(layers: usize) {
     let x = data.batch_vcb(&idx);
     let mut ws = Workspace::new(n, cfg.components, layers, padded_width(3));
     let mut g = Grads { layers: Vec::new(), c: Vec::new() };
-    let terms = engine::loss_and_grad(&mut ws, &w, &nb, &x, 3, &maps, &cfg, &mut g, None);
+    let terms = engine::loss_and_grad(&mut ws, &w, &nb, &x, None, 3, &maps, &cfg, &mut g, None);
     assert!(terms.hinge > 0.0 && terms.sparsity > 0.0 && terms.reconstruction > 0.0, "{terms:?}");
 
     // Burn autodiff reference.

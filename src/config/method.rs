@@ -346,12 +346,16 @@ pub struct AutoencoderMethod {
     /// Synthetic shapes per training step (augmentation in feature space; 0: none).
     #[serde(skip_serializing_if = "is_zero")]
     pub augment: usize,
-    /// `local` | `blend` (default `local`).
+    /// `local` | `blend` | `mixed` (default `local`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub augment_mix: Option<AugmentMix>,
     /// [r_min, r_max] of a local mix's region radius (default [0.1, 0.3]).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub augment_radius: Option<[f64; 2]>,
+    /// Standard deviation of Gaussian noise added to the encoder's input features (scaled
+    /// units) while the decoding is compared with the clean shapes (0: none).
+    #[serde(skip_serializing_if = "is_zero_f64")]
+    pub input_noise: f64,
     /// Training shapes held out to choose the kept step (0: none).
     #[serde(skip_serializing_if = "is_zero")]
     pub validation: usize,
@@ -420,6 +424,7 @@ impl Default for AutoencoderMethod {
             augment: d.augment,
             augment_mix: None,
             augment_radius: None,
+            input_noise: d.input_noise,
             validation: d.validation,
             validate_every: None,
             lambda_orthogonal: d.lambda_orthogonal,
@@ -458,6 +463,7 @@ impl AutoencoderMethod {
             augment: self.augment,
             augment_mix: self.augment_mix.unwrap_or(d.augment_mix),
             augment_radius: self.augment_radius.unwrap_or(d.augment_radius),
+            input_noise: self.input_noise,
             validation: self.validation,
             validate_every: self.validate_every.unwrap_or(d.validate_every),
             lambda_orthogonal: self.lambda_orthogonal,

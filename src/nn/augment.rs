@@ -12,6 +12,7 @@
 //!   valid feature field (no cycle or sign ambiguity is created by the consistency).
 //! - **blend** ([`AugmentMix::Blend`]): `x = x_a + α (x_b − x_a)`, α uniform in [0, 1] (a
 //!   convex blend of two shapes).
+//! - **mixed** ([`AugmentMix::Mixed`]): each draw is local or blend, with probability ½.
 //!
 //! Blends of features inside [−0.95, 0.95] stay inside it (convexity), so the scaled data's
 //! range is kept. Centres come from a pool of [`POOL`] vertices (farthest-point-like spread by
@@ -35,6 +36,8 @@ pub enum AugmentMix {
     Local,
     /// A convex blend of two whole shapes.
     Blend,
+    /// Each draw is [`AugmentMix::Local`] or [`AugmentMix::Blend`] with probability ½.
+    Mixed,
 }
 
 impl AugmentMix {
@@ -43,6 +46,7 @@ impl AugmentMix {
         match s {
             "local" => Some(AugmentMix::Local),
             "blend" => Some(AugmentMix::Blend),
+            "mixed" => Some(AugmentMix::Mixed),
             _ => None,
         }
     }
@@ -84,7 +88,7 @@ impl Augmenter {
         seed: u64,
     ) -> Result<Self> {
         let mut pool = Vec::new();
-        if mix == AugmentMix::Local {
+        if mix != AugmentMix::Blend {
             let mut rng = Rng::new(seed ^ 0xA06_0E47_0000_0001);
             let centers = rng.sample_distinct(n, POOL.min(n));
             for c in centers {
@@ -125,14 +129,19 @@ impl Augmenter {
         let b = if n_shapes > 1 { (a + 1 + rng.below(n_shapes - 1)) % n_shapes } else { a };
         let (xa, xb) = (shapes(a), shapes(b));
         debug_assert!(xa.len() == 9 * self.n && xb.len() == 9 * self.n);
-        match self.mix {
+        let mix = match self.mix {
+            AugmentMix::Mixed if rng.uniform() < 0.5 => AugmentMix::Local,
+            AugmentMix::Mixed => AugmentMix::Blend,
+            m => m,
+        };
+        match mix {
             AugmentMix::Blend => {
                 let t = rng.uniform() as f32;
                 for (row, (&u, &v)) in xa.iter().zip(xb).enumerate() {
                     put(row, u + t * (v - u));
                 }
             }
-            AugmentMix::Local => {
+            AugmentMix::Local | AugmentMix::Mixed => {
                 let d = &self.pool[rng.below(self.pool.len())];
                 let r = (self.radius[0] + rng.uniform() * (self.radius[1] - self.radius[0])) as f32;
                 let w = 0.5 * r;

@@ -58,6 +58,10 @@ pub struct AutoencoderConfig {
     pub augment_mix: AugmentMix,
     /// [r_min, r_max] of the radius of a local mix's region (normalised geodesic distance).
     pub augment_radius: [f64; 2],
+    /// Standard deviation σ of Gaussian noise added, afresh every step, to the encoder's input
+    /// (the scaled features of every real and synthetic shape of the batch) while the decoding
+    /// is compared with the clean shapes: a denoising autoencoder (0: none, the paper).
+    pub input_noise: f64,
     /// Training shapes held out (evenly spaced) to choose the step whose parameters are kept:
     /// the one with the lowest encode–decode feature error on them; 0: none (the last step's).
     pub validation: usize,
@@ -180,6 +184,7 @@ impl Default for AutoencoderConfig {
             augment: 0,
             augment_mix: AugmentMix::Local,
             augment_radius: [0.1, 0.3],
+            input_noise: 0.0,
             validation: 0,
             validate_every: 50,
             lambda_orthogonal: 0.0,
@@ -259,6 +264,7 @@ impl AutoencoderConfig {
         nonneg("lambda_orthogonal", self.lambda_orthogonal)?;
         nonneg("lambda_vertex", self.lambda_vertex)?;
         nonneg("vertex_clip", self.vertex_clip)?;
+        nonneg("input_noise", self.input_noise)?;
         if self.encoder_passes > 16 {
             return Err(bad("encoder_passes", format!("{} must be in 0..=16", self.encoder_passes)));
         }
@@ -292,6 +298,12 @@ impl AutoencoderConfig {
             return Err(bad(
                 "lambda_vertex",
                 format!("{} needs engine = \"hand\" (the graph engine has no vertex term)", self.lambda_vertex),
+            ));
+        }
+        if self.input_noise > 0.0 && self.engine == Engine::Graph {
+            return Err(bad(
+                "input_noise",
+                format!("{} needs engine = \"hand\" (the graph engine has no input noise)", self.input_noise),
             ));
         }
         if self.device == ComputeDevice::Wgpu {

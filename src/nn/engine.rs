@@ -481,12 +481,16 @@ fn backward_except_components(
     w: &Weights,
     nb: &NeighborIndex,
     x: &[f32],
+    target: Option<&[f32]>,
     b_real: usize,
     cfg: &AutoencoderConfig,
     grads: &mut Grads,
     encoded: bool,
     output_term: Option<OutputTerm<'_>>,
 ) -> Partial {
+    // The encoder reads `x`; the reconstruction and output terms compare with `target` (the
+    // clean shapes when `x` carries input noise).
+    let target = target.unwrap_or(x);
     let (n, bp, k) = (ws.n, ws.bp, ws.k);
     let r = 9 * bp;
     let l = w.layers.len();
@@ -502,7 +506,7 @@ fn backward_except_components(
     let inv_b = 1.0 / b_real as f64;
 
     // Reconstruction: dG_L = (2/B)(X̂ − X) on real lanes.
-    let sse = kernels::squared_error(&ws.dec[l], x, &ws.mask, (2.0 * inv_b) as f32, &mut ws.d_a);
+    let sse = kernels::squared_error(&ws.dec[l], target, &ws.mask, (2.0 * inv_b) as f32, &mut ws.d_a);
     let reconstruction = sse * inv_b;
     // The caller's term on the decoded shapes (the vertex term): the mean over the lanes it
     // sees (all, or a sample of them), with this step's weight. With `vertex_clip`, its
@@ -515,7 +519,7 @@ fn backward_except_components(
             let scale = (weight * inv) as f32;
             let v = if cfg.vertex_clip > 0.0 {
                 ws.d_b.fill(0.0);
-                let v = o.add_loss_and_grad(x, &ws.dec[l], bp, lanes, scale, &mut ws.d_b);
+                let v = o.add_loss_and_grad(target, &ws.dec[l], bp, lanes, scale, &mut ws.d_b);
                 let norm = |a: &[f32]| a.iter().map(|&g| g as f64 * g as f64).sum::<f64>().sqrt();
                 let (f, g) = (norm(&ws.d_a), norm(&ws.d_b));
                 let c = if g > cfg.vertex_clip * f { (cfg.vertex_clip * f / g) as f32 } else { 1.0 };
@@ -524,7 +528,7 @@ fn backward_except_components(
                 }
                 v
             } else {
-                o.add_loss_and_grad(x, &ws.dec[l], bp, lanes, scale, &mut ws.d_a)
+                o.add_loss_and_grad(target, &ws.dec[l], bp, lanes, scale, &mut ws.d_a)
             };
             (v * inv, weight)
         }
@@ -636,20 +640,23 @@ fn backward_except_components(
 /// Loss and gradients for one batch.
 ///
 /// `x` is the batch in VCB layout with `b_real` real shapes in lanes `0..b_real` (the rest zero);
-/// `maps` must already be updated for `w.c`. Returns the loss terms; `grads` is overwritten.
+/// `target` (same layout) is what the decoding is compared with, `x` itself when `None` (a
+/// denoising step passes the clean shapes there and noisy ones as `x`); `maps` must already be
+/// updated for `w.c`. Returns the loss terms; `grads` is overwritten.
 #[allow(clippy::too_many_arguments)]
 pub fn loss_and_grad(
     ws: &mut Workspace,
     w: &Weights,
     nb: &NeighborIndex,
     x: &[f32],
+    target: Option<&[f32]>,
     b_real: usize,
     maps: &SupportMaps,
     cfg: &AutoencoderConfig,
     grads: &mut Grads,
     output_term: Option<OutputTerm<'_>>,
 ) -> LossTerms {
-    let part = backward_except_components(ws, w, nb, x, b_real, cfg, grads, false, output_term);
+    let part = backward_except_components(ws, w, nb, x, target, b_real, cfg, grads, false, output_term);
     component_gradient(ws, w, b_real, part.sym.as_deref(), grads);
     let (sparsity, orthogonality) = component_penalties(ws, w, maps, cfg, grads);
     terms(cfg, &part, sparsity, orthogonality)
@@ -742,6 +749,7 @@ pub fn loss_and_layer_grads(
     w: &Weights,
     nb: &NeighborIndex,
     x: &[f32],
+    target: Option<&[f32]>,
     b_real: usize,
     cfg: &AutoencoderConfig,
     grads: &mut Grads,
@@ -750,7 +758,7 @@ pub fn loss_and_layer_grads(
 ) -> PartialLoss {
     assert!(fused_update_applies(w, cfg), "the fused update needs the linear encoder and lambda_orthogonal = 0");
     assert!(!encoded || b_real == ws.b_real, "the batch encoded ahead has another width");
-    let part = backward_except_components(ws, w, nb, x, b_real, cfg, grads, encoded, output_term);
+    let part = backward_except_components(ws, w, nb, x, target, b_real, cfg, grads, encoded, output_term);
     ws.b_real = b_real;
     PartialLoss {
         reconstruction: part.reconstruction,

@@ -186,6 +186,8 @@ pub struct Trainer<'a> {
     augmenter: Option<Augmenter>,
     /// The mini-batch buffer (VCB, padded width of batch + synthetic shapes).
     batch_buf: Vec<f32>,
+    /// The encoder's noisy input of a step with `input_noise > 0` (same layout as the batch).
+    noisy_buf: Vec<f32>,
     validation: Option<Validation<'a>>,
     /// The caller's term on the decoded shapes (`lambda_vertex`).
     output_loss: Option<&'a dyn OutputLoss>,
@@ -302,6 +304,7 @@ impl<'a> Trainer<'a> {
             timings: StepTimings::default(),
             augmenter,
             batch_buf: Vec::new(),
+            noisy_buf: Vec::new(),
             validation: None,
             output_loss: None,
             vertex_lanes: Vec::new(),
@@ -520,6 +523,20 @@ impl<'a> Trainer<'a> {
                 aug.draw(&|s| data.shape(s), n_shapes, &mut self.rng, |row, v| x[row * bp + b + j] = v);
             }
         }
+        // Denoising: the encoder reads the batch plus fresh Gaussian noise on its real lanes; the
+        // decoding is compared with the clean batch.
+        let sigma = self.config.input_noise;
+        if sigma > 0.0 {
+            self.noisy_buf.clear();
+            self.noisy_buf.extend_from_slice(x);
+            for row in self.noisy_buf.chunks_exact_mut(bp) {
+                for v in &mut row[..b + m] {
+                    *v += (sigma * self.rng.normal()) as f32;
+                }
+            }
+        }
+        let (x, target): (&[f32], Option<&[f32]>) =
+            if sigma > 0.0 { (&self.noisy_buf, Some(&*x)) } else { (&*x, None) };
         if self.output_loss.is_some() {
             let lanes = b + m;
             let v = self.config.vertex_batch;
@@ -541,7 +558,7 @@ impl<'a> Trainer<'a> {
                 let encoded = std::mem::take(&mut self.encoded_ahead);
                 let (rows, partial) = rayon::join(
                     || SupportMaps::query_rows(&plan, n, cfg, dist),
-                    || engine::loss_and_layer_grads(ws, w, nb, x, b + m, cfg, grads, encoded, output_term),
+                    || engine::loss_and_layer_grads(ws, w, nb, x, target, b + m, cfg, grads, encoded, output_term),
                 );
                 self.maps.apply_update(plan, rows)?;
                 engine::finish_loss(partial, &self.maps, &self.config)
@@ -551,6 +568,7 @@ impl<'a> Trainer<'a> {
                 &self.weights,
                 self.neighbors,
                 x,
+                target,
                 b + m,
                 &self.maps,
                 &self.config,
@@ -707,10 +725,11 @@ impl<'a> Trainer<'a> {
             let a = self.adam.begin_step(&self.config, lr, self.weights.c.len());
             // The next step's batch is this one (full batch, nothing synthetic): encode it with
             // the new parameters during the update.
-            let next = self
-                .full_batch
-                .as_deref()
-                .filter(|_| self.config.augment == 0 && engine::encode_next_applies(&self.workspace, &self.weights));
+            let next = self.full_batch.as_deref().filter(|_| {
+                self.config.augment == 0
+                    && self.config.input_noise == 0.0
+                    && engine::encode_next_applies(&self.workspace, &self.weights)
+            });
             let mut c = std::mem::take(&mut self.weights.c);
             self.c_finite = engine::update_components(
                 &mut self.workspace,
