@@ -1,6 +1,6 @@
 //! STED (spatial and temporal) and Erms of a trained autoencoder's test reconstructions, both
 //! with the network encoder's codes and with codes fitted through the decoder (issue 17: the
-//! two side by side, until `meshdeco eval` reports both).
+//! two side by side; `meshdeco eval` reports the same per cell).
 //!
 //! `cargo run --release --example ae_fitted_sted -- <config.toml> <model dir> [--no-fit]`: the
 //! config's `[data]` gives the test split (frames in order: temporal STED); the model is a
