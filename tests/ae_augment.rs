@@ -242,6 +242,35 @@ fn validation_keeps_the_step_with_the_lowest_validation_error() {
     assert!(sse < last, "the kept model ({sse}) should beat the last step ({last})");
 }
 
+/// Central finite differences of `loss` against the analytic gradients `g` at `w`: the `top`
+/// entries of C with the largest gradients, and W_point[0][0] of the first layer (5 %).
+fn check_against_finite_differences(
+    w: &Weights,
+    g: &meshdeco::nn::engine::Grads,
+    top: usize,
+    loss: &mut dyn FnMut(&Weights) -> f64,
+) {
+    let mut order: Vec<usize> = (0..g.c.len()).collect();
+    order.sort_by(|&i, &j| g.c[j].abs().total_cmp(&g.c[i].abs()));
+    assert!(order.len() >= top, "only {} entries of C", order.len());
+    for &i in order.iter().take(top) {
+        let h = 1e-2 * w.c[i].abs().max(1e-2);
+        let (mut wp, mut wm) = (w.clone(), w.clone());
+        wp.c[i] += h;
+        wm.c[i] -= h;
+        let fd = (loss(&wp) - loss(&wm)) / (2.0 * h as f64);
+        let an = g.c[i] as f64;
+        assert!((fd - an).abs() <= 0.05 * an.abs().max(1e-3), "dL/dC[{i}]: analytic {an}, finite difference {fd}");
+    }
+    let h = 1e-3f32;
+    let (mut wp, mut wm) = (w.clone(), w.clone());
+    wp.layers[0].wp[0][0] += h;
+    wm.layers[0].wp[0][0] -= h;
+    let fd = (loss(&wp) - loss(&wm)) / (2.0 * h as f64);
+    let an = g.layers[0].wp[0][0];
+    assert!((fd - an).abs() <= 0.05 * an.abs().max(1e-3), "dL/dW_point[0][0]: analytic {an}, finite difference {fd}");
+}
+
 #[test]
 fn least_squares_encoder_gradients_match_finite_differences() {
     use meshdeco::nn::config::EncoderKind;
@@ -278,29 +307,7 @@ fn least_squares_encoder_gradients_match_finite_differences() {
         engine::loss_and_grad(ws, w, &nb, &x, None, b, &maps, &cfg, &mut scratch, None).total
     };
     engine::loss_and_grad(&mut ws, &w, &nb, &x, None, b, &maps, &cfg, &mut g, None);
-    // The entries of C with the largest gradients, and W_point[0][0].
-    let mut order: Vec<usize> = (0..g.c.len()).collect();
-    order.sort_by(|&i, &j| g.c[j].abs().total_cmp(&g.c[i].abs()));
-    let mut checked = 0;
-    for &i in order.iter().take(8) {
-        let h = 1e-2 * w.c[i].abs().max(1e-2);
-        let mut wp = w.clone();
-        wp.c[i] += h;
-        let mut wm = w.clone();
-        wm.c[i] -= h;
-        let fd = (loss(&wp, &mut ws) - loss(&wm, &mut ws)) / (2.0 * h as f64);
-        let an = g.c[i] as f64;
-        assert!((fd - an).abs() <= 0.05 * an.abs().max(1e-3), "dL/dC[{i}]: analytic {an}, finite difference {fd}");
-        checked += 1;
-    }
-    let h = 1e-3f32;
-    let (mut wp, mut wm) = (w.clone(), w.clone());
-    wp.layers[0].wp[0][0] += h;
-    wm.layers[0].wp[0][0] -= h;
-    let fd = (loss(&wp, &mut ws) - loss(&wm, &mut ws)) / (2.0 * h as f64);
-    let an = g.layers[0].wp[0][0];
-    assert!((fd - an).abs() <= 0.05 * an.abs().max(1e-3), "dL/dW_point[0][0]: analytic {an}, finite difference {fd}");
-    assert_eq!(checked, 8);
+    check_against_finite_differences(&w, &g, 8, &mut |w| loss(w, &mut ws));
     // The graph engine has only the tied encoder: refused by name.
     let bad = AutoencoderConfig { engine: Engine::Graph, ..cfg };
     assert!(bad.validate().unwrap_err().to_string().contains("encoder"));
@@ -400,22 +407,5 @@ fn denoising_compares_with_the_clean_shapes_and_its_gradients_match_finite_diffe
         let mut scratch = Grads::default();
         engine::loss_and_grad(ws, w, &nb, &noisy, Some(&clean), b, &maps, &cfg, &mut scratch, None).total
     };
-    let mut order: Vec<usize> = (0..g.c.len()).collect();
-    order.sort_by(|&i, &j| g.c[j].abs().total_cmp(&g.c[i].abs()));
-    for &i in order.iter().take(6) {
-        let h = 1e-2 * w.c[i].abs().max(1e-2);
-        let (mut wp, mut wm) = (w.clone(), w.clone());
-        wp.c[i] += h;
-        wm.c[i] -= h;
-        let fd = (loss(&wp, &mut ws) - loss(&wm, &mut ws)) / (2.0 * h as f64);
-        let an = g.c[i] as f64;
-        assert!((fd - an).abs() <= 0.05 * an.abs().max(1e-3), "dL/dC[{i}]: analytic {an}, finite difference {fd}");
-    }
-    let h = 1e-3f32;
-    let (mut wp, mut wm) = (w.clone(), w.clone());
-    wp.layers[0].wp[0][0] += h;
-    wm.layers[0].wp[0][0] -= h;
-    let fd = (loss(&wp, &mut ws) - loss(&wm, &mut ws)) / (2.0 * h as f64);
-    let an = g.layers[0].wp[0][0];
-    assert!((fd - an).abs() <= 0.05 * an.abs().max(1e-3), "dL/dW_point[0][0]: analytic {an}, finite difference {fd}");
+    check_against_finite_differences(&w, &g, 6, &mut |w| loss(w, &mut ws));
 }
