@@ -740,9 +740,9 @@ pub struct PartialLoss {
 /// left to [`update_components`] (or to [`components_gradient`]). Only for
 /// `lambda_orthogonal = 0` and the linear encoder ([`fused_update_applies`]). It does not read
 /// the support maps, so their distance queries may run beside it; [`finish_loss`] then gives
-/// the same loss terms as [`loss_and_grad`] (`target` as there). With `encoded`, the encoder outputs and `Zᵀ` of
-/// `x` are already in the workspace (computed by the last [`update_components`] with
-/// `encode_next`, for this same `x` and these parameters).
+/// the same loss terms as [`loss_and_grad`] (`target` as there). With `encoded`, the encoder
+/// outputs and `Zᵀ` of `x` are already in the workspace (computed by the last
+/// [`update_components`] with `encode_next`, for this same `x` and these parameters).
 #[allow(clippy::too_many_arguments)]
 pub fn loss_and_layer_grads(
     ws: &mut Workspace,
