@@ -129,30 +129,27 @@ impl Augmenter {
         let b = if n_shapes > 1 { (a + 1 + rng.below(n_shapes - 1)) % n_shapes } else { a };
         let (xa, xb) = (shapes(a), shapes(b));
         debug_assert!(xa.len() == 9 * self.n && xb.len() == 9 * self.n);
-        let mix = match self.mix {
-            AugmentMix::Mixed if rng.uniform() < 0.5 => AugmentMix::Local,
-            AugmentMix::Mixed => AugmentMix::Blend,
-            m => m,
+        let local = match self.mix {
+            AugmentMix::Local => true,
+            AugmentMix::Blend => false,
+            AugmentMix::Mixed => rng.uniform() < 0.5,
         };
-        match mix {
-            AugmentMix::Blend => {
-                let t = rng.uniform() as f32;
-                for (row, (&u, &v)) in xa.iter().zip(xb).enumerate() {
-                    put(row, u + t * (v - u));
-                }
+        if !local {
+            let t = rng.uniform() as f32;
+            for (row, (&u, &v)) in xa.iter().zip(xb).enumerate() {
+                put(row, u + t * (v - u));
             }
-            AugmentMix::Local | AugmentMix::Mixed => {
-                let d = &self.pool[rng.below(self.pool.len())];
-                let r = (self.radius[0] + rng.uniform() * (self.radius[1] - self.radius[0])) as f32;
-                let w = 0.5 * r;
-                for (i, &di) in d.iter().enumerate() {
-                    let m = mask(di, r, w);
-                    for c in 0..9 {
-                        let row = i * 9 + c;
-                        let (u, v) = (xa[row], xb[row]);
-                        put(row, u + m * (v - u));
-                    }
-                }
+            return;
+        }
+        let d = &self.pool[rng.below(self.pool.len())];
+        let r = (self.radius[0] + rng.uniform() * (self.radius[1] - self.radius[0])) as f32;
+        let w = 0.5 * r;
+        for (i, &di) in d.iter().enumerate() {
+            let m = mask(di, r, w);
+            for c in 0..9 {
+                let row = i * 9 + c;
+                let (u, v) = (xa[row], xb[row]);
+                put(row, u + m * (v - u));
             }
         }
     }
