@@ -14,7 +14,8 @@ use meshdeco::mesh::{MeshSequence, Vec3};
 use meshdeco::metrics::erms::{Alignment, erms};
 use meshdeco::metrics::locality::{SUPPORT_THRESHOLD, support_regions};
 use meshdeco::metrics::sted::{FrameOrder, Sted, StedParams};
-use meshdeco::model::{RefineOptions, load_model};
+use meshdeco::model::RefineOptions;
+use meshdeco::pipeline::load_model;
 
 fn centroid_align(r: &mut [Vec3], t: &[Vec3]) {
     let n = r.len() as f64;

@@ -89,7 +89,14 @@ fn demo(iterations: usize) {
         let peak = c.vertex_change.iter().enumerate().max_by(|a, b| a.1.total_cmp(b.1)).map(|(i, _)| i).unwrap();
         println!(
             "rank {} dim {}: distance {:.3}, largest change at ({:.2}, {:.2}), C centre at ({:.2}, {:.2}), support {} vertices",
-            c.rank, c.dim, c.distance, p[peak][0], p[peak][1], p[c.center][0], p[c.center][1], c.support_size
+            c.summary.rank,
+            c.summary.dim,
+            c.summary.distance,
+            p[peak][0],
+            p[peak][1],
+            p[c.summary.center][0],
+            p[c.summary.center][1],
+            c.summary.support_size
         );
     }
 }

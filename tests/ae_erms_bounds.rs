@@ -1,7 +1,7 @@
 //! The autoencoder pipeline's Erms on vertices against baselines computed here, on data where a
 //! nonlinear model should win: `synthetic:tube` (two bends and a bulge; bends are rotations,
 //! nonlinear in vertex positions). Train every third frame, test the rest, K = 2. The test Erms
-//! reported by training is recomputed from the reloaded model (`model::load_model`, encode →
+//! reported by training is recomputed from the reloaded model (`pipeline::load_model`, encode →
 //! decode) and compared with the rest shape (all weights zero) and with PCA at equal K, both
 //! centroid-aligned like the autoencoder's ACAP (translation free).
 
@@ -9,7 +9,8 @@ mod common;
 
 use meshdeco::config::Config;
 use meshdeco::metrics::erms::{Alignment, erms};
-use meshdeco::model::{load_model, reconstruct};
+use meshdeco::model::reconstruct;
+use meshdeco::pipeline::load_model;
 use meshdeco::pipeline::{Silent, TrainOptions, train};
 
 const DATA: &str = "[data]\npath = \"synthetic:tube\"\ntrain = \"every:3\"\ntest = \"rest\"\n";

@@ -193,15 +193,15 @@ fn training_recovers_planted_local_deformations() {
     assert!(
         hit[0] && hit[1],
         "top components do not localize on the planted bumps: {:?}",
-        analysis.components.iter().map(|c| (c.dim, c.distance, c.center)).collect::<Vec<_>>()
+        analysis.components.iter().map(|c| (c.summary.dim, c.summary.distance, c.summary.center)).collect::<Vec<_>>()
     );
 
     // Synthesis with weight 1 on a dimension decodes its extreme shape; weight 0 the reference.
     let top = &analysis.components[0];
-    let s1 = ae.synthesize(&analysis, &[(top.dim, 1.0)]).unwrap();
+    let s1 = ae.synthesize(&analysis, &[(top.summary.dim, 1.0)]).unwrap();
     let d1: f64 = s1.data.iter().zip(&top.features).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
     assert!(d1 < 1e-6, "synthesis at weight 1 differs from the extreme by {d1}");
-    let s0 = ae.synthesize(&analysis, &[(top.dim, 0.0)]).unwrap();
+    let s0 = ae.synthesize(&analysis, &[(top.summary.dim, 0.0)]).unwrap();
     let d0: f64 = s0.data.iter().zip(&analysis.reference_features).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
     assert!(d0 < 1e-6);
     // Interpolation ends at the decoded end codes.

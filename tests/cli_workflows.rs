@@ -82,7 +82,7 @@ fn pose_on_an_autoencoder() {
     let d = tmp("aepose");
     std::fs::write(d.join("ae.toml"), ae_config("ae", 150, 6)).unwrap();
     ok(&meshdeco(&["train", "--config", "ae.toml", "--out", "ae"], &d));
-    let model = meshdeco::model::load_model(&d.join("ae")).unwrap();
+    let model = meshdeco::pipeline::load_model(&d.join("ae")).unwrap();
     let start = model.decode(&[model.start_weights(None).unwrap()]).unwrap().remove(0);
     let mut best = (0, 0.0, [0.0; 3]);
     for p in model.decode(&model.train_weights().unwrap()).unwrap() {

@@ -11,7 +11,8 @@ use common::{meshdeco, output_text};
 
 use meshdeco::export::read_glb;
 use meshdeco::mesh::{self, Vec3};
-use meshdeco::model::{self, load_model};
+use meshdeco::model;
+use meshdeco::pipeline::load_model;
 
 fn tmp(tag: &str) -> PathBuf {
     common::fresh_dir("export", tag)

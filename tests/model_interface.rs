@@ -10,7 +10,8 @@ use common::{meshdeco, output_text};
 
 use meshdeco::config::{Config, MethodKind};
 use meshdeco::mesh;
-use meshdeco::model::{self, load_model, ranked};
+use meshdeco::model::{self, ranked};
+use meshdeco::pipeline::load_model;
 
 fn tmp(tag: &str) -> PathBuf {
     common::fresh_dir("model", tag)

@@ -8,8 +8,9 @@ use std::process::{Command, Output};
 
 use meshdeco::config::Config;
 use meshdeco::mesh::{self, Vec3};
-use meshdeco::model::{PoseOptions, load_model};
+use meshdeco::model::PoseOptions;
 use meshdeco::pipeline::Silent;
+use meshdeco::pipeline::load_model;
 use meshdeco::pipeline::pose::{ball, displacement_share};
 use meshdeco::synthetic;
 

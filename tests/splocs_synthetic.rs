@@ -278,7 +278,7 @@ fn pca_with_rank_components_is_exact() {
     }
 }
 
-/// Reference numbers on real data (DESIGN.md: the Python SPLOCS reference reaches train Erms
+/// Reference numbers on real data (docs/design.md § Reference numbers: the Python SPLOCS reference reaches train Erms
 /// 14.18 on SCAPE and 5.75 on the horse gallop with K 50, λ 2, support [0.1, 0.7], 10
 /// iterations, rest = first frame, distances on the unit-box rest mesh). Distances here are
 /// graph (Dijkstra) distances, a stand-in for heat geodesics. Skipped when the data is absent;

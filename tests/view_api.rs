@@ -9,7 +9,7 @@ mod common;
 mod view_support;
 
 use common::{fresh_dir, meshdeco, output_text};
-use meshdeco::model::load_model;
+use meshdeco::pipeline::load_model;
 use serde_json::{Value, json};
 use view_support::{Viewer, dist, f32s, header, max_diff, parse_shape, train};
 

@@ -7,7 +7,8 @@ use anyhow::{Context, Result};
 use clap::Args;
 use meshdeco::artifact;
 use meshdeco::mesh::{self, TriMesh};
-use meshdeco::model::{self, RefineOptions, load_model};
+use meshdeco::model::{self, RefineOptions};
+use meshdeco::pipeline::load_model;
 
 #[derive(Debug, Args)]
 pub struct EncodeArgs {

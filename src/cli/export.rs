@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use anyhow::{Context, Result, bail};
 use clap::Args;
 use meshdeco::export::{ExportOptions, export_glb};
-use meshdeco::model::load_model;
+use meshdeco::pipeline::load_model;
 
 #[derive(Debug, Args)]
 #[command(after_help = "The base mesh is the model's neutral shape (all weights 0: the rest shape for SPLOCS, the \

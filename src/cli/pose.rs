@@ -1,20 +1,19 @@
 //! `meshdeco pose`: direct-manipulation posing of a trained model from vertex constraints.
 
-use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use clap::Args;
-use meshdeco::mesh::{self, TriMesh, Vec3};
-use meshdeco::methods::posing::PoseConfig;
-use meshdeco::model::{PoseOptions, check_connectivity, load_model};
-use meshdeco::pipeline::ae_pose::AePoseConfig;
+use meshdeco::mesh::{self, TriMesh};
+use meshdeco::model::{Constraints, PoseOptions, check_connectivity};
+use meshdeco::pipeline::load_model;
 use meshdeco::pipeline::pose::{ball, check_targets, displacement_share};
 
 #[derive(Debug, Args)]
 #[command(after_help = "CONSTRAINTS FILE: a JSON object mapping 0-based vertex indices (as strings) to target \
-positions in data units, e.g. {\"123\": [0.1, -0.02, 0.35], \"4071\": [0.0, 0.2, 0.3]}.
+positions in data units, e.g. {\"123\": [0.1, -0.02, 0.35], \"4071\": [0.0, 0.2, 0.3]}, or the \
+viewer's spelling: [{\"vertex\": 123, \"target\": [0.1, -0.02, 0.35]}, ...].
 
 START: without --from, linear models start from all weights 0 (their offset: the training mean for \
 PCA, the rest shape for SPLOCS), region PCA from all coefficients 0 (the region means), the \
@@ -39,16 +38,16 @@ pub struct PoseArgs {
     pub out: PathBuf,
     /// γ: pull towards the start weights, dimensionless (Eq. 8/10 regulariser, scaled by the
     /// mean squared response of one weight at the constrained vertices; also the autoencoder's).
-    #[arg(long, default_value_t = 0.025)]
+    #[arg(long, default_value_t = PoseOptions::default().gamma)]
     pub gamma: f64,
     /// β: boundary consistency between regions (region PCA only; squared vertex differences, as
     /// given). With few training shapes β = 1 couples the regions so strongly that a drag
     /// spreads like holistic PCA; on face-poses β = 1e-6 keeps 99.7 % of the energy in the
     /// dragged vertex's region.
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = PoseOptions::default().beta)]
     pub beta: f64,
     /// Gauss-Newton iterations at most (autoencoder only).
-    #[arg(long, default_value_t = 30)]
+    #[arg(long, default_value_t = PoseOptions::default().max_iterations)]
     pub max_iterations: usize,
     /// Radius (fraction of the rest mesh's bounding-box diagonal) of the ball around each
     /// constrained vertex in which the reported displacement-energy share is measured.
@@ -56,65 +55,10 @@ pub struct PoseArgs {
     pub local_radius: f64,
 }
 
-/// Reads a constraints file: sorted (vertex, target) pairs.
-pub fn read_constraints(path: &Path, n_vertices: usize) -> Result<Vec<(usize, Vec3)>> {
+/// Reads a constraints file (either spelling of [`Constraints::from_json`]).
+pub fn read_constraints(path: &Path, n_vertices: usize) -> Result<Constraints> {
     let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-    let Pairs(pairs) = serde_json::from_str(&text).map_err(|e| {
-        anyhow::anyhow!(
-            "{}: line {} column {}: {e} (expected a JSON object {{\"vertex index\": [x, y, z], ...}})",
-            path.display(),
-            e.line(),
-            e.column()
-        )
-    })?;
-    if pairs.is_empty() {
-        bail!("{}: no constraint given", path.display());
-    }
-    let mut seen = BTreeMap::new();
-    let mut out = Vec::with_capacity(pairs.len());
-    for (k, v) in &pairs {
-        let i: usize =
-            k.trim().parse().map_err(|_| anyhow::anyhow!("{}: key `{k}` is not a vertex index", path.display()))?;
-        if i >= n_vertices {
-            bail!(
-                "{}: vertex {i} out of range (the model has {n_vertices} vertices, 0..{})",
-                path.display(),
-                n_vertices - 1
-            );
-        }
-        if v.len() != 3 || v.iter().any(|x| !x.is_finite()) {
-            bail!("{}: target of vertex {i} must be 3 finite numbers, got {v:?}", path.display());
-        }
-        if seen.insert(i, k.clone()).is_some() {
-            bail!("{}: vertex {i} is constrained twice (key `{k}`); give each vertex once", path.display());
-        }
-        out.push((i, [v[0], v[1], v[2]]));
-    }
-    out.sort_by_key(|c| c.0);
-    Ok(out)
-}
-
-/// A JSON object's (key, value) pairs in file order, duplicates kept (serde maps drop them).
-struct Pairs(Vec<(String, Vec<f64>)>);
-
-impl<'de> serde::Deserialize<'de> for Pairs {
-    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> std::result::Result<Self, D::Error> {
-        struct V;
-        impl<'de> serde::de::Visitor<'de> for V {
-            type Value = Pairs;
-            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
-                f.write_str("a JSON object {\"vertex index\": [x, y, z], ...}")
-            }
-            fn visit_map<A: serde::de::MapAccess<'de>>(self, mut m: A) -> std::result::Result<Pairs, A::Error> {
-                let mut out = Vec::new();
-                while let Some(kv) = m.next_entry::<String, Vec<f64>>()? {
-                    out.push(kv);
-                }
-                Ok(Pairs(out))
-            }
-        }
-        d.deserialize_map(V)
-    }
+    Ok(Constraints::from_json_text(&path.display().to_string(), &text, n_vertices)?)
 }
 
 /// Checks the numeric flags, naming the flag and the value.
@@ -127,8 +71,8 @@ fn check_flags(a: &PoseArgs) -> Result<()> {
     if !(a.local_radius.is_finite() && a.local_radius > 0.0) {
         bail!("--local-radius {}: must be a positive fraction of the bounding-box diagonal", a.local_radius);
     }
-    if a.max_iterations == 0 {
-        bail!("--max-iterations 0: must be at least 1");
+    if !(1..=PoseOptions::MAX_ITERATIONS).contains(&a.max_iterations) {
+        bail!("--max-iterations {}: must be from 1 to {}", a.max_iterations, PoseOptions::MAX_ITERATIONS);
     }
     Ok(())
 }
@@ -156,13 +100,10 @@ pub fn run(a: PoseArgs) -> Result<()> {
             None
         }
     };
-    let opts = PoseOptions {
-        linear: PoseConfig { gamma: a.gamma, beta: a.beta },
-        ae: AePoseConfig { gamma: a.gamma, max_iterations: a.max_iterations, ..Default::default() },
-    };
+    let opts = PoseOptions { gamma: a.gamma, beta: a.beta, max_iterations: a.max_iterations };
+    opts.validate()?;
     let w0 = model.start_weights(from.as_deref())?;
-    let vertices: Vec<usize> = cons.iter().map(|c| c.0).collect();
-    let targets: Vec<Vec3> = cons.iter().map(|c| c.1).collect();
+    let Constraints { vertices, targets } = cons;
     check_targets(&rest, &vertices, &targets).with_context(|| format!("{}", a.constraints.display()))?;
     let t0 = Instant::now();
     let res = model.pose(&vertices, &targets, &w0, &opts)?;
@@ -170,7 +111,7 @@ pub fn run(a: PoseArgs) -> Result<()> {
     if res.positions.iter().flatten().any(|x| !x.is_finite()) {
         bail!("posing {} produced non-finite coordinates; nothing written", a.model.display());
     }
-    println!("{} model, {} constraint(s), solved in {:.1} ms", model.kind().name(), cons.len(), 1e3 * secs);
+    println!("{} model, {} constraint(s), solved in {:.1} ms", model.kind().name(), vertices.len(), 1e3 * secs);
     let (lo, hi) = rest.bounding_box();
     let diag = mesh::dist(lo, hi);
     for (&v, t) in vertices.iter().zip(&targets) {

@@ -6,7 +6,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 use anyhow::{Context, Result};
 use clap::Args;
-use meshdeco::config::{Config, MethodKind};
+use meshdeco::config::Config;
 use meshdeco::pipeline::metrics_file::Metrics;
 use meshdeco::pipeline::{TrainOptions, train};
 
@@ -29,7 +29,7 @@ pub fn run(a: TrainArgs) -> Result<()> {
     let cfg = Config::from_file(&a.config).with_context(|| format!("reading config {}", a.config.display()))?;
     let out = cfg.output_dir(a.out.as_deref());
     let mut options = TrainOptions { resume: a.resume, stop: None };
-    if cfg.kind() == MethodKind::Autoencoder {
+    if cfg.method.can_resume() {
         let stop = Arc::new(AtomicBool::new(false));
         let flag = stop.clone();
         // Ctrl-C: finish the current step, write a checkpoint, exit non-zero with a hint.

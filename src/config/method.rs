@@ -190,25 +190,48 @@ pub struct SplocsMethod {
     pub geodesic_m: f64,
     /// ACAP rotation consistency (acap only).
     pub consistency: ConsistencyName,
+    /// Threads of the component update: 0 (default) as many as the machine has, 1 sequential.
+    #[serde(skip_serializing_if = "is_zero")]
+    pub threads: usize,
 }
+
+/// The one map between [`SplocsMethod`]'s keys and [`SplocsConfig`]'s fields (same names;
+/// `fixed_centers` are read from files on the way in). Both directions name every field (no
+/// `..`), so a solver field without a key is a compile error.
+macro_rules! splocs_keys {
+    ($($field:ident),* $(,)?) => {
+        impl SplocsMethod {
+            fn from_solver(c: SplocsConfig, representation: RepresentationKind, geodesic_m: f64, consistency: ConsistencyName) -> Self {
+                let SplocsConfig { fixed_centers, $($field),* } = c;
+                SplocsMethod {
+                    representation,
+                    geodesic_m,
+                    consistency,
+                    fixed_centers: fixed_centers.into_iter().map(FixedCenter::Vertices).collect(),
+                    $($field),*
+                }
+            }
+
+            fn solver_config_with(&self, fixed_centers: Vec<Vec<usize>>) -> SplocsConfig {
+                let SplocsMethod {
+                    representation: _,
+                    geodesic_m: _,
+                    consistency: _,
+                    fixed_centers: _,
+                    $($field),*
+                } = self.clone();
+                SplocsConfig { fixed_centers, $($field),* }
+            }
+        }
+    };
+}
+
+splocs_keys!(components, sparsity, support, weights, max_iterations, admm, tolerance, seed, threads);
 
 impl Default for SplocsMethod {
     fn default() -> Self {
-        let d = SplocsConfig::default();
-        SplocsMethod {
-            components: d.components,
-            representation: RepresentationKind::Displacement,
-            sparsity: d.sparsity,
-            support: d.support,
-            weights: d.weights,
-            max_iterations: d.max_iterations,
-            admm: d.admm,
-            tolerance: d.tolerance,
-            seed: d.seed,
-            fixed_centers: Vec::new(),
-            geodesic_m: SPLOCS_GEODESIC_M,
-            consistency: ConsistencyName::Global,
-        }
+        let solver = SplocsConfig { threads: 0, ..SplocsConfig::default() };
+        SplocsMethod::from_solver(solver, RepresentationKind::Displacement, SPLOCS_GEODESIC_M, ConsistencyName::Global)
     }
 }
 
@@ -217,21 +240,6 @@ impl SplocsMethod {
     pub fn solver_config(&self) -> Result<SplocsConfig> {
         let fixed_centers = self.fixed_centers.iter().map(FixedCenter::read).collect::<Result<Vec<_>>>()?;
         Ok(self.solver_config_with(fixed_centers))
-    }
-
-    fn solver_config_with(&self, fixed_centers: Vec<Vec<usize>>) -> SplocsConfig {
-        SplocsConfig {
-            components: self.components,
-            sparsity: self.sparsity,
-            support: self.support,
-            weights: self.weights,
-            max_iterations: self.max_iterations,
-            admm: self.admm.clone(),
-            tolerance: self.tolerance,
-            seed: self.seed,
-            fixed_centers,
-            threads: 0,
-        }
     }
 }
 
@@ -312,6 +320,13 @@ impl RegionPcaMethod {
 }
 
 /// `kind = "autoencoder"`: the mesh-convolutional autoencoder (Tan et al. 2018).
+///
+/// Every field of the network's [`AutoencoderConfig`] is a key here, under the same name
+/// (except `d_min`/`d_max`, written `support = [d_min, d_max]`), with its meaning documented
+/// there; [`network_keys!`] maps the two both ways, naming every field, so a new network field
+/// does not compile until it is a key. The method's own keys: `geodesic_m`, `scaling`,
+/// `consistency`, `fit_test`. Keys at their default that older configs did not have are left out
+/// of a written `config.toml` (`skip_serializing_if`); they parse back to the same value.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct AutoencoderMethod {
@@ -327,6 +342,12 @@ pub struct AutoencoderMethod {
     pub learning_rate_final: Option<f64>,
     pub beta1: f64,
     pub beta2: f64,
+    /// Adam ε (default 1e-8).
+    #[serde(skip_serializing_if = "network_default::epsilon")]
+    pub epsilon: f64,
+    /// Standard deviation of the normal initialisation (default 0.02).
+    #[serde(skip_serializing_if = "network_default::init_std")]
+    pub init_std: f64,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub batch_size: Option<usize>,
     pub layers: usize,
@@ -344,137 +365,156 @@ pub struct AutoencoderMethod {
     /// Also report `test_erms_fitted`.
     pub fit_test: bool,
     /// Synthetic shapes per training step (augmentation in feature space; 0: none).
-    #[serde(skip_serializing_if = "is_zero")]
+    #[serde(skip_serializing_if = "network_default::augment")]
     pub augment: usize,
     /// `local` | `blend` | `mixed` (default `local`).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub augment_mix: Option<AugmentMix>,
+    #[serde(skip_serializing_if = "network_default::augment_mix")]
+    pub augment_mix: AugmentMix,
     /// [r_min, r_max] of a local mix's region radius (default [0.1, 0.3]).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub augment_radius: Option<[f64; 2]>,
+    #[serde(skip_serializing_if = "network_default::augment_radius")]
+    pub augment_radius: [f64; 2],
     /// Standard deviation of Gaussian noise added to the encoder's input features (scaled
     /// units) while the decoding is compared with the clean shapes (0: none).
-    #[serde(skip_serializing_if = "is_zero_f64")]
+    #[serde(skip_serializing_if = "network_default::input_noise")]
     pub input_noise: f64,
     /// Training shapes held out to choose the kept step (0: none).
-    #[serde(skip_serializing_if = "is_zero")]
+    #[serde(skip_serializing_if = "network_default::validation")]
     pub validation: usize,
     /// Steps between validation measurements (default 50).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub validate_every: Option<usize>,
+    #[serde(skip_serializing_if = "network_default::validate_every")]
+    pub validate_every: usize,
     /// `tied` (the paper) | `least-squares`.
-    #[serde(skip_serializing_if = "is_tied")]
+    #[serde(skip_serializing_if = "network_default::encoder")]
     pub encoder: EncoderKind,
     /// Weight of the decorrelation term on the rows of C (0: none).
-    #[serde(skip_serializing_if = "is_zero_f64")]
+    #[serde(skip_serializing_if = "network_default::lambda_orthogonal")]
     pub lambda_orthogonal: f64,
     /// Weight of the vertex term (0: none).
-    #[serde(skip_serializing_if = "is_zero_f64")]
+    #[serde(skip_serializing_if = "network_default::lambda_vertex")]
     pub lambda_vertex: f64,
     /// Shapes per step the vertex term sees (default 0: all).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub vertex_batch: Option<usize>,
+    #[serde(skip_serializing_if = "network_default::vertex_batch")]
+    pub vertex_batch: usize,
     /// Fraction of the iterations over which the vertex term's weight ramps up (default 0).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub vertex_warmup: Option<f64>,
+    #[serde(skip_serializing_if = "network_default::vertex_warmup")]
+    pub vertex_warmup: f64,
     /// Cap on the vertex term's gradient, in multiples of the feature error's (default 0: none).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub vertex_clip: Option<f64>,
+    #[serde(skip_serializing_if = "network_default::vertex_clip")]
+    pub vertex_clip: f64,
     /// Residual passes of the encoder at inference (0: the paper's one pass).
-    #[serde(skip_serializing_if = "is_zero")]
+    #[serde(skip_serializing_if = "network_default::encoder_passes")]
     pub encoder_passes: usize,
-}
-
-fn is_tied(e: &EncoderKind) -> bool {
-    *e == EncoderKind::Tied
-}
-
-fn is_zero_f64(x: &f64) -> bool {
-    *x == 0.0
 }
 
 fn is_zero(n: &usize) -> bool {
     *n == 0
 }
 
-impl Default for AutoencoderMethod {
-    fn default() -> Self {
-        let d = AutoencoderConfig::default();
-        AutoencoderMethod {
-            components: d.components,
-            support: [d.d_min, d.d_max],
-            seed: d.seed,
-            geodesic_m: AE_GEODESIC_M,
-            iterations: d.iterations,
-            learning_rate: d.learning_rate,
-            learning_rate_final: d.learning_rate_final,
-            beta1: d.beta1,
-            beta2: d.beta2,
-            batch_size: d.batch_size,
-            layers: d.layers,
-            lambda1: d.lambda1,
-            lambda2: d.lambda2,
-            theta: d.theta,
-            checkpoint_every: d.checkpoint_every,
-            scaling: ScalingName::PerDimension,
-            consistency: ConsistencyName::Global,
-            engine: d.engine,
-            device: d.device,
-            fit_test: true,
-            augment: d.augment,
-            augment_mix: None,
-            augment_radius: None,
-            input_noise: d.input_noise,
-            validation: d.validation,
-            validate_every: None,
-            lambda_orthogonal: d.lambda_orthogonal,
-            lambda_vertex: d.lambda_vertex,
-            vertex_batch: None,
-            vertex_warmup: None,
-            vertex_clip: None,
-            encoder_passes: d.encoder_passes,
-            encoder: d.encoder,
-        }
+/// `skip_serializing_if` predicates: the value equals [`AutoencoderConfig::default`]'s.
+mod network_default {
+    use crate::nn::config::AutoencoderConfig;
+    macro_rules! is_default {
+        ($($field:ident: $t:ty),* $(,)?) => {$(
+            pub fn $field(v: &$t) -> bool {
+                *v == AutoencoderConfig::default().$field
+            }
+        )*};
     }
+    is_default!(
+        epsilon: f64,
+        init_std: f64,
+        augment: usize,
+        augment_mix: crate::nn::augment::AugmentMix,
+        augment_radius: [f64; 2],
+        input_noise: f64,
+        validation: usize,
+        validate_every: usize,
+        encoder: crate::nn::config::EncoderKind,
+        lambda_orthogonal: f64,
+        lambda_vertex: f64,
+        vertex_batch: usize,
+        vertex_warmup: f64,
+        vertex_clip: f64,
+        encoder_passes: usize,
+    );
 }
 
-impl AutoencoderMethod {
-    /// The network's hyperparameters.
-    pub fn network_config(&self) -> AutoencoderConfig {
-        let d = AutoencoderConfig::default();
-        AutoencoderConfig {
-            components: self.components,
-            layers: self.layers,
-            learning_rate: self.learning_rate,
-            learning_rate_final: self.learning_rate_final,
-            beta1: self.beta1,
-            beta2: self.beta2,
-            iterations: self.iterations,
-            batch_size: self.batch_size,
-            lambda1: self.lambda1,
-            lambda2: self.lambda2,
-            theta: self.theta,
-            d_min: self.support[0],
-            d_max: self.support[1],
-            checkpoint_every: self.checkpoint_every,
-            seed: self.seed,
-            engine: self.engine,
-            device: self.device,
-            augment: self.augment,
-            augment_mix: self.augment_mix.unwrap_or(d.augment_mix),
-            augment_radius: self.augment_radius.unwrap_or(d.augment_radius),
-            input_noise: self.input_noise,
-            validation: self.validation,
-            validate_every: self.validate_every.unwrap_or(d.validate_every),
-            lambda_orthogonal: self.lambda_orthogonal,
-            lambda_vertex: self.lambda_vertex,
-            vertex_batch: self.vertex_batch.unwrap_or(d.vertex_batch),
-            vertex_warmup: self.vertex_warmup.unwrap_or(d.vertex_warmup),
-            vertex_clip: self.vertex_clip.unwrap_or(d.vertex_clip),
-            encoder_passes: self.encoder_passes,
-            encoder: self.encoder,
-            ..d
+/// The one map between [`AutoencoderMethod`]'s keys and [`AutoencoderConfig`]'s fields: the
+/// listed fields carry the same name on both sides, `support` is `[d_min, d_max]`. Both
+/// directions name every field of both structs (no `..`), so a field added to either and not
+/// listed here is a compile error.
+macro_rules! network_keys {
+    ($($field:ident),* $(,)?) => {
+        impl AutoencoderMethod {
+            /// The method whose network keys are `c`'s and whose own keys are `own`'s.
+            fn from_network(c: AutoencoderConfig, own: AutoencoderOwnKeys) -> Self {
+                let AutoencoderConfig { d_min, d_max, $($field),* } = c;
+                let AutoencoderOwnKeys { geodesic_m, scaling, consistency, fit_test } = own;
+                AutoencoderMethod { support: [d_min, d_max], geodesic_m, scaling, consistency, fit_test, $($field),* }
+            }
+
+            /// The network's hyperparameters.
+            pub fn network_config(&self) -> AutoencoderConfig {
+                let AutoencoderMethod { support, geodesic_m: _, scaling: _, consistency: _, fit_test: _, $($field),* } =
+                    self.clone();
+                AutoencoderConfig { d_min: support[0], d_max: support[1], $($field),* }
+            }
         }
+    };
+}
+
+network_keys!(
+    components,
+    layers,
+    init_std,
+    learning_rate,
+    learning_rate_final,
+    beta1,
+    beta2,
+    epsilon,
+    iterations,
+    batch_size,
+    lambda1,
+    lambda2,
+    theta,
+    checkpoint_every,
+    seed,
+    engine,
+    device,
+    augment,
+    augment_mix,
+    augment_radius,
+    input_noise,
+    validation,
+    validate_every,
+    encoder,
+    lambda_orthogonal,
+    lambda_vertex,
+    vertex_batch,
+    vertex_warmup,
+    vertex_clip,
+    encoder_passes,
+);
+
+/// The autoencoder method's keys that are not the network's.
+struct AutoencoderOwnKeys {
+    geodesic_m: f64,
+    scaling: ScalingName,
+    consistency: ConsistencyName,
+    fit_test: bool,
+}
+
+impl Default for AutoencoderMethod {
+    fn default() -> Self {
+        AutoencoderMethod::from_network(
+            AutoencoderConfig::default(),
+            AutoencoderOwnKeys {
+                geodesic_m: AE_GEODESIC_M,
+                scaling: ScalingName::PerDimension,
+                consistency: ConsistencyName::Global,
+                fit_test: true,
+            },
+        )
     }
 }
 
@@ -502,6 +542,17 @@ pub trait MethodSettings {
     /// `[control_points]`): per-vertex models and the autoencoder.
     fn supports_control_points(&self) -> bool {
         self.representation() == RepresentationKind::Displacement
+    }
+    /// Whether training runs in steps that a checkpoint can resume (`meshdeco train --resume`,
+    /// and Ctrl-C stops it after writing one).
+    fn can_resume(&self) -> bool {
+        false
+    }
+    /// Whether fitting the trained model to control points iterates through a nonlinear
+    /// decoder (the evaluation then runs `control_points.autoencoder_trials` trials, fewer than
+    /// the closed-form fits' `control_points.trials`).
+    fn iterative_point_fit(&self) -> bool {
+        false
     }
 }
 
@@ -615,6 +666,12 @@ impl MethodSettings for AutoencoderMethod {
     fn supports_control_points(&self) -> bool {
         true
     }
+    fn can_resume(&self) -> bool {
+        true
+    }
+    fn iterative_point_fit(&self) -> bool {
+        true
+    }
     fn validate(&self) -> Result<()> {
         if self.iterations == 0 {
             return Err(Error::config("method.iterations", "0 must be at least 1"));
@@ -651,6 +708,11 @@ impl MethodConfig {
     /// The representation the method runs on.
     pub fn representation(&self) -> RepresentationKind {
         self.settings().representation()
+    }
+
+    /// See [`MethodSettings::can_resume`].
+    pub fn can_resume(&self) -> bool {
+        self.settings().can_resume()
     }
 
     /// Parses and validates a `[method]` table. Errors name `method.<key>`: an unknown key, a

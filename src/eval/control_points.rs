@@ -18,7 +18,7 @@
 //!
 //! Autoencoder: the latent code is optimised to meet the points
 //! ([`crate::pipeline::ae_fit::AeFitEncoder`], Levenberg–Marquardt, the same γ, start code = the
-//! training reference shape's code, [`AE_FIT_ITERATIONS`] iterations at most). Its ACAP decoding
+//! training reference shape's code, [`crate::pipeline::ae_fit::POINT_FIT_ITERATIONS`] iterations at most). Its ACAP decoding
 //! fixes the centroid, so the best global translation (control points' mean residual) is
 //! applied in closed form, and the result is the decoded shape moved by it — measured, like the
 //! linear models, without further alignment.
@@ -34,10 +34,6 @@ use crate::mesh::Vec3;
 use crate::metrics::erms::{Alignment, erms};
 use crate::model::Model;
 use crate::rng::Rng;
-
-/// Levenberg–Marquardt iterations of the autoencoder's control-point fit (it starts from the
-/// reference shape's code, farther from the target than an encoder's code).
-pub const AE_FIT_ITERATIONS: usize = 30;
 
 /// Mean, minimum and maximum Erms over trials for one number of control points.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

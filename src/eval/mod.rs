@@ -47,13 +47,12 @@ pub use config::{Cell, ControlPointsConfig, EvalConfig, EvalDataset, EvalMethod}
 use control_points::{ControlPointErms, erms_curve};
 
 use crate::artifact;
-use crate::config::MethodKind;
 use crate::error::{Error, Result};
 use crate::mesh::Vec3;
 use crate::metrics::erms::Alignment;
 use crate::metrics::locality::{SUPPORT_THRESHOLD, support_regions};
 use crate::metrics::sted::{FrameOrder, Sted, StedParams};
-use crate::model::load_model;
+use crate::pipeline::load_model;
 use crate::pipeline::metrics_file::median;
 use crate::pipeline::train::{TrainOptions, TrainOutcome, frames_in_data_units, train_prepared};
 use crate::pipeline::{Progress, Silent};
@@ -450,8 +449,11 @@ pub fn run(
                     }
                     let ds = DatasetData::cached(&mut data[cell.dataset], d)?;
                     let model = load_model(&dir)?;
-                    let trials =
-                        if cell.config.kind() == MethodKind::Autoencoder { cp.autoencoder_trials } else { cp.trials };
+                    let trials = if cell.config.method.settings().iterative_point_fit() {
+                        cp.autoencoder_trials
+                    } else {
+                        cp.trials
+                    };
                     let rows = erms_curve(model.as_ref(), &ds.test, &cp.counts, trials, cp.gamma, cp.seed)?;
                     if let Some(r) = rows.iter().find(|r| !r.erms_mean.is_finite()) {
                         return Err(Error::Numerical(format!(

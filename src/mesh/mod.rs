@@ -19,7 +19,7 @@ pub use inspect::{InspectReport, Warning, WarningKind, inspect, inspect_path};
 pub use load::{LoadedMesh, MeshFormat, load_mesh, read_mesh};
 pub use sequence::{LoadedSequence, load_sequence, read_sequence};
 pub use topology::Topology;
-pub use write::{colormap, colormap_range, write_mesh, write_obj, write_off, write_ply};
+pub use write::{colormap, colormap_range, obj_bytes, ply_bytes, write_mesh, write_obj, write_off, write_ply};
 
 /// One vertex position, `[x, y, z]` (the 3-vector type of [`crate::math::vec3`]).
 pub use crate::math::Vec3;

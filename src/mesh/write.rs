@@ -17,16 +17,26 @@ use crate::error::{Error, Result};
 /// Writes `mesh` as Wavefront OBJ (`v x y z` lines, then `f a b c` with 1-based indices).
 pub fn write_obj(path: &Path, mesh: &TriMesh) -> Result<()> {
     check_mesh(path, mesh)?;
-    write_atomic_with(path, |w| {
-        writeln!(w, "# meshdeco: {} vertices, {} faces", mesh.n_vertices(), mesh.n_faces())?;
-        for p in &mesh.positions {
-            writeln!(w, "v {:?} {:?} {:?}", p[0], p[1], p[2])?;
-        }
-        for f in &mesh.faces {
-            writeln!(w, "f {} {} {}", f[0] + 1, f[1] + 1, f[2] + 1)?;
-        }
-        Ok(())
-    })
+    write_atomic_with(path, |w| emit_obj(w, mesh))
+}
+
+/// The OBJ text [`write_obj`] writes, in memory (e.g. a download); `what` names it in errors.
+pub fn obj_bytes(what: &str, mesh: &TriMesh) -> Result<Vec<u8>> {
+    check_mesh(Path::new(what), mesh)?;
+    let mut out = Vec::new();
+    emit_obj(&mut out, mesh).map_err(|e| Error::Invalid(format!("{what}: {e}")))?;
+    Ok(out)
+}
+
+fn emit_obj(w: &mut impl Write, mesh: &TriMesh) -> std::io::Result<()> {
+    writeln!(w, "# meshdeco: {} vertices, {} faces", mesh.n_vertices(), mesh.n_faces())?;
+    for p in &mesh.positions {
+        writeln!(w, "v {:?} {:?} {:?}", p[0], p[1], p[2])?;
+    }
+    for f in &mesh.faces {
+        writeln!(w, "f {} {} {}", f[0] + 1, f[1] + 1, f[2] + 1)?;
+    }
+    Ok(())
 }
 
 /// Writes `mesh` as ASCII OFF (0-based indices).
@@ -84,31 +94,47 @@ pub fn write_ply(
             )));
         }
     }
-    write_atomic_with(path, |w| {
-        writeln!(w, "ply\nformat ascii 1.0\ncomment written by meshdeco")?;
-        writeln!(w, "element vertex {n}\nproperty double x\nproperty double y\nproperty double z")?;
-        if colors.is_some() {
-            writeln!(w, "property uchar red\nproperty uchar green\nproperty uchar blue")?;
+    write_atomic_with(path, |w| emit_ply(w, mesh, colors, scalars))
+}
+
+/// The PLY text [`write_ply`] writes (no colours, no scalar), in memory; `what` names it in errors.
+pub fn ply_bytes(what: &str, mesh: &TriMesh) -> Result<Vec<u8>> {
+    check_mesh(Path::new(what), mesh)?;
+    let mut out = Vec::new();
+    emit_ply(&mut out, mesh, None, None).map_err(|e| Error::Invalid(format!("{what}: {e}")))?;
+    Ok(out)
+}
+
+fn emit_ply(
+    w: &mut impl Write,
+    mesh: &TriMesh,
+    colors: Option<&[[u8; 3]]>,
+    scalars: Option<(&str, &[f64])>,
+) -> std::io::Result<()> {
+    let n = mesh.n_vertices();
+    writeln!(w, "ply\nformat ascii 1.0\ncomment written by meshdeco")?;
+    writeln!(w, "element vertex {n}\nproperty double x\nproperty double y\nproperty double z")?;
+    if colors.is_some() {
+        writeln!(w, "property uchar red\nproperty uchar green\nproperty uchar blue")?;
+    }
+    if let Some((name, _)) = scalars {
+        writeln!(w, "property float {name}")?;
+    }
+    writeln!(w, "element face {}\nproperty list uchar int vertex_indices\nend_header", mesh.n_faces())?;
+    for (i, p) in mesh.positions.iter().enumerate() {
+        write!(w, "{:?} {:?} {:?}", p[0], p[1], p[2])?;
+        if let Some(c) = colors {
+            write!(w, " {} {} {}", c[i][0], c[i][1], c[i][2])?;
         }
-        if let Some((name, _)) = scalars {
-            writeln!(w, "property float {name}")?;
+        if let Some((_, s)) = scalars {
+            write!(w, " {:?}", s[i] as f32)?;
         }
-        writeln!(w, "element face {}\nproperty list uchar int vertex_indices\nend_header", mesh.n_faces())?;
-        for (i, p) in mesh.positions.iter().enumerate() {
-            write!(w, "{:?} {:?} {:?}", p[0], p[1], p[2])?;
-            if let Some(c) = colors {
-                write!(w, " {} {} {}", c[i][0], c[i][1], c[i][2])?;
-            }
-            if let Some((_, s)) = scalars {
-                write!(w, " {:?}", s[i] as f32)?;
-            }
-            writeln!(w)?;
-        }
-        for f in &mesh.faces {
-            writeln!(w, "3 {} {} {}", f[0], f[1], f[2])?;
-        }
-        Ok(())
-    })
+        writeln!(w)?;
+    }
+    for f in &mesh.faces {
+        writeln!(w, "3 {} {} {}", f[0], f[1], f[2])?;
+    }
+    Ok(())
 }
 
 /// Maps values linearly onto a perceptually uniform blue → green → yellow colour ramp (a

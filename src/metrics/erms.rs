@@ -1,4 +1,4 @@
-//! Erms (Neumann et al. 2013, DESIGN.md § Metrics): the root-mean-square vertex coordinate
+//! Erms (Neumann et al. 2013, docs/design.md § Metrics and protocol): the root-mean-square vertex coordinate
 //! error, `Erms = 1000·sqrt(Σ_f Σ_v ‖v − v'‖² / (3·F·N))`, reported in the data's own units
 //! × 1000.
 //!

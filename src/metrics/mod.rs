@@ -1,4 +1,4 @@
-//! Evaluation metrics (plain `f64`, no Burn; DESIGN.md § Metrics and protocol):
+//! Evaluation metrics (plain `f64`, no Burn; docs/design.md § Metrics and protocol):
 //!
 //! * [`erms`]: Erms, raw or centroid-aligned, the alignment kept with the number;
 //! * [`sted`]: STED (Váša & Skala 2011), spatial and temporal parts, spatial only for unordered

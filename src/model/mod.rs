@@ -7,9 +7,10 @@
 //! **A trait, not an enum.** Each method implements [`Model`] in its own file
 //! (`pipeline/linear.rs` for pca and splocs, `pipeline/region.rs`, `pipeline/autoencoder.rs`),
 //! so commands (`encode`, `synthesize`, `components`, `interpolate`, `pose`), the evaluation and
-//! later front ends are written once against `dyn Model`, and a new method adds one file and one
-//! line in [`registry`] — the one place that names each method kind ([`registry::load_model`],
-//! [`registry::fit`]). An enum would put a `match` in every operation of every caller.
+//! later front ends are written once against `dyn Model`. The one place that names each method
+//! kind is the registry above this layer (`pipeline/registry.rs`: `fit` and `load_model`); a new
+//! method adds its files and one arm there (ARCHITECTURE.md, "Where a change goes"). An enum
+//! would put a `match` in every operation of every caller.
 //!
 //! Units and conventions: every position that enters or leaves a [`Model`] is in the data's own
 //! units (the unit-box scaling of `data.unit_box` is applied and undone inside); weights are the
@@ -18,11 +19,9 @@
 //! ([`Model::synthesis_weights`]) are the user-facing weights of `meshdeco synthesize`: equal to
 //! the weights for linear models, and `z_i = Z_r,i + (Z_h,i − Z_r,i)·w_i` for the autoencoder.
 
-pub mod registry;
+pub mod pose;
 
 use std::path::Path;
-
-pub use registry::{FitContext, FitStats, Fitted, fit, load_model};
 
 use crate::config::MethodKind;
 use crate::error::{Error, Result};
@@ -30,7 +29,7 @@ use crate::mesh::{MeshSequence, TriMesh, Vec3};
 use crate::metrics::erms::{Alignment, erms};
 use crate::representation::RepresentationKind;
 
-pub use crate::pipeline::pose::{PoseOptions, PoseResult};
+pub use pose::{Constraints, PoseOptions, PoseResult};
 
 /// One component of a trained model, as shown to a person.
 #[derive(Debug, Clone, PartialEq)]
@@ -140,7 +139,14 @@ pub trait Model {
     /// What the default start weights are, in words.
     fn start_description(&self) -> &'static str;
     /// Poses: `vertices` moved to `targets` (data units) starting from weights `w0`.
+    /// `options` is checked by the caller ([`PoseOptions::validate`]); the model reads those of
+    /// [`Model::pose_parameters`].
     fn pose(&self, vertices: &[usize], targets: &[Vec3], w0: &[f64], options: &PoseOptions) -> Result<PoseResult>;
+    /// The [`PoseOptions`] this model's [`Model::pose`] reads (`gamma`, `beta`,
+    /// `max_iterations`): what a front end offers to set.
+    fn pose_parameters(&self) -> &'static [&'static str] {
+        &["gamma"]
+    }
     /// The vertices a drag of `v` should stay in, with a name (region, component support), if
     /// the model has such a notion.
     fn locality_set(&self, v: usize) -> Option<(String, Vec<usize>)> {

@@ -7,7 +7,7 @@ use super::augment::AugmentMix;
 use crate::error::{Error, Result};
 
 /// Every hyperparameter of the autoencoder method. Defaults are the reference implementation's
-/// (Tan et al. 2018; DESIGN.md § Mesh autoencoder).
+/// (Tan et al. 2018; docs/design.md § Mesh autoencoder).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct AutoencoderConfig {

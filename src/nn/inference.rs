@@ -63,9 +63,11 @@ pub struct Autoencoder {
     module: OnceLock<AutoencoderModule>,
 }
 
-/// One latent dimension's extreme shape (see [`Autoencoder::analyze_components`]).
-#[derive(Debug, Clone, Serialize)]
-pub struct ComponentExtreme {
+/// One latent dimension of the component analysis (see [`Autoencoder::analyze_components`]):
+/// its range over the data, the extreme kept, how far that moves the shape, its rank and centre.
+/// The trained artefact stores these (`autoencoder.json`'s `analysis`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ComponentSummary {
     /// Latent dimension k.
     pub dim: usize,
     /// Rank by `distance` (0 = largest).
@@ -76,16 +78,29 @@ pub struct ComponentExtreme {
     pub z_max: f64,
     /// The extreme kept (`z_min` or `z_max`), i.e. `Z_h,k`.
     pub z_extreme: f64,
-    /// Feature-space distance ‖decode(z_h) − decode(z_r)‖ (Frobenius over N × 9).
+    /// Feature-space distance ‖decode(z_h) − decode(z_r)‖ (Frobenius over N × 9); for a piece
+    /// translation, the translation's length in data units.
     pub distance: f64,
+    /// Centre vertex `argmax_i ‖C_k,i‖` (a piece translation: the piece's vertex nearest its
+    /// rest centroid).
+    pub center: usize,
+    /// Number of vertices whose change is at least 10 % of the largest change.
+    pub support_size: usize,
+    /// For a dimension after the network's K (a piece translation of a multi-piece mesh):
+    /// `[piece, axis]`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub piece: Option<[usize; 2]>,
+}
+
+/// One latent dimension's extreme shape: its summary, decoded features and per-vertex change.
+#[derive(Debug, Clone, Serialize)]
+pub struct ComponentExtreme {
+    #[serde(flatten)]
+    pub summary: ComponentSummary,
     /// Decoded features of the extreme shape, `N × 9` vertex-major.
     pub features: Vec<f64>,
     /// Per-vertex feature change ‖Δx_i‖ against the decoded reference (N values).
     pub vertex_change: Vec<f64>,
-    /// Centre vertex `argmax_i ‖C_k,i‖`.
-    pub center: usize,
-    /// Number of vertices whose change is at least 10 % of the largest change.
-    pub support_size: usize,
 }
 
 /// Result of the component analysis.
@@ -106,7 +121,7 @@ impl ComponentAnalysis {
     pub fn extremes_by_dim(&self) -> Vec<f64> {
         let mut v = vec![0.0; self.z_reference.len()];
         for c in &self.components {
-            v[c.dim] = c.z_extreme;
+            v[c.summary.dim] = c.summary.z_extreme;
         }
         v
     }
@@ -384,21 +399,24 @@ impl Autoencoder {
             let support_size = if peak > 0.0 { vertex_change.iter().filter(|&&v| v >= 0.1 * peak).count() } else { 0 };
             debug_assert_eq!(vertex_change.len(), n);
             comps.push(ComponentExtreme {
-                dim: kk,
-                rank: 0,
-                z_min: lo,
-                z_max: hi,
-                z_extreme,
-                distance,
+                summary: ComponentSummary {
+                    dim: kk,
+                    rank: 0,
+                    z_min: lo,
+                    z_max: hi,
+                    z_extreme,
+                    distance,
+                    center: centers[kk],
+                    support_size,
+                    piece: None,
+                },
                 features,
                 vertex_change,
-                center: centers[kk],
-                support_size,
             });
         })?;
-        comps.sort_by(|a, b| b.distance.total_cmp(&a.distance).then(a.dim.cmp(&b.dim)));
+        comps.sort_by(|a, b| b.summary.distance.total_cmp(&a.summary.distance).then(a.summary.dim.cmp(&b.summary.dim)));
         for (r, c) in comps.iter_mut().enumerate() {
-            c.rank = r;
+            c.summary.rank = r;
         }
         Ok(ComponentAnalysis { reference, z_reference: zr, reference_features, components: comps })
     }

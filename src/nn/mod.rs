@@ -68,7 +68,7 @@ pub mod training;
 
 pub use config::AutoencoderConfig;
 pub use data::TrainingData;
-pub use inference::{Autoencoder, ComponentAnalysis, ComponentExtreme};
+pub use inference::{Autoencoder, ComponentAnalysis, ComponentExtreme, ComponentSummary};
 pub use loss::{CenterDistances, EuclideanDistances, HopDistances, LossTerms};
 pub use model::AutoencoderModule;
 pub use neighbors::NeighborIndex;

@@ -2,7 +2,7 @@
 //! pure-Burn forward pass (the autodiff reference; training uses the hand-written pass of
 //! [`super::engine`], which computes the same function).
 //!
-//! Conventions (DESIGN.md § Mesh autoencoder):
+//! Conventions (docs/design.md § Mesh autoencoder):
 //! - features of one shape `X ∈ R^{N×9}`; a batch is `[B, N, 9]`;
 //! - convolution `y_i = W_point·x_i + W_nb·mean_{j∈N(i)} x_j + b` with `W ∈ R^{9×9}` stored
 //!   `[out, in]`;

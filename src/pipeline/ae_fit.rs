@@ -31,6 +31,10 @@ use crate::geometry::farthest_point_sampling::FarthestPointSampler;
 use crate::geometry::graph_distance::EdgeGraph;
 use crate::mesh::{MeshSequence, Vec3};
 
+/// Levenberg–Marquardt iterations of the autoencoder's control-point fit ([`crate::model::Model::point_fit`]:
+/// it starts from the reference shape's code, farther from the target than an encoder's code).
+pub const POINT_FIT_ITERATIONS: usize = 30;
+
 /// Codes (one K-vector per frame) and reconstructions (N positions per frame, data units).
 pub type FittedFrames = (Vec<Vec<f64>>, Vec<Vec<Vec3>>);
 

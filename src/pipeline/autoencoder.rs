@@ -26,19 +26,21 @@ use std::time::Instant;
 
 use serde::{Deserialize, Serialize};
 
-use super::ae_fit::AeFitEncoder;
-use super::ae_pose::AePoser;
+use super::ae_fit::{AeFitEncoder, POINT_FIT_ITERATIONS};
+use super::ae_pose::{AePoseConfig, AePoser};
 use super::ae_vertex_loss::AcapVertexLoss;
 use super::geodesic_support::GeodesicSupport;
 use super::linear::{rest_from_arrays, rest_to_arrays};
-use super::pose::{PoseOptions, PoseResult, single_frame};
+use super::pose::single_frame;
+use super::registry::{FitContext, FitStats, Fitted};
 use crate::artifact::{self, ArrayStore};
 use crate::config::{AutoencoderMethod, MethodConfig, MethodKind};
 use crate::error::{Error, Result};
-use crate::eval::control_points::AE_FIT_ITERATIONS;
 use crate::mesh::{self, MeshSequence, TriMesh, Vec3};
 use crate::methods::support_map::{ComponentLocality, SupportDistances, component_locality, support_ramp};
-use crate::model::{Component, FitContext, FitStats, Fitted, Model, PointFit, RefineOptions, Refined};
+use crate::model::{Component, Model, PointFit, RefineOptions, Refined};
+use crate::model::{PoseOptions, PoseResult};
+use crate::nn::ComponentSummary;
 use crate::nn::{Autoencoder, CenterDistances, NeighborIndex, RunOptions, Trainer, TrainingData};
 use crate::preprocess::{Prepared, UnitBox};
 use crate::representation::acap::Consistency;
@@ -72,22 +74,6 @@ pub struct AeHeader {
     /// Component analysis: per latent dimension (index = dimension) the extreme code kept,
     /// the feature-space distance, its rank (0 = largest) and centre vertex.
     pub analysis: Vec<ComponentSummary>,
-}
-
-/// One latent dimension of the component analysis.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct ComponentSummary {
-    pub dim: usize,
-    pub rank: usize,
-    pub z_min: f64,
-    pub z_max: f64,
-    pub z_extreme: f64,
-    pub distance: f64,
-    pub center: usize,
-    pub support_size: usize,
-    /// For a piece-translation dimension (multi-piece meshes): `[piece, axis]`.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub piece: Option<[usize; 2]>,
 }
 
 /// Heat-geodesic distances normalised by the largest geodesic distance (the trainer's
@@ -312,7 +298,7 @@ impl AeArtifact {
 }
 
 /// Control-point fit of the autoencoder: Levenberg–Marquardt on the code from the reference
-/// shape's code, at most [`AE_FIT_ITERATIONS`] iterations.
+/// shape's code, at most [`POINT_FIT_ITERATIONS`] iterations.
 struct AePointFit<'a> {
     artifact: &'a AeArtifact,
     fitter: AeFitEncoder<'a>,
@@ -434,13 +420,22 @@ impl Model for AeArtifact {
     fn start_description(&self) -> &'static str {
         "the code of the rest mesh"
     }
+    fn pose_parameters(&self) -> &'static [&'static str] {
+        &["gamma", "max_iterations"]
+    }
     fn pose(&self, vertices: &[usize], targets: &[Vec3], w0: &[f64], options: &PoseOptions) -> Result<PoseResult> {
         let start = self.decode_codes(&[w0.to_vec()])?.remove(0);
-        let (weights, positions) = AePoser::new(self, vertices, &options.ae)?.solve(targets, w0)?;
+        let (weights, positions) = AePoser::new(
+            self,
+            vertices,
+            &AePoseConfig { gamma: options.gamma, max_iterations: options.max_iterations, ..Default::default() },
+        )?
+        .solve(targets, w0)?;
         Ok(PoseResult { start, positions, weights })
     }
     fn point_fit<'a>(&'a self, vertices: &[usize], gamma: f64) -> Result<Option<Box<dyn PointFit + 'a>>> {
-        let fitter = AeFitEncoder::with_vertices(self, vertices.to_vec(), gamma)?.with_iterations(AE_FIT_ITERATIONS)?;
+        let fitter =
+            AeFitEncoder::with_vertices(self, vertices.to_vec(), gamma)?.with_iterations(POINT_FIT_ITERATIONS)?;
         Ok(Some(Box::new(AePointFit { artifact: self, fitter })))
     }
     fn save(&self, dir: &Path) -> Result<()> {
@@ -637,21 +632,7 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
     let mut train_codes = model.encode(&xs_train)?;
     append_translations(&representation, &mut train_codes, &train_t);
     let analysis = model.analyze_components(&xs_train, 0)?;
-    let mut summaries: Vec<ComponentSummary> = analysis
-        .components
-        .iter()
-        .map(|c| ComponentSummary {
-            dim: c.dim,
-            rank: c.rank,
-            z_min: c.z_min,
-            z_max: c.z_max,
-            z_extreme: c.z_extreme,
-            distance: c.distance,
-            center: c.center,
-            support_size: c.support_size,
-            piece: None,
-        })
-        .collect();
+    let mut summaries: Vec<ComponentSummary> = analysis.components.iter().map(|c| c.summary.clone()).collect();
     summaries.sort_by_key(|c| c.dim);
     summaries.extend(piece_summaries(&representation, ae_cfg.components, &train_t, 0));
     let header = AeHeader {

@@ -1,6 +1,6 @@
 //! Geodesic distance providers for support maps, built on [`HeatGeodesics`].
 //!
-//! Two normalisations are used by the methods (DESIGN.md § Normalisation of distances):
+//! Two normalisations are used by the methods (docs/design.md § Normalisation of distances):
 //! - SPLOCS (Neumann et al.): distances on the rest mesh scaled into the unit box (largest
 //!   bounding-box side = 1) — [`GeodesicSupport::unit_box`];
 //! - the autoencoder (Tan et al.): distances divided by the largest pairwise geodesic distance,

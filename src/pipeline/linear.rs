@@ -12,7 +12,8 @@ use std::time::Instant;
 use serde::{Deserialize, Serialize};
 
 use super::geodesic_support::GeodesicSupport;
-use super::pose::{PoseOptions, PoseResult, control_targets, model_targets};
+use super::pose::{control_targets, model_targets};
+use super::registry::{FitContext, FitStats, Fitted};
 use crate::artifact::{self, ArrayStore};
 use crate::config::{ConsistencyName, MethodConfig, MethodKind, PcaMethod, SplocsMethod, method_key};
 use crate::error::{Error, Result};
@@ -24,7 +25,8 @@ use crate::methods::support_map::{
     ComponentLocality, SupportDistances, TriangleSupport, component_locality, support_ramp,
 };
 use crate::methods::{DataMatrix, LinearModel, WeightConstraint};
-use crate::model::{Component, FitContext, FitStats, Fitted, Model, PointFit, argmax};
+use crate::model::{Component, Model, PointFit, argmax};
+use crate::model::{PoseOptions, PoseResult};
 use crate::preprocess::{Prepared, UnitBox};
 use crate::representation::acap::Consistency;
 use crate::representation::roundtrip::Alignment;
@@ -428,7 +430,9 @@ impl Model for LinearArtifact {
         }
         let start = self.synthesize(w0)?;
         let t = model_targets(vertices, targets, self.header.unit_box, Some(&self.rest.positions));
-        let weights = LinearPoser::new(&self.model, vertices, &options.linear)?.solve(&t, w0)?;
+        let weights =
+            LinearPoser::new(&self.model, vertices, &PoseConfig { gamma: options.gamma, beta: options.beta })?
+                .solve(&t, w0)?;
         let positions = self.synthesize(&weights)?;
         Ok(PoseResult { start, positions, weights })
     }

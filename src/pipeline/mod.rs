@@ -11,8 +11,10 @@ pub mod linear;
 pub mod metrics_file;
 pub mod pose;
 pub mod region;
+pub mod registry;
 pub mod train;
 
+pub use registry::{FitContext, FitStats, Fitted, fit, load_model};
 pub use train::{TrainOptions, TrainOutcome, train, train_prepared};
 
 /// Progress reporting hooks of long jobs (the CLI draws them with indicatif).

@@ -1,6 +1,6 @@
 //! Posing helpers shared by the models' [`crate::model::Model::pose`] implementations and the
-//! `pose` command: options and result of one pose, model-space targets, and the locality
-//! measures of a drag.
+//! `pose` command: model-space targets, target checks, and the locality measures of a drag (the
+//! options, constraints and result of a pose are [`crate::model::pose`]'s).
 //!
 //! - `pca` / `splocs` on displacements: Lewis–Anjyo posing ([`crate::methods::posing::LinearPoser`],
 //!   paper 002 Eq. 8), honouring the model's weight constraint (SPLOCS: w ≥ 0 when trained so).
@@ -11,29 +11,9 @@
 //! an error naming the model and representation: their vertices come out of a Poisson solve, so
 //! the per-vertex formulation of Eq. 8 does not apply.
 
-use super::ae_pose::AePoseConfig;
 use crate::error::{Error, Result};
 use crate::mesh::{MeshSequence, TriMesh, Vec3};
-use crate::methods::posing::{PoseConfig, energy_share};
-
-/// Hyperparameters of posing: γ, β for the linear and region models, the autoencoder's
-/// optimiser settings (its γ is `ae.gamma`).
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct PoseOptions {
-    pub linear: PoseConfig,
-    pub ae: AePoseConfig,
-}
-
-/// The result of one pose.
-#[derive(Debug, Clone)]
-pub struct PoseResult {
-    /// Start positions (N, data units).
-    pub start: Vec<Vec3>,
-    /// Posed positions (N, data units).
-    pub positions: Vec<Vec3>,
-    /// Posed weights / coefficients / latent code.
-    pub weights: Vec<f64>,
-}
+use crate::methods::posing::energy_share;
 
 /// `positions` as a one-frame sequence with `rest`'s faces (errors when it does not have one
 /// position per vertex of `rest`).

@@ -15,7 +15,8 @@ use std::time::Instant;
 use serde::{Deserialize, Serialize};
 
 use super::linear::{rest_from_arrays, rest_to_arrays};
-use super::pose::{PoseOptions, PoseResult, control_targets, model_targets, single_frame};
+use super::pose::{control_targets, model_targets, single_frame};
+use super::registry::{FitContext, FitStats, Fitted};
 use crate::artifact::{self, ArrayStore};
 use crate::config::{MethodConfig, MethodKind, RegionPcaMethod, method_key};
 use crate::error::{Error, Result};
@@ -24,7 +25,8 @@ use crate::methods::DataMatrix;
 use crate::methods::posing::{PoseConfig, RegionPoser};
 use crate::methods::region_pca::{RegionBasis, RegionPcaModel};
 use crate::methods::segmentation::segment;
-use crate::model::{Component, FitContext, FitStats, Fitted, Model, PointFit, argmax};
+use crate::model::{Component, Model, PointFit, argmax};
+use crate::model::{PoseOptions, PoseResult};
 use crate::preprocess::{Prepared, UnitBox};
 use crate::representation::roundtrip::Alignment;
 use crate::representation::{Features, Representation, RepresentationKind, RepresentationOptions};
@@ -312,10 +314,15 @@ impl Model for RegionArtifact {
     fn start_description(&self) -> &'static str {
         "all coefficients 0 (the per-region training means)"
     }
+    fn pose_parameters(&self) -> &'static [&'static str] {
+        &["gamma", "beta"]
+    }
     fn pose(&self, vertices: &[usize], targets: &[Vec3], w0: &[f64], options: &PoseOptions) -> Result<PoseResult> {
         let start = self.decode(&[w0.to_vec()])?.remove(0);
         let t = model_targets(vertices, targets, self.header.unit_box, Some(&self.rest.positions));
-        let weights = RegionPoser::new(&self.model, vertices, &options.linear)?.solve(&t, w0)?;
+        let weights =
+            RegionPoser::new(&self.model, vertices, &PoseConfig { gamma: options.gamma, beta: options.beta })?
+                .solve(&t, w0)?;
         let positions = self.decode(std::slice::from_ref(&weights))?.remove(0);
         Ok(PoseResult { start, positions, weights })
     }

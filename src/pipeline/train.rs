@@ -1,5 +1,5 @@
 //! The one path from a config to an artefact directory, used by `meshdeco train` and by
-//! `meshdeco eval`: prepare the data → fit the method ([`crate::model::fit`]) → measure on
+//! `meshdeco eval`: prepare the data → fit the method ([`crate::pipeline::fit`]) → measure on
 //! vertices in data units (train Erms, test Erms with the model's own encoding and, where the
 //! model has one, with refined encodings; locality) → write.
 //!
@@ -22,7 +22,8 @@ use crate::config::{Config, resolved_toml};
 use crate::error::Result;
 use crate::mesh::{MeshSequence, Vec3};
 use crate::metrics::erms::erms;
-use crate::model::{FitContext, Model, RefineOptions, reconstruct};
+use crate::model::{Model, RefineOptions, reconstruct};
+use crate::pipeline::FitContext;
 use crate::preprocess::{self, Prepared};
 
 /// Options of [`train`] besides the config.
@@ -87,7 +88,7 @@ fn fit_measure_write(
 ) -> Result<TrainOutcome> {
     let mut ctx = FitContext { out, resume: options.resume, stop: options.stop.clone(), progress };
     let t = std::time::Instant::now();
-    let fitted = crate::model::fit(prep, &cfg.method, &mut ctx)?;
+    let fitted = crate::pipeline::fit(prep, &cfg.method, &mut ctx)?;
     let progress = ctx.progress;
     let model = fitted.model;
     let stats = fitted.stats;

@@ -1,5 +1,5 @@
 //! ACAP ("as-consistent-as-possible") deformation features of Gao et al., as used by Tan et al.,
-//! matching the reference implementation (DESIGN.md § Representations → acap).
+//! matching the reference implementation (docs/design.md § Representations → acap).
 //!
 //! Per vertex i of a frame, against the reference mesh (positions q):
 //! 1. Weights from the reference only: w_ij = sqrt(sexp(½(cot α_ij + cot β_ij))), α, β the
@@ -19,7 +19,7 @@
 //!
 //! Decoding (features → positions): T_i = exp(logR_i)·S_i (Rodrigues), then, by default, the
 //! exact inverse of step 3 ([`FitInverse`]: positions whose 1-ring fits give these T_i; encode →
-//! decode is exact to rounding), optionally regularised by the edge least squares; or DESIGN.md's
+//! decode is exact to rounding), optionally regularised by the edge least squares; or docs/design.md's
 //! edge least squares alone ([`AcapReconstruction`], min Σ c_ij ‖(p_i − p_j) − ½(T_i + T_j)(q_i −
 //! q_j)‖² with c_ij = w_ij, the ACAP weights above: positive, bounded, the ones that weight the
 //! 1-ring fits). See [`AcapDecoder`]. Both matrices depend on the reference only and are
@@ -173,7 +173,7 @@ pub enum AcapDecoder {
     /// of ±0.05 added to every feature, weight 0 / 0.01 / 0.1 give 2.25 / 1.84 / 1.50 (edge least
     /// squares alone: 1.74).
     FitInverse { edge_weight: f64 },
-    /// DESIGN.md's edge least squares alone ([`AcapReconstruction`], weights c_ij = w_ij).
+    /// docs/design.md's edge least squares alone ([`AcapReconstruction`], weights c_ij = w_ij).
     EdgeLeastSquares,
 }
 

@@ -5,7 +5,7 @@
 //! ω = (θ + 2πk)·a for every integer k (the "flipped" ones (−a, 2π − θ + 2πk) are among them:
 //! (2π − θ)(−a) = (θ − 2π)a). The identity has ω = 2πk·u for any unit u.
 //!
-//! * [`bfs_consistency`] is the reference implementation's option 0 (DESIGN.md § acap step 6):
+//! * [`bfs_consistency`] is the reference implementation's option 0 (docs/design.md § acap step 6):
 //!   a breadth-first walk from vertex 0 in which every child aligns its axis with its parent's
 //!   (flipping to (−a, 2π − θ)) and tracks a cycle count k from the jump of the stored angle.
 //! * [`global_consistency`] replaces the reference's option 1 (two integer programs solved by a

@@ -1,4 +1,4 @@
-//! Vertex positions from per-vertex deformation gradients T_i (ACAP decoding, DESIGN.md
+//! Vertex positions from per-vertex deformation gradients T_i (ACAP decoding, docs/design.md
 //! § acap "Reconstruction").
 //!
 //! Solves

@@ -32,18 +32,14 @@ use serde_json::{Value, json};
 use crate::error::{Error, Result};
 use crate::mesh::{MeshSequence, TriMesh, Vec3};
 use crate::metrics::erms::Alignment;
-use crate::model::{self, Model, PoseOptions, load_model};
+use crate::model::{self, Constraints, Model, PoseOptions};
+use crate::pipeline::load_model;
 use http::{Request, Response};
 
 /// The page.
 pub const INDEX_HTML: &str = include_str!("web/index.html");
 /// The page's script (WebGL2 viewer, panels, API client).
 pub const APP_JS: &str = include_str!("web/app.js");
-
-/// Default posing hyperparameters offered by the page (those of `meshdeco pose`).
-pub const DEFAULT_GAMMA: f64 = 0.025;
-pub const DEFAULT_BETA: f64 = 1.0;
-pub const DEFAULT_MAX_ITERATIONS: usize = 30;
 
 /// What `meshdeco view` serves.
 #[derive(Debug, Clone)]
@@ -284,7 +280,8 @@ fn describe(s: &Session, model_path: &Path) -> Result<Shared> {
         "view_axis": view,
         "segmentation_groups": groups,
         "frames": frames,
-        "pose_defaults": { "gamma": DEFAULT_GAMMA, "beta": DEFAULT_BETA, "max_iterations": DEFAULT_MAX_ITERATIONS },
+        "pose_defaults": PoseOptions::default().to_json(),
+        "pose_parameters": m.pose_parameters(),
     });
     let faces_bytes = rest.faces.iter().flatten().flat_map(|&i| (i as u32).to_le_bytes()).collect();
     let heat = components.iter().map(|c| f32_bytes(c.magnitudes.iter().copied())).collect();
@@ -478,68 +475,34 @@ fn pose(req: &Request, shared: &Shared, jobs: &Sender<Job>) -> ApiResult<Respons
     let n = shared.rest.n_vertices();
     let list = body
         .get("constraints")
-        .and_then(Value::as_array)
         .ok_or_else(|| bad("missing `constraints`: an array of {\"vertex\": index, \"target\": [x, y, z]}"))?;
-    if list.is_empty() {
-        return Err(bad("`constraints` is empty: give at least one {\"vertex\", \"target\"}"));
-    }
-    let mut vertices = Vec::with_capacity(list.len());
-    let mut targets = Vec::with_capacity(list.len());
-    for (i, c) in list.iter().enumerate() {
-        let v = c
-            .get("vertex")
-            .and_then(Value::as_u64)
-            .ok_or_else(|| bad(format!("constraints[{i}]: `vertex` must be a vertex index (integer ≥ 0)")))?;
-        if v as usize >= n || v > u32::MAX as u64 {
-            return Err(bad(format!(
-                "constraints[{i}]: vertex {v} out of range (the model has {n} vertices, 0..{})",
-                n.saturating_sub(1)
-            )));
-        }
-        let v = v as usize;
-        let t = c
-            .get("target")
-            .and_then(Value::as_array)
-            .filter(|a| a.len() == 3)
-            .ok_or_else(|| bad(format!("constraints[{i}]: `target` of vertex {v} must be [x, y, z]")))?;
-        let t = [
-            number(&t[0], &format!("constraints[{i}].target[0]"))?,
-            number(&t[1], &format!("constraints[{i}].target[1]"))?,
-            number(&t[2], &format!("constraints[{i}].target[2]"))?,
-        ];
-        if vertices.contains(&v) {
-            return Err(bad(format!("constraints[{i}]: vertex {v} is constrained twice")));
-        }
-        vertices.push(v);
-        targets.push(t);
-    }
+    let Constraints { vertices, targets } =
+        Constraints::from_json("`constraints`", list, n).map_err(|e| bad(e.to_string()))?;
     crate::pipeline::pose::check_targets(&shared.rest, &vertices, &targets).map_err(|e| bad(e.to_string()))?;
     let start = match body.get("start") {
         Some(s) => Some(vector(s, "start", shared.k, false)?),
         None => None,
     };
+    let d = PoseOptions::default();
     let param = |key: &str, default: f64| -> ApiResult<f64> {
         match body.get(key) {
             None => Ok(default),
-            Some(v) => {
-                let x = number(v, &format!("`{key}`"))?;
-                if x < 0.0 {
-                    return Err(bad(format!("`{key}` {x}: must be ≥ 0")));
-                }
-                Ok(x)
-            }
+            Some(v) => number(v, &format!("`{key}`")),
         }
     };
-    let gamma = param("gamma", DEFAULT_GAMMA)?;
-    let beta = param("beta", DEFAULT_BETA)?;
-    let iterations = param("max_iterations", DEFAULT_MAX_ITERATIONS as f64)?;
-    if !(1.0..=1000.0).contains(&iterations) || iterations.fract() != 0.0 {
-        return Err(bad(format!("`max_iterations` {iterations}: must be an integer from 1 to 1000")));
+    let iterations = param("max_iterations", d.max_iterations as f64)?;
+    if !(1.0..=PoseOptions::MAX_ITERATIONS as f64).contains(&iterations) || iterations.fract() != 0.0 {
+        return Err(bad(format!(
+            "`max_iterations` {iterations}: must be an integer from 1 to {}",
+            PoseOptions::MAX_ITERATIONS
+        )));
     }
     let options = PoseOptions {
-        linear: crate::methods::posing::PoseConfig { gamma, beta },
-        ae: crate::pipeline::ae_pose::AePoseConfig { gamma, max_iterations: iterations as usize, ..Default::default() },
+        gamma: param("gamma", d.gamma)?,
+        beta: param("beta", d.beta)?,
+        max_iterations: iterations as usize,
     };
+    options.validate().map_err(|e| bad(e.to_string()))?;
     Ok(on_model(jobs, move |s| {
         let m = s.model.as_ref();
         let r = (|| -> ApiResult<Response> {
@@ -613,38 +576,18 @@ fn export(req: &Request, shared: &Shared, jobs: &Sender<Job>) -> ApiResult<Respo
     let faces = shared.rest.faces.clone();
     Ok(on_model(jobs, move |s| {
         let m = s.model.as_ref();
-        result(evaluate(m, c).map(|(w, d, p)| match format.as_str() {
-            "json" => Response::json(200, &json!({ "kind": m.kind().name(), "dials": d, "weights": w })),
-            "ply" => Response::new(200, "text/plain; charset=utf-8", ply_text(&p, &faces).into_bytes()),
-            _ => Response::new(200, "text/plain; charset=utf-8", obj_text(&p, &faces).into_bytes()),
-        }))
+        let r = (|| -> ApiResult<Response> {
+            let (w, d, p) = evaluate(m, c)?;
+            let mesh = TriMesh::new(p, faces);
+            let text = |b: crate::error::Result<Vec<u8>>| -> ApiResult<Response> {
+                Ok(Response::new(200, "text/plain; charset=utf-8", b.map_err(|e| bad(e.to_string()))?))
+            };
+            match format.as_str() {
+                "json" => Ok(Response::json(200, &json!({ "kind": m.kind().name(), "dials": d, "weights": w }))),
+                "ply" => text(crate::mesh::ply_bytes("shape.ply", &mesh)),
+                _ => text(crate::mesh::obj_bytes("shape.obj", &mesh)),
+            }
+        })();
+        result(r)
     }))
-}
-
-/// OBJ text (shortest round-trip coordinates, 1-based faces).
-pub fn obj_text(p: &[Vec3], faces: &[[usize; 3]]) -> String {
-    let mut s = format!("# meshdeco view: {} vertices, {} faces\n", p.len(), faces.len());
-    for q in p {
-        s += &format!("v {:?} {:?} {:?}\n", q[0], q[1], q[2]);
-    }
-    for f in faces {
-        s += &format!("f {} {} {}\n", f[0] + 1, f[1] + 1, f[2] + 1);
-    }
-    s
-}
-
-/// ASCII PLY text.
-pub fn ply_text(p: &[Vec3], faces: &[[usize; 3]]) -> String {
-    let mut s = format!(
-        "ply\nformat ascii 1.0\ncomment meshdeco view\nelement vertex {}\nproperty double x\nproperty double y\nproperty double z\nelement face {}\nproperty list uchar int vertex_indices\nend_header\n",
-        p.len(),
-        faces.len()
-    );
-    for q in p {
-        s += &format!("{:?} {:?} {:?}\n", q[0], q[1], q[2]);
-    }
-    for f in faces {
-        s += &format!("3 {} {} {}\n", f[0], f[1], f[2]);
-    }
-    s
 }

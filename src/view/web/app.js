@@ -500,7 +500,7 @@ async function start() {
   const g = S.desc.pose_defaults; $('gamma').value = Math.log10(g.gamma); $('beta').value = Math.log10(g.beta);
   const pv = () => { const p = poseParams(); $('gamma-v').textContent = p.gamma.toPrecision(2); $('beta-v').textContent = p.beta.toPrecision(2); };
   $('gamma').oninput = pv; $('beta').oninput = pv; pv();
-  if (S.desc.kind !== 'region-pca') $('beta-row').style.display = 'none';
+  if (!S.desc.pose_parameters.includes('beta')) $('beta-row').style.display = 'none';
   initGL(); frameCamera(); buildComponents(); showPins(); colours();
   // Start shape: the decoding of the start weights.
   const r = await fetch('/api/decode', { method: 'POST', body: JSON.stringify({ weights: Array.from(S.weights) }) });

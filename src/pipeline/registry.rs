@@ -1,21 +1,20 @@
-//! The one place that names every method kind: fitting a typed method config on prepared data
-//! ([`fit`]) and loading a trained model from its artefact directory ([`load_model`]). A new
-//! method adds one arm to each.
+//! The one place that names every method's artefact: fitting a typed method config on prepared
+//! data ([`fit`]) and loading a trained model from its artefact directory ([`load_model`]). A new
+//! method adds one arm to each (and its config variant in `src/config/method.rs`).
 
 use std::path::Path;
 use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 
-use super::Model;
+use super::Progress;
+use super::autoencoder::{self, AeArtifact};
+use super::linear::{self, LinearArtifact};
+use super::region::{self, RegionArtifact};
 use crate::artifact;
 use crate::config::{MethodConfig, MethodKind};
 use crate::error::{Error, Result};
 use crate::methods::support_map::ComponentLocality;
-use crate::pipeline::Progress;
-use crate::pipeline::autoencoder::AeArtifact;
-use crate::pipeline::linear::LinearArtifact;
-use crate::pipeline::region::RegionArtifact;
-use crate::pipeline::{autoencoder, linear, region};
+use crate::model::Model;
 use crate::preprocess::Prepared;
 
 /// What a fit may use besides the data: the artefact directory (the autoencoder writes its
@@ -56,9 +55,9 @@ pub struct Fitted {
 
 /// Fits the configured method on prepared data.
 pub fn fit(prep: &Prepared, method: &MethodConfig, ctx: &mut FitContext<'_>) -> Result<Fitted> {
-    if ctx.resume && method.kind() != MethodKind::Autoencoder {
+    if ctx.resume && !method.can_resume() {
         return Err(Error::Invalid(format!(
-            "--resume applies to the autoencoder only; {} trains in one go",
+            "--resume applies to methods that train in steps (the autoencoder); {} trains in one go",
             method.kind().name()
         )));
     }

@@ -1,0 +1,258 @@
+//! What a pose asks of a [`super::Model`], whatever the method: the options (one set of
+//! defaults, shared by `meshdeco pose` and the viewer's `/api/pose`), the vertex constraints
+//! (one type, read from either JSON spelling), and the result.
+
+use std::collections::BTreeSet;
+
+use serde_json::Value;
+
+use crate::error::{Error, Result};
+use crate::mesh::Vec3;
+
+/// Hyperparameters of one pose. Every model reads the ones it lists in
+/// [`super::Model::pose_parameters`] and ignores the others.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PoseOptions {
+    /// γ ≥ 0, dimensionless: pull towards the start weights (paper 002 Eq. 8/10's regulariser,
+    /// scaled by the mean squared response of one weight at the constrained vertices; the
+    /// autoencoder's pull towards its start code likewise).
+    pub gamma: f64,
+    /// β ≥ 0: boundary consistency between regions (region PCA; squared vertex differences).
+    pub beta: f64,
+    /// Gauss–Newton iterations at most (the autoencoder), 1 ..= [`PoseOptions::MAX_ITERATIONS`].
+    pub max_iterations: usize,
+}
+
+impl Default for PoseOptions {
+    /// γ = 0.025 (the paper's value), β = 1, 30 iterations.
+    fn default() -> Self {
+        PoseOptions { gamma: 0.025, beta: 1.0, max_iterations: 30 }
+    }
+}
+
+impl PoseOptions {
+    /// The largest `max_iterations` accepted.
+    pub const MAX_ITERATIONS: usize = 1000;
+
+    /// Checks every value; the error names the option (`` `gamma` ``, `` `beta` ``,
+    /// `` `max_iterations` ``) and the value.
+    pub fn validate(&self) -> Result<()> {
+        for (key, v) in [("gamma", self.gamma), ("beta", self.beta)] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(Error::Invalid(format!("`{key}` {v}: must be a finite number ≥ 0")));
+            }
+        }
+        if !(1..=Self::MAX_ITERATIONS).contains(&self.max_iterations) {
+            return Err(Error::Invalid(format!(
+                "`max_iterations` {}: must be an integer from 1 to {}",
+                self.max_iterations,
+                Self::MAX_ITERATIONS
+            )));
+        }
+        Ok(())
+    }
+
+    /// The defaults as JSON (`{"gamma", "beta", "max_iterations"}`), as the viewer offers them.
+    pub fn to_json(&self) -> Value {
+        serde_json::json!({ "gamma": self.gamma, "beta": self.beta, "max_iterations": self.max_iterations })
+    }
+}
+
+/// The result of one pose.
+#[derive(Debug, Clone)]
+pub struct PoseResult {
+    /// Start positions (N, data units).
+    pub start: Vec<Vec3>,
+    /// Posed positions (N, data units).
+    pub positions: Vec<Vec3>,
+    /// Posed weights / coefficients / latent code.
+    pub weights: Vec<f64>,
+}
+
+/// Vertex constraints of a pose: distinct vertex indices (0-based, sorted) and their target
+/// positions (data units, finite).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Constraints {
+    pub vertices: Vec<usize>,
+    pub targets: Vec<Vec3>,
+}
+
+impl Constraints {
+    /// Reads constraints from JSON text (a constraints file of `meshdeco pose`), in either
+    /// spelling of [`Constraints::from_json`]. A key given twice in an object is an error (JSON
+    /// readers usually keep the last silently). Errors start with `source`.
+    pub fn from_json_text(source: &str, text: &str, n_vertices: usize) -> Result<Self> {
+        let pairs: Spelled = serde_json::from_str(text).map_err(|e| {
+            Error::Invalid(format!(
+                "{source}: line {} column {}: {e} (expected {{\"vertex index\": [x, y, z], ...}} or [{{\"vertex\": index, \"target\": [x, y, z]}}, ...])",
+                e.line(),
+                e.column()
+            ))
+        })?;
+        Self::from_entries(source, pairs.0, n_vertices)
+    }
+
+    /// Reads constraints from a JSON value: an object `{"vertex index": [x, y, z], …}` or an
+    /// array `[{"vertex": index, "target": [x, y, z]}, …]` (the viewer's `/api/pose`). Errors
+    /// start with `source` and name the entry.
+    pub fn from_json(source: &str, value: &Value, n_vertices: usize) -> Result<Self> {
+        let entries = match value {
+            Value::Object(m) => m.iter().map(|(k, v)| Entry::Keyed(k.clone(), v.clone())).collect(),
+            Value::Array(a) => a.iter().cloned().map(Entry::Listed).collect(),
+            other => {
+                return Err(Error::Invalid(format!(
+                    "{source}: expected {{\"vertex index\": [x, y, z], ...}} or [{{\"vertex\": index, \"target\": [x, y, z]}}, ...], got {}",
+                    kind_of(other)
+                )));
+            }
+        };
+        Self::from_entries(source, entries, n_vertices)
+    }
+
+    fn from_entries(source: &str, entries: Vec<Entry>, n: usize) -> Result<Self> {
+        if entries.is_empty() {
+            return Err(Error::Invalid(format!("{source}: no constraint given (the list is empty)")));
+        }
+        let bad = |m: String| Error::Invalid(format!("{source}: {m}"));
+        let mut seen = BTreeSet::new();
+        let mut pairs = Vec::with_capacity(entries.len());
+        for (i, e) in entries.into_iter().enumerate() {
+            let (what, v, t) = match e {
+                Entry::Keyed(k, t) => {
+                    let v = k.trim().parse::<u64>().map_err(|_| bad(format!("key `{k}` is not a vertex index")))?;
+                    (format!("key `{k}`"), v, t)
+                }
+                Entry::Listed(c) => {
+                    let v = c.get("vertex").and_then(Value::as_u64).ok_or_else(|| {
+                        bad(format!("constraints[{i}]: `vertex` must be a vertex index (integer ≥ 0)"))
+                    })?;
+                    let t = c.get("target").cloned().unwrap_or(Value::Null);
+                    (format!("constraints[{i}]"), v, t)
+                }
+            };
+            if v >= n as u64 {
+                return Err(bad(format!(
+                    "{what}: vertex {v} out of range (the model has {n} vertices, 0..{})",
+                    n.saturating_sub(1)
+                )));
+            }
+            let v = v as usize;
+            let Some(a) = t.as_array().filter(|a| a.len() == 3) else {
+                return Err(bad(format!("{what}: target of vertex {v} must be 3 finite numbers [x, y, z], got {t}")));
+            };
+            let mut target = [0.0; 3];
+            for (j, x) in a.iter().enumerate() {
+                target[j] = x
+                    .as_f64()
+                    .filter(|x| x.is_finite())
+                    .ok_or_else(|| bad(format!("{what}: target[{j}] must be a number (vertex {v}), got {x}")))?;
+            }
+            if !seen.insert(v) {
+                return Err(bad(format!("{what}: vertex {v} is constrained twice; give each vertex once")));
+            }
+            pairs.push((v, target));
+        }
+        pairs.sort_by_key(|p| p.0);
+        Ok(Constraints { vertices: pairs.iter().map(|p| p.0).collect(), targets: pairs.iter().map(|p| p.1).collect() })
+    }
+
+    /// Number of constrained vertices.
+    pub fn len(&self) -> usize {
+        self.vertices.len()
+    }
+
+    /// Whether there is none (never, once read).
+    pub fn is_empty(&self) -> bool {
+        self.vertices.is_empty()
+    }
+}
+
+fn kind_of(v: &Value) -> &'static str {
+    match v {
+        Value::Null => "null",
+        Value::Bool(_) => "a boolean",
+        Value::Number(_) => "a number",
+        Value::String(_) => "a string",
+        Value::Array(_) => "an array",
+        Value::Object(_) => "an object",
+    }
+}
+
+/// One constraint as written: `"v": [x, y, z]` in an object, or `{"vertex", "target"}` in an array.
+enum Entry {
+    Keyed(String, Value),
+    Listed(Value),
+}
+
+/// The entries of a JSON object in file order with duplicates kept, or of an array.
+struct Spelled(Vec<Entry>);
+
+impl<'de> serde::Deserialize<'de> for Spelled {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> std::result::Result<Self, D::Error> {
+        struct V;
+        impl<'de> serde::de::Visitor<'de> for V {
+            type Value = Spelled;
+            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                f.write_str("a JSON object {\"vertex index\": [x, y, z], ...} or an array of {\"vertex\", \"target\"}")
+            }
+            fn visit_map<A: serde::de::MapAccess<'de>>(self, mut m: A) -> std::result::Result<Spelled, A::Error> {
+                let mut out = Vec::new();
+                while let Some((k, v)) = m.next_entry::<String, Value>()? {
+                    out.push(Entry::Keyed(k, v));
+                }
+                Ok(Spelled(out))
+            }
+            fn visit_seq<A: serde::de::SeqAccess<'de>>(self, mut s: A) -> std::result::Result<Spelled, A::Error> {
+                let mut out = Vec::new();
+                while let Some(v) = s.next_element::<Value>()? {
+                    out.push(Entry::Listed(v));
+                }
+                Ok(Spelled(out))
+            }
+        }
+        d.deserialize_any(V)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn both_spellings_read_the_same_constraints() {
+        let a = Constraints::from_json_text("c.json", r#"{"7": [1, 2, 3], "2": [0, 0, 0.5]}"#, 10).unwrap();
+        let b = Constraints::from_json_text(
+            "c.json",
+            r#"[{"vertex": 2, "target": [0, 0, 0.5]}, {"vertex": 7, "target": [1, 2, 3]}]"#,
+            10,
+        )
+        .unwrap();
+        assert_eq!(a, b);
+        assert_eq!(a.vertices, [2, 7]);
+        let v: Value =
+            serde_json::from_str(r#"[{"vertex": 7, "target": [1, 2, 3]}, {"vertex": 2, "target": [0, 0, 0.5]}]"#)
+                .unwrap();
+        assert_eq!(Constraints::from_json("body", &v, 10).unwrap(), a);
+    }
+
+    #[test]
+    fn bad_constraints_name_the_entry() {
+        let err = |t: &str| Constraints::from_json_text("c.json", t, 10).unwrap_err().to_string();
+        assert!(err(r#"{"3": [0, 0, 0], "3": [1, 1, 1]}"#).contains("vertex 3 is constrained twice"));
+        assert!(err(r#"{"x": [0, 0, 0]}"#).contains("key `x` is not a vertex index"));
+        assert!(err(r#"{"10": [0, 0, 0]}"#).contains("vertex 10 out of range (the model has 10 vertices, 0..9)"));
+        assert!(err(r#"[{"vertex": 1, "target": [0, 0]}]"#).contains("constraints[0]: target of vertex 1 must be"));
+        assert!(err(r#"[{"vertex": -1, "target": [0, 0, 0]}]"#).contains("constraints[0]: `vertex` must be"));
+        assert!(err("{}").contains("no constraint given"));
+        assert!(err("[1, 2").starts_with("c.json: line 1"));
+    }
+
+    #[test]
+    fn options_are_validated_by_name() {
+        assert!(PoseOptions::default().validate().is_ok());
+        let e = PoseOptions { gamma: -1.0, ..Default::default() }.validate().unwrap_err().to_string();
+        assert!(e.contains("gamma") && e.contains("-1"), "{e}");
+        let e = PoseOptions { max_iterations: 1001, ..Default::default() }.validate().unwrap_err().to_string();
+        assert!(e.contains("max_iterations") && e.contains("1001"), "{e}");
+    }
+}
