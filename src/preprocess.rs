@@ -86,6 +86,25 @@ pub fn load_frames(path: &str) -> Result<MeshSequence> {
     if crate::synthetic::is_synthetic(path) { crate::synthetic::load(path) } else { mesh::load_sequence(path) }
 }
 
+/// Loads frames to use with a trained model whose rest mesh is `rest`: anything
+/// [`load_frames`] reads, or a NumPy `.npy` (F × N × 3) — or `.npz` written `file.npz:array` —
+/// whose connectivity is the model's (the template it was trained with).
+pub fn load_frames_for(path: &str, rest: &crate::mesh::TriMesh) -> Result<MeshSequence> {
+    let (file, array) = match path.rsplit_once(':') {
+        Some((f, a)) if f.to_ascii_lowercase().ends_with(".npz") => (f, Some(a)),
+        _ => (path, None),
+    };
+    if mesh::npy::is_numpy_path(file) {
+        if file.to_ascii_lowercase().ends_with(".npz") && array.is_none() {
+            return Err(crate::error::Error::Invalid(format!(
+                "{path}: name the array of the .npz to read, as `{path}:<array>`"
+            )));
+        }
+        return mesh::npy::load_npy_with_faces(Path::new(file), array, rest.n_vertices(), rest.faces.clone());
+    }
+    load_frames(path)
+}
+
 /// Loads the frames of a `[data]` section: a NumPy `.npy`/`.npz` array with its template mesh
 /// (`data.template`, `data.array`), or anything [`load_frames`] reads.
 pub fn load_data(cfg: &DataConfig) -> Result<MeshSequence> {

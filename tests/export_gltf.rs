@@ -87,7 +87,17 @@ fn every_kind_exports_valid_gltf_that_replays_the_model() {
 
         let m = load_model(&dir).unwrap();
         let k = m.n_components();
-        let g = read_glb(&glb).unwrap();
+        let file = read_glb(&glb).unwrap();
+        // The file is Y-up: the rest mesh's tallest bounding-box axis is Y (the tube lies along
+        // z in its data), every target carries its normals' change, keys sit at i / fps.
+        let (lo, hi) = mesh::bounding_box(&file.base);
+        let tallest = (0..3).max_by(|&a, &b| (hi[a] - lo[a]).total_cmp(&(hi[b] - lo[b]))).unwrap();
+        assert_eq!((tallest, file.up_axis.as_str()), (1, "+z"), "{name}: tallest axis of the file's base");
+        assert_eq!(file.target_normals.len(), k, "{name}: morph target normals");
+        for (i, t) in file.times.iter().enumerate() {
+            assert!((t - i as f64 / 30.0).abs() < 1e-6, "{name}: key {i} at {t} s");
+        }
+        let g = file.in_data_axes();
         assert_eq!(g.targets.len(), k, "{name}");
         assert_eq!(g.names.len(), k, "{name}");
         assert_eq!(g.faces, m.rest().faces, "{name}");
@@ -165,13 +175,73 @@ fn additivity_error_is_zero_for_displacement_models_and_measured_for_nonlinear_o
     std::fs::remove_dir_all(&d).unwrap();
 }
 
+/// The autoencoder's blendshapes, honestly: fitted targets blend closer to the model's own
+/// shapes than the dial-1 shapes do, the printed additivity is in the Erms unit with a warning
+/// when it exceeds the train Erms, `--bake` replays the training frames exactly, and `--up`
+/// picks the axis that becomes +Y.
+#[test]
+fn autoencoder_exports_fitted_targets_and_bakes_exact_frames() {
+    let d = tmp("ae-bake");
+    let dir = train(&d, "ae", BUMPS, KINDS[5].1);
+    let m = load_model(&dir).unwrap();
+    let opts = |targets| meshdeco::export::ExportOptions { targets, ..Default::default() };
+    let fitted =
+        meshdeco::export::export_glb(m.as_ref(), &d.join("f.glb"), &opts(meshdeco::export::TargetFit::Fitted)).unwrap();
+    let extreme =
+        meshdeco::export::export_glb(m.as_ref(), &d.join("e.glb"), &opts(meshdeco::export::TargetFit::Extreme))
+            .unwrap();
+    let (ef, ee) = (fitted.additivity_erms.unwrap(), extreme.additivity_erms.unwrap());
+    println!("autoencoder additivity: fitted {ef:.4}, dial-1 targets {ee:.4}");
+    assert!(fitted.targets_fitted && ef < ee, "fitted {ef} vs extreme {ee}");
+    assert_eq!(fitted.additivity_extreme_erms, Some(ee));
+    // The fitted file replays what it reports.
+    let g = read_glb(&d.join("f.glb")).unwrap().in_data_axes();
+    let train = m.train_weights().unwrap();
+    let truth = m.decode(&train).unwrap();
+    let ranked = model::ranked(m.as_ref()).unwrap();
+    let blends: Vec<Vec<Vec3>> = train
+        .iter()
+        .map(|w| {
+            let dials = m.dials(w).unwrap();
+            g.blend(&ranked.iter().map(|c| dials[c.index]).collect::<Vec<_>>())
+        })
+        .collect();
+    let from_file = meshdeco::metrics::erms::erms(&truth, &blends, m.alignment()).unwrap();
+    assert!((from_file - ef).abs() < 1e-3 * ef.max(1.0), "file blends {from_file} vs reported {ef}");
+    // The command prints the additivity in the Erms unit and warns above the train Erms.
+    let metrics: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("metrics.json")).unwrap()).unwrap();
+    let train_erms = metrics["train_erms"].as_f64().unwrap();
+    let o = meshdeco(&["export", dir.to_str().unwrap(), "--out", "x.glb", "--targets", "extreme"], &d);
+    assert!(o.status.success(), "{}", output_text(&o));
+    let text = output_text(&o);
+    assert!(text.contains("additivity error: Erms"), "{text}");
+    assert_eq!(text.contains("warning: the blendshapes miss"), ee > train_erms, "train Erms {train_erms}: {text}");
+    // --bake: one target per training frame; the blend at each key is the model's decoding.
+    let o = meshdeco(&["export", dir.to_str().unwrap(), "--out", "b.glb", "--bake", "--up", "-y"], &d);
+    assert!(o.status.success(), "{}", output_text(&o));
+    let file = read_glb(&d.join("b.glb")).unwrap();
+    assert_eq!(file.up_axis, "-y");
+    assert_eq!(meshdeco::math::mat3::mat_vec(&file.rotation, [0.0, -1.0, 0.0]), [0.0, 1.0, 0.0]);
+    let b = file.in_data_axes();
+    assert_eq!((b.targets.len(), b.animation.len()), (train.len(), train.len()));
+    let keyed: Vec<Vec<Vec3>> = b.animation.iter().map(|keys| b.blend(keys)).collect();
+    let e = meshdeco::metrics::erms::erms(&truth, &keyed, m.alignment()).unwrap();
+    println!("--bake: keyed blends vs the model's decoding: Erms {e:.2e}");
+    assert!(e <= 1e-4, "--bake playback differs from the model's decoding by Erms {e}");
+    std::fs::remove_dir_all(&d).unwrap();
+}
+
 #[test]
 fn export_refuses_bad_arguments() {
     let d = tmp("bad");
     let dir = train(&d, "pca", BUMPS, KINDS[0].1);
-    for (args, needle) in
-        [(vec!["--out", "x.gltf"], ".glb"), (vec!["--out", "x.glb", "--animation", "--fps", "0"], "--fps")]
-    {
+    for (args, needle) in [
+        (vec!["--out", "x.gltf"], ".glb"),
+        (vec!["--out", "x.glb", "--animation", "--fps", "0"], "--fps"),
+        (vec!["--out", "x.glb", "--up", "w"], "--up"),
+        (vec!["--out", "x.glb", "--fit-regularisation", "0"], "--fit-regularisation"),
+    ] {
         let mut all = vec!["export", dir.to_str().unwrap()];
         all.extend(args);
         let o = meshdeco(&all, &d);

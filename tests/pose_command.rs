@@ -144,3 +144,55 @@ fn bad_constraint_files_fail_with_reasons() {
     assert!(!o.status.success() && e.contains("`pca` model on the `triangle-gradient` representation"), "{e}");
     std::fs::remove_dir_all(&d).unwrap();
 }
+
+/// The drag benchmark as a user runs it, on test frames given as a NumPy `.npy` (its
+/// connectivity is the model's): the printed medians parse, the landing is small and the shape
+/// prior moves less collateral than the paper's weights prior on SPLOCS; `encode` reads the same
+/// `.npy`; a `.npz` without its array name is refused with the spelling to use.
+#[test]
+fn drag_bench_on_numpy_test_frames() {
+    let d = tmp("bench");
+    let model = train(&d, "splocs", "kind = \"splocs\"\ncomponents = 6\nsupport = [0.05, 0.3]\nweights = \"signed\"");
+    let seq = synthetic::load("synthetic:bumps").unwrap();
+    mesh::npy::write_npy(&d.join("test.npy"), &seq.frames[30..]).unwrap();
+    let run = |prior: &str| {
+        let o = meshdeco(
+            &["drag-bench", model.to_str().unwrap(), "test.npy", "--drags", "12", "--pins", "1,3", "--prior", prior],
+            &d,
+        );
+        let text = String::from_utf8_lossy(&o.stdout).into_owned();
+        assert!(o.status.success(), "{text}{}", String::from_utf8_lossy(&o.stderr));
+        // | pins | drags | landing | max motion | moved share | frame share | posed | neutral | improved | ms |
+        let rows: Vec<Vec<f64>> = text
+            .lines()
+            .filter(|l| l.starts_with("| 1 |") || l.starts_with("| 3 |"))
+            .map(|l| {
+                l.split('|').map(|c| c.trim().trim_end_matches('%').trim()).filter_map(|c| c.parse().ok()).collect()
+            })
+            .collect();
+        assert_eq!(rows.len(), 2, "{text}");
+        rows
+    };
+    let shape = run("shape");
+    let weights = run("weights");
+    // One pin lands (three random pins may include vertices the data never moves).
+    assert!(shape[0][2] < 1.0, "one pin lands {}% of the drag away", shape[0][2]);
+    for r in &shape {
+        assert!(r[6] < r[7] + 1e-9, "posed Erms {} not below the neutral shape's {}", r[6], r[7]);
+    }
+    assert!(
+        shape[0][3] <= weights[0][3] + 1e-9,
+        "max motion ÷ drag: shape {} vs weights {}",
+        shape[0][3],
+        weights[0][3]
+    );
+    let o = meshdeco(&["encode", model.to_str().unwrap(), "test.npy", "--out", "enc"], &d);
+    assert!(o.status.success(), "encode test.npy: {}", String::from_utf8_lossy(&o.stderr));
+    mesh::npy::write_npz(&d.join("t.npz"), &[("frames", &seq.frames[30..])]).unwrap();
+    let o = meshdeco(&["encode", model.to_str().unwrap(), "t.npz", "--out", "enc2"], &d);
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("t.npz:<array>"), "{}", String::from_utf8_lossy(&o.stderr));
+    let o = meshdeco(&["encode", model.to_str().unwrap(), "t.npz:frames", "--out", "enc3"], &d);
+    assert!(o.status.success(), "encode t.npz:frames: {}", String::from_utf8_lossy(&o.stderr));
+    std::fs::remove_dir_all(&d).unwrap();
+}

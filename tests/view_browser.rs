@@ -218,11 +218,12 @@ fn view_in_headless_chromium_draws_dials_poses_and_recovers() {
     assert!(view_support::max_diff(&restored, &before) < 1e-6, "undo did not restore the shape before the drag");
     assert_eq!(f(&b.eval("meshdeco.S.pins.size")), 0.0);
 
-    // 6. Frames: the "next" button shows frame 1's reconstruction, its Erms and its error map.
+    // 6. Frames: the "next" button shows frame 1's reconstruction (0-based; the box counts from
+    // 1, as the file names do), its Erms and its error map.
     let next = b.centre("#next");
     b.click(next.0, next.1);
     settle(&mut b);
-    assert_eq!(b.eval("document.getElementById('frame-i').value"), "1");
+    assert_eq!(b.eval("document.getElementById('frame-i').value"), "2");
     let info = b.eval("document.getElementById('frame-info').textContent");
     assert!(info.as_str().unwrap().contains("Erms"), "frame info: {info}");
     let (s, _, body) = v.request("GET", "/api/frame/1", b"");

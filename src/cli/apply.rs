@@ -91,7 +91,7 @@ pub struct InterpolateArgs {
 
 pub fn encode(a: EncodeArgs) -> Result<()> {
     let m = load_model(&a.model).with_context(|| format!("loading model {}", a.model.display()))?;
-    let mut seq = meshdeco::preprocess::load_frames(&a.path)?;
+    let mut seq = meshdeco::preprocess::load_frames_for(&a.path, &m.rest())?;
     if let Some(spec) = &a.frames {
         let sel =
             meshdeco::config::FrameSelection::parse("--frames", spec)?.resolve("--frames", seq.n_frames(), None)?;

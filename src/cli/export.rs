@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
 use clap::Args;
-use meshdeco::export::{ExportOptions, export_glb};
+use meshdeco::export::{ExportOptions, TargetFit, UpAxis, export_glb};
 use meshdeco::pipeline::load_model;
 
 #[derive(Debug, Args)]
@@ -31,6 +31,27 @@ pub struct ExportArgs {
     /// it, darkened by that component's relative magnitude.
     #[arg(long)]
     pub colors: bool,
+    /// The data axis that points up in the file (glTF is Y-up): auto (the longest bounding-box
+    /// axis, as `meshdeco render --view auto`), x, y, z, -x, -y or -z. The shape is rotated.
+    #[arg(long, default_value = "auto", value_parser = parse_up, allow_hyphen_values = true)]
+    pub up: UpAxis,
+    /// Morph targets of models whose decoding is not linear in the dials (the autoencoder, SPLOCS
+    /// on triangle gradients or ACAP): `fitted` (least squares over the training frames,
+    /// regularised towards the dial-1 shapes) or `extreme` (the dial-1 shapes).
+    #[arg(long, default_value = "fitted", value_parser = ["fitted", "extreme"])]
+    pub targets: String,
+    /// Regularisation of the fitted targets towards the dial-1 shapes, relative to the mean
+    /// squared training dial (> 0; larger: closer to the dial-1 shapes).
+    #[arg(long, default_value_t = meshdeco::export::gltf::FIT_REGULARISATION)]
+    pub fit_regularisation: f64,
+    /// One morph target per training frame (its decoding) keyed in turn at weight 1: exact
+    /// playback of the training frames instead of dials (implies --animation).
+    #[arg(long)]
+    pub bake: bool,
+}
+
+fn parse_up(s: &str) -> std::result::Result<UpAxis, String> {
+    UpAxis::parse(s).ok_or_else(|| format!("`{s}`: expected auto, x, y, z, -x, -y or -z"))
 }
 
 pub fn run(a: ExportArgs) -> Result<()> {
@@ -41,7 +62,15 @@ pub fn run(a: ExportArgs) -> Result<()> {
         bail!("--fps {}: must be a positive number", a.fps);
     }
     let model = load_model(&a.model).with_context(|| format!("loading model {}", a.model.display()))?;
-    let opts = ExportOptions { animation: a.animation, fps: a.fps, colors: a.colors };
+    let opts = ExportOptions {
+        animation: a.animation,
+        fps: a.fps,
+        colors: a.colors,
+        up: a.up,
+        targets: if a.targets == "extreme" { TargetFit::Extreme } else { TargetFit::Fitted },
+        fit_regularisation: a.fit_regularisation,
+        bake: a.bake,
+    };
     let r = export_glb(model.as_ref(), &a.out, &opts)?;
     println!(
         "wrote {} ({} bytes): {} morph targets{}",
@@ -54,12 +83,41 @@ pub fn run(a: ExportArgs) -> Result<()> {
             String::new()
         }
     );
+    println!("up axis: data {} is the file's +Y", r.up_axis);
+    let train_erms = train_erms(&a.model);
     match r.additivity_erms {
-        Some(e) => println!(
-            "additivity error (Erms of blended targets vs the model's own decoding of the {} training frames): {e:.4}",
-            model.train_frames().len()
-        ),
+        Some(e) => {
+            let how = if a.bake {
+                "baked frames".to_string()
+            } else if r.targets_fitted {
+                format!(
+                    "targets fitted to the training frames; the dial-1 shapes' would be {:.4}",
+                    r.additivity_extreme_erms.unwrap_or(f64::NAN)
+                )
+            } else {
+                "dial-1 targets".to_string()
+            };
+            println!(
+                "additivity error: Erms {e:.4} (the unit of train/test Erms) of the blended targets against the model's own decoding of its {} training frames ({how})",
+                model.train_frames().len()
+            );
+            if let Some(t) = train_erms
+                && e > t
+            {
+                eprintln!(
+                    "warning: the blendshapes miss the model's own shapes by Erms {e:.4}, more than the model's train Erms {t:.4}: \
+                     dialled or animated in another tool they will not look like the model; --bake keys the training frames exactly"
+                );
+            }
+        }
         None => println!("additivity error: not measured (the model stores no training weights)"),
     }
     Ok(())
+}
+
+/// The model's train Erms from its `metrics.json` (verified with the artefact on load), if any.
+fn train_erms(model: &std::path::Path) -> Option<f64> {
+    let dir = meshdeco::artifact::model_dir(model);
+    let v: serde_json::Value = meshdeco::artifact::read_json(&dir.join("metrics.json")).ok()?;
+    v.get("train_erms")?.as_f64().filter(|x| x.is_finite())
 }

@@ -54,6 +54,8 @@ pub enum Command {
     Eval(eval::EvalArgs),
     /// Pose a trained model by dragging vertices: constraints JSON {"vertex": [x, y, z]} → mesh.
     Pose(pose::PoseArgs),
+    /// Drag benchmark: pins moved to their places in test frames; landing, collateral motion, Erms.
+    DragBench(pose::DragBenchArgs),
     /// Picture of a mesh as PNG (z-buffer, Lambert shading × vertex colours of a PLY).
     Render(render::RenderArgs),
     /// Interactive viewer in the browser: component sliders, drag posing, heat maps, frames.
@@ -97,6 +99,7 @@ fn dispatch(command: Command) -> Result<()> {
         Command::Components(a) => apply::components(a),
         Command::Interpolate(a) => apply::interpolate(a),
         Command::Encode(a) => apply::encode(a),
+        Command::DragBench(a) => pose::drag_bench(a),
         Command::Synthesize(a) => apply::synthesize(a),
         Command::Export(a) => export::run(a),
         Command::Features(a) => features::features(a),

@@ -6,7 +6,7 @@ use std::time::Instant;
 use anyhow::{Context, Result, bail};
 use clap::Args;
 use meshdeco::mesh::{self, TriMesh};
-use meshdeco::model::{Constraints, PoseOptions, check_connectivity};
+use meshdeco::model::{Constraints, PoseOptions, PosePrior, check_connectivity};
 use meshdeco::pipeline::load_model;
 use meshdeco::pipeline::pose::{ball, check_targets, displacement_share};
 
@@ -36,19 +36,23 @@ pub struct PoseArgs {
     /// each vertex moved (scalar property `displacement`).
     #[arg(long, short)]
     pub out: PathBuf,
-    /// γ: pull towards the start weights, dimensionless (Eq. 8/10 regulariser, scaled by the
-    /// mean squared response of one weight at the constrained vertices; also the autoencoder's).
+    /// γ: pull towards the start, dimensionless (Eq. 8/10 regulariser, scaled by the mean
+    /// squared response of one weight at the constrained vertices, measured as --prior says;
+    /// also the autoencoder's). Smaller lands the pins more exactly.
     #[arg(long, default_value_t = PoseOptions::default().gamma)]
     pub gamma: f64,
     /// β: boundary consistency between regions (region PCA only; squared vertex differences, as
     /// given). With few training shapes β = 1 couples the regions so strongly that a drag
-    /// spreads like holistic PCA; on face-poses β = 1e-6 keeps 99.7 % of the energy in the
-    /// dragged vertex's region.
+    /// spreads like holistic PCA; the default 1e-6 keeps a drag in the dragged vertex's region.
     #[arg(long, default_value_t = PoseOptions::default().beta)]
     pub beta: f64,
     /// Gauss-Newton iterations at most (autoencoder only).
     #[arg(long, default_value_t = PoseOptions::default().max_iterations)]
     pub max_iterations: usize,
+    /// What the pull towards the start measures: `shape` (the whole shape's change: a drag moves
+    /// what it must and little else) or `weights` (the paper's ‖w − w0‖²).
+    #[arg(long, default_value = "shape", value_parser = parse_prior)]
+    pub prior: PosePrior,
     /// Radius (fraction of the rest mesh's bounding-box diagonal) of the ball around each
     /// constrained vertex in which the reported displacement-energy share is measured.
     #[arg(long, default_value_t = 0.2)]
@@ -100,7 +104,13 @@ pub fn run(a: PoseArgs) -> Result<()> {
             None
         }
     };
-    let opts = PoseOptions { gamma: a.gamma, beta: a.beta, max_iterations: a.max_iterations };
+    let opts = PoseOptions {
+        gamma: a.gamma,
+        beta: a.beta,
+        max_iterations: a.max_iterations,
+        prior: a.prior,
+        time_limit: None,
+    };
     opts.validate()?;
     let w0 = model.start_weights(from.as_deref())?;
     let Constraints { vertices, targets } = cons;
@@ -146,4 +156,113 @@ pub fn run(a: PoseArgs) -> Result<()> {
     }
     println!("wrote {}", a.out.display());
     Ok(())
+}
+
+#[derive(Debug, Args)]
+#[command(after_help = "Each drag starts from the model's neutral shape, picks PINS random vertices and moves each \
+to its position in a random test frame (centroid-aligned for models that align so), poses with the pose \
+defaults (or --gamma/--beta/--max-iterations) and measures: landing error (% of the drag), largest motion \
+of any vertex ÷ the largest drag, the share of vertices moved more than half the mean drag (and the same \
+share for the test frame itself), and the Erms of the posed and of the neutral shape against the frame. \
+Rows are medians over the drags.")]
+pub struct DragBenchArgs {
+    /// Model directory written by `meshdeco train` (or its model.json).
+    pub model: PathBuf,
+    /// Test frames (any path `meshdeco encode` accepts), with the model's connectivity.
+    pub data: String,
+    /// Only these frames of DATA (1-based, natural order, the config syntax: "37-71").
+    #[arg(long)]
+    pub frames: Option<String>,
+    /// Drags per pin count.
+    #[arg(long, default_value_t = 50)]
+    pub drags: usize,
+    /// Pin counts, comma-separated.
+    #[arg(long, default_value = "1,3,10")]
+    pub pins: String,
+    /// Seed of the draws.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// γ override (default: the pose default).
+    #[arg(long)]
+    pub gamma: Option<f64>,
+    /// β override (region PCA).
+    #[arg(long)]
+    pub beta: Option<f64>,
+    /// Iterations override (autoencoder).
+    #[arg(long)]
+    pub max_iterations: Option<usize>,
+    /// `shape` or `weights` (see `meshdeco pose --help`).
+    #[arg(long, default_value = "shape", value_parser = parse_prior)]
+    pub prior: PosePrior,
+    /// Also write every drag and the medians as JSON here.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+}
+
+pub fn drag_bench(a: DragBenchArgs) -> Result<()> {
+    use meshdeco::eval::drag::{DragBenchConfig, drag_bench};
+    let model = load_model(&a.model).with_context(|| format!("loading model {}", a.model.display()))?;
+    let mut seq = meshdeco::preprocess::load_frames_for(&a.data, &model.rest())?;
+    if let Some(spec) = &a.frames {
+        let sel =
+            meshdeco::config::FrameSelection::parse("--frames", spec)?.resolve("--frames", seq.n_frames(), None)?;
+        seq = seq.select(&sel);
+    }
+    check_connectivity(model.as_ref(), &seq, &a.data)?;
+    let pins = a
+        .pins
+        .split(',')
+        .map(|t| t.trim().parse::<usize>().map_err(|_| anyhow::anyhow!("--pins `{}`: `{t}` is not a count", a.pins)))
+        .collect::<Result<Vec<_>>>()?;
+    let d = PoseOptions::default();
+    let options = PoseOptions {
+        gamma: a.gamma.unwrap_or(d.gamma),
+        beta: a.beta.unwrap_or(d.beta),
+        max_iterations: a.max_iterations.unwrap_or(d.max_iterations),
+        prior: a.prior,
+        time_limit: None,
+    };
+    options.validate()?;
+    let cfg = DragBenchConfig { drags: a.drags, pins, seed: a.seed, options };
+    let (rows, summary) = drag_bench(model.as_ref(), &seq, &cfg)?;
+    println!(
+        "{} model {}, {} test frames of {}; pose options γ {} β {} iterations {} prior {}",
+        model.kind().name(),
+        a.model.display(),
+        seq.n_frames(),
+        a.data,
+        options.gamma,
+        options.beta,
+        options.max_iterations,
+        options.prior.name()
+    );
+    println!(
+        "| pins | drags | landing % of drag | max motion ÷ drag | moved > ½ drag | test frame's own | posed Erms | neutral Erms | improved | pose ms |"
+    );
+    println!("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
+    for s in &summary {
+        println!(
+            "| {} | {} | {:.3} | {:.2} | {:.1} % | {:.1} % | {:.3} | {:.3} | {:.0} % | {:.1} |",
+            s.pins,
+            s.drags,
+            s.landing_percent,
+            s.max_motion_ratio,
+            100.0 * s.moved_share,
+            100.0 * s.frame_moved_share,
+            s.posed_erms,
+            s.neutral_erms,
+            100.0 * s.improved_share,
+            1e3 * s.seconds
+        );
+    }
+    if let Some(p) = &a.json {
+        let v = serde_json::json!({ "summary": summary, "drags": rows });
+        meshdeco::artifact::write_atomic(p, serde_json::to_string_pretty(&v)?.as_bytes())?;
+        println!("every drag in {}", p.display());
+    }
+    Ok(())
+}
+
+fn parse_prior(s: &str) -> std::result::Result<PosePrior, String> {
+    PosePrior::parse(s).ok_or_else(|| format!("`{s}`: expected shape or weights"))
 }

@@ -151,6 +151,7 @@ mod tests {
             rest: TriMesh::new(rest.positions.clone(), rest.faces.clone()),
             model: lm,
             representation,
+            shape_metric: Default::default(),
         }
     }
 

@@ -34,6 +34,7 @@
 
 pub mod config;
 pub mod control_points;
+pub mod drag;
 pub mod plots;
 pub mod report;
 

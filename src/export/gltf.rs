@@ -18,6 +18,23 @@
 //! - `animation`: one key per training frame at t = i / fps, linear interpolation, the morph
 //!   weights of frame i being the model's dials of its stored training weights.
 //!
+//! - `up`: glTF is Y-up and faces +Z. The shape is *rotated* (positions, normals and targets; not
+//!   a node transform, which some importers drop) so that the chosen data axis points along +Y:
+//!   `auto` takes `meshdeco render --view auto`'s rule (the axis of largest extent is up, the
+//!   camera looks along the smallest, which becomes +Z). The rotation is stored in
+//!   `asset.extras.up_axis` / `asset.extras.rotation` (rows: data → glTF).
+//! - A plain material: non-metallic, rough, light grey, double-sided where the mesh has a
+//!   boundary; every morph target carries its normals' change too.
+//! - `targets`: for models whose decoding is not linear in the dials (the autoencoder, SPLOCS on
+//!   triangle gradients or ACAP) the dial-1 shapes blend poorly. `fitted` (the default) solves
+//!   for the targets T by least squares so that base + Σ_k w_fk·T_k best matches the model's own
+//!   decoding of every training frame f, regularised towards the dial-1 shapes:
+//!   `min Σ_f ‖base + W_f·T − D_f‖² + μ Σ_k ‖T_k − E_k‖²`, `μ = fit_regularisation ×
+//!   trace(WᵀW)/K` (one K × K factorisation, 3N right-hand sides). Displacement models are
+//!   linear: their fitted targets are their dial-1 shapes, and they are written as such.
+//! - `bake`: one target per training frame (its decoding minus the base) and an animation that
+//!   keys each in turn at weight 1: exact playback of the training frames, no dials.
+//!
 //! Coordinates are stored as `f32` (glTF's only float type), so a round trip is exact to about
 //! 1e-7 relative.
 
@@ -44,12 +61,87 @@ pub struct ExportOptions {
     pub fps: f64,
     /// Add `COLOR_0` showing each component's support.
     pub colors: bool,
+    /// Which data axis becomes glTF's +Y.
+    pub up: UpAxis,
+    /// How the targets of a nonlinear model are made.
+    pub targets: TargetFit,
+    /// μ of the fitted targets relative to trace(WᵀW)/K (> 0).
+    pub fit_regularisation: f64,
+    /// One target per training frame, keyed in turn (implies the animation).
+    pub bake: bool,
 }
 
 impl Default for ExportOptions {
     fn default() -> Self {
-        ExportOptions { animation: false, fps: 30.0, colors: false }
+        ExportOptions {
+            animation: false,
+            fps: 30.0,
+            colors: false,
+            up: UpAxis::Auto,
+            targets: TargetFit::Fitted,
+            fit_regularisation: FIT_REGULARISATION,
+            bake: false,
+        }
     }
+}
+
+/// Default `fit_regularisation` (README "Export": the SCAPE autoencoder's measurements).
+pub const FIT_REGULARISATION: f64 = 0.1;
+
+/// The data axis that becomes glTF's up (+Y).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum UpAxis {
+    /// The axis of largest bounding-box extent, + side (as `meshdeco render --view auto`).
+    Auto,
+    /// Axis 0 = x, 1 = y, 2 = z; `true`: its − side points up.
+    Axis(usize, bool),
+}
+
+impl UpAxis {
+    /// Parses `auto`, `x`, `y`, `z`, `+x`, `-x`, ….
+    pub fn parse(s: &str) -> Option<Self> {
+        let t = s.trim().to_ascii_lowercase();
+        if t == "auto" {
+            return Some(UpAxis::Auto);
+        }
+        let (neg, name) = match t.strip_prefix('-') {
+            Some(r) => (true, r),
+            None => (false, t.strip_prefix('+').unwrap_or(&t)),
+        };
+        let axis = ["x", "y", "z"].iter().position(|a| *a == name)?;
+        Some(UpAxis::Axis(axis, neg))
+    }
+}
+
+/// How the morph targets of a model are made.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum TargetFit {
+    /// The shape at dial 1 of each component minus the base.
+    Extreme,
+    /// Least squares over the training frames, regularised towards [`TargetFit::Extreme`].
+    Fitted,
+}
+
+/// The rotation (rows: data → glTF) taking the chosen up axis to +Y and the view axis (smallest
+/// extent among the others) to +Z, with its description (e.g. `+x`).
+pub fn orientation(positions: &[Vec3], up: UpAxis) -> (crate::math::mat3::Mat3, String) {
+    let (lo, hi) = crate::mesh::bounding_box(positions);
+    let e: Vec<f64> = (0..3).map(|k| hi[k] - lo[k]).collect();
+    let (axis, neg) = match up {
+        UpAxis::Auto => (crate::mesh::render::auto_axes(positions).0, false),
+        UpAxis::Axis(a, n) => (a, n),
+    };
+    let view = [2, 0, 1].into_iter().filter(|&k| k != axis).min_by(|&a, &b| e[a].total_cmp(&e[b])).unwrap_or(2);
+    let unit = |k: usize, sign: f64| -> Vec3 { std::array::from_fn(|j| if j == k { sign } else { 0.0 }) };
+    let y = unit(axis, if neg { -1.0 } else { 1.0 });
+    let z = unit(view, 1.0);
+    let x = crate::math::vec3::cross(y, z);
+    let name = format!("{}{}", if neg { "-" } else { "+" }, ["x", "y", "z"][axis]);
+    ([x, y, z], name)
+}
+
+fn rotate(r: &crate::math::mat3::Mat3, p: &[Vec3]) -> Vec<Vec3> {
+    p.iter().map(|&v| crate::math::mat3::mat_vec(r, v)).collect()
 }
 
 /// What [`export_glb`] wrote.
@@ -62,6 +154,12 @@ pub struct ExportReport {
     /// Additivity error (Erms, data units × 1000) over the training frames, when the model
     /// stores their weights.
     pub additivity_erms: Option<f64>,
+    /// Additivity error of the dial-1 targets, when the written targets were fitted.
+    pub additivity_extreme_erms: Option<f64>,
+    /// Whether the targets were fitted to the training frames.
+    pub targets_fitted: bool,
+    /// The data axis written as +Y (`+x`, `-z`, …).
+    pub up_axis: String,
     /// Animation keys written (0 without `animation`).
     pub animation_frames: usize,
     /// Size of the file, bytes.
@@ -97,11 +195,97 @@ impl Blendshapes {
         Ok(Blendshapes { base, index, names, deltas, magnitudes })
     }
 
+    /// Replaces the targets by their least-squares fit to the model's decoding of its training
+    /// frames, regularised towards the current targets with `mu_rel × trace(WᵀW)/K` (module
+    /// docs). Returns `false` (nothing changed) when the model stores no training weights.
+    pub fn fit_to_training(&mut self, model: &dyn Model, mu_rel: f64) -> Result<bool> {
+        let Some(weights) = model.train_weights() else { return Ok(false) };
+        let truth = model.decode(&weights)?;
+        let k = self.deltas.len();
+        if k == 0 || weights.is_empty() {
+            return Ok(false);
+        }
+        // W: F × K dials in target order.
+        let w: Vec<Vec<f64>> = weights
+            .iter()
+            .map(|wf| model.dials(wf).map(|d| self.index.iter().map(|&i| d[i]).collect()))
+            .collect::<Result<_>>()?;
+        let mut a = faer::Mat::<f64>::zeros(k, k);
+        for row in &w {
+            for i in 0..k {
+                for j in 0..k {
+                    a[(i, j)] += row[i] * row[j];
+                }
+            }
+        }
+        let tr = (0..k).map(|i| a[(i, i)]).sum::<f64>();
+        let mu = mu_rel * (tr / k as f64).max(f64::MIN_POSITIVE);
+        for i in 0..k {
+            a[(i, i)] += mu;
+        }
+        let n = self.base.len();
+        // Right-hand sides: Wᵀ(D_f − base) + μ·E, one column per coordinate (3N).
+        let mut rhs = faer::Mat::<f64>::zeros(k, 3 * n);
+        for (row, d) in w.iter().zip(&truth) {
+            for v in 0..n {
+                for c in 0..3 {
+                    let r = d[v][c] - self.base[v][c];
+                    if r != 0.0 {
+                        for i in 0..k {
+                            rhs[(i, 3 * v + c)] += row[i] * r;
+                        }
+                    }
+                }
+            }
+        }
+        for (i, e) in self.deltas.iter().enumerate() {
+            for v in 0..n {
+                for c in 0..3 {
+                    rhs[(i, 3 * v + c)] += mu * e[v][c];
+                }
+            }
+        }
+        use faer::linalg::solvers::Solve;
+        let llt =
+            a.llt(faer::Side::Lower).map_err(|e| Error::Numerical(format!("fitting the export's targets: {e:?}")))?;
+        llt.solve_in_place(rhs.as_mut());
+        for (i, e) in self.deltas.iter_mut().enumerate() {
+            for v in 0..n {
+                for c in 0..3 {
+                    e[v][c] = rhs[(i, 3 * v + c)];
+                }
+            }
+        }
+        Ok(true)
+    }
+
+    /// One target per training frame: its decoding minus the base (`bake`).
+    pub fn baked(model: &dyn Model) -> Result<Self> {
+        let weights = model
+            .train_weights()
+            .ok_or_else(|| Error::Invalid("--bake: the model stores no training weights to bake".to_string()))?;
+        let k = model.n_components();
+        let base = synthesize(model, &vec![0.0; k])?;
+        let frames = model.decode(&weights)?;
+        let names: Vec<String> = model.train_frames().iter().map(|f| format!("frame {f}")).collect();
+        let deltas: Vec<Vec<Vec3>> = frames
+            .iter()
+            .map(|f| f.iter().zip(&base).map(|(s, b)| [s[0] - b[0], s[1] - b[1], s[2] - b[2]]).collect())
+            .collect();
+        let magnitudes = deltas.iter().map(|d| d.iter().map(|x| crate::mesh::dist(*x, [0.0; 3])).collect()).collect();
+        let index = (0..frames.len()).collect();
+        Ok(Blendshapes { base, index, names, deltas, magnitudes })
+    }
+
     /// base + Σ_t dials[index_t]·delta_t.
     pub fn blend(&self, dials: &[f64]) -> Vec<Vec3> {
         let w: Vec<f64> = self.index.iter().map(|&k| dials[k]).collect();
         blend(&self.base, &self.deltas, &w)
     }
+}
+
+fn one_hot(n: usize, i: usize) -> Vec<f64> {
+    (0..n).map(|j| if j == i { 1.0 } else { 0.0 }).collect()
 }
 
 /// `base + Σ_t w_t·targets_t` (w in target order).
@@ -290,10 +474,37 @@ pub fn export_glb(model: &dyn Model, path: &Path, options: &ExportOptions) -> Re
     if options.animation && !(options.fps.is_finite() && options.fps > 0.0) {
         return Err(Error::Invalid(format!("--fps ({}) must be a positive number", options.fps)));
     }
+    if !(options.fit_regularisation.is_finite() && options.fit_regularisation > 0.0) {
+        return Err(Error::Invalid(format!(
+            "--fit-regularisation ({}) must be a positive number",
+            options.fit_regularisation
+        )));
+    }
     let rest = model.rest();
-    let shapes = Blendshapes::of(model)?;
-    let additivity = additivity_error(model, &shapes)?;
-    let train = if options.animation {
+    let (mut shapes, additivity, additivity_extreme, fitted) = if options.bake {
+        let s = Blendshapes::baked(model)?;
+        let weights = model.train_weights().unwrap_or_default();
+        let truth = model.decode(&weights)?;
+        let blends: Vec<Vec<Vec3>> = (0..s.deltas.len()).map(|i| s.blend(&one_hot(s.deltas.len(), i))).collect();
+        let e = erms(&truth, &blends, model.alignment())?;
+        (s, Some(e), None, false)
+    } else {
+        let mut s = Blendshapes::of(model)?;
+        let extreme = additivity_error(model, &s)?;
+        // Displacement models blend exactly (0 up to rounding): nothing to fit.
+        let scale = {
+            let (lo, hi) = rest.bounding_box();
+            1000.0 * crate::mesh::dist(lo, hi)
+        };
+        let nonlinear = extreme.is_some_and(|e| e > 1e-9 * scale.max(f64::MIN_POSITIVE));
+        if options.targets == TargetFit::Fitted && nonlinear && s.fit_to_training(model, options.fit_regularisation)? {
+            let after = additivity_error(model, &s)?;
+            (s, after, extreme, true)
+        } else {
+            (s, extreme, None, false)
+        }
+    };
+    let train = if options.animation || options.bake {
         let w = model.train_weights().ok_or_else(|| {
             Error::Invalid("--animation: the model stores no training weights to animate".to_string())
         })?;
@@ -301,16 +512,27 @@ pub fn export_glb(model: &dyn Model, path: &Path, options: &ExportOptions) -> Re
     } else {
         None
     };
+    // Orientation: rotate the base and the targets so that the chosen axis is +Y.
+    let (rotation, up_axis) = orientation(&shapes.base, options.up);
+    shapes.base = rotate(&rotation, &shapes.base);
+    for d in &mut shapes.deltas {
+        *d = rotate(&rotation, d);
+    }
+    let normals_of = |p: &[Vec3]| -> Vec<Vec3> {
+        vertex_normals(p, &rest.faces, NormalWeighting::Area)
+            .into_iter()
+            .map(|n| if n == [0.0; 3] { [0.0, 1.0, 0.0] } else { n })
+            .collect()
+    };
+    let base_normals = normals_of(&shapes.base);
+    let open =
+        crate::mesh::topology::Topology::new(rest.n_vertices(), &rest.faces).is_boundary_vertex.iter().any(|&b| b);
 
     let mut b = Builder::new();
     use json::accessor::Type;
     use json::buffer::Target;
     let positions = b.floats(&flat(&shapes.base), Type::Vec3, Some(Target::ArrayBuffer), true, "positions");
-    let normals: Vec<Vec3> = vertex_normals(&shapes.base, &rest.faces, NormalWeighting::Area)
-        .into_iter()
-        .map(|n| if n == [0.0; 3] { [0.0, 0.0, 1.0] } else { n })
-        .collect();
-    let normals = b.floats(&flat(&normals), Type::Vec3, Some(Target::ArrayBuffer), false, "normals");
+    let normals = b.floats(&flat(&base_normals), Type::Vec3, Some(Target::ArrayBuffer), false, "normals");
     let indices = b.indices(&rest.faces)?;
     let mut attributes = BTreeMap::new();
     attributes.insert(Valid(json::mesh::Semantic::Positions), positions);
@@ -324,19 +546,38 @@ pub fn export_glb(model: &dyn Model, path: &Path, options: &ExportOptions) -> Re
         .deltas
         .iter()
         .zip(&shapes.names)
-        .map(|(d, name)| json::mesh::MorphTarget {
-            positions: Some(b.floats(&flat(d), Type::Vec3, Some(Target::ArrayBuffer), true, name)),
-            normals: None,
-            tangents: None,
+        .map(|(d, name)| {
+            let shape: Vec<Vec3> =
+                shapes.base.iter().zip(d).map(|(p, q)| [p[0] + q[0], p[1] + q[1], p[2] + q[2]]).collect();
+            let dn: Vec<Vec3> = normals_of(&shape)
+                .iter()
+                .zip(&base_normals)
+                .map(|(a, b)| [a[0] - b[0], a[1] - b[1], a[2] - b[2]])
+                .collect();
+            json::mesh::MorphTarget {
+                positions: Some(b.floats(&flat(d), Type::Vec3, Some(Target::ArrayBuffer), true, name)),
+                normals: Some(b.floats(&flat(&dn), Type::Vec3, Some(Target::ArrayBuffer), false, "normal change")),
+                tangents: None,
+            }
         })
         .collect();
+    let material = b.root.push(json::Material {
+        double_sided: open,
+        pbr_metallic_roughness: json::material::PbrMetallicRoughness {
+            base_color_factor: json::material::PbrBaseColorFactor([0.8, 0.8, 0.8, 1.0]),
+            metallic_factor: json::material::StrengthFactor(0.0),
+            roughness_factor: json::material::StrengthFactor(0.8),
+            ..Default::default()
+        },
+        ..Default::default()
+    });
     let n_targets = targets.len();
     let primitive = json::mesh::Primitive {
         attributes,
         extensions: None,
         extras: None,
         indices: Some(indices),
-        material: None,
+        material: Some(material),
         mode: Valid(json::mesh::Mode::Triangles),
         targets: (n_targets > 0).then_some(targets),
     };
@@ -357,9 +598,13 @@ pub fn export_glb(model: &dyn Model, path: &Path, options: &ExportOptions) -> Re
     {
         let times: Vec<f32> = (0..weights.len()).map(|i| (i as f64 / options.fps) as f32).collect();
         let mut values = Vec::with_capacity(weights.len() * n_targets);
-        for w in weights {
-            let dials = model.dials(w)?;
-            values.extend(shapes.index.iter().map(|&k| dials[k] as f32));
+        for (i, w) in weights.iter().enumerate() {
+            if options.bake {
+                values.extend(one_hot(n_targets, i).iter().map(|&x| x as f32));
+            } else {
+                let dials = model.dials(w)?;
+                values.extend(shapes.index.iter().map(|&k| dials[k] as f32));
+            }
         }
         let input = b.floats(&times, Type::Scalar, None, true, "frame times");
         let output = b.floats(&values, Type::Scalar, None, false, "frame weights");
@@ -397,7 +642,11 @@ pub fn export_glb(model: &dyn Model, path: &Path, options: &ExportOptions) -> Re
             "representation": model.representation().name(),
             "components": n_targets,
             "additivity_erms": additivity,
-            "additivity_note": "Erms (1000 × RMS, data units) between the model's decoding of its training frames and the base mesh plus the weighted morph targets",
+            "additivity_extreme_erms": additivity_extreme,
+            "targets": if options.bake { "baked" } else if fitted { "fitted" } else { "extreme" },
+            "additivity_note": "Erms (1000 × RMS of the coordinates, data units: the unit of every Erms of meshdeco) between the model's decoding of its training frames and the base mesh plus the weighted morph targets",
+            "up_axis": up_axis,
+            "rotation": rotation,
             "train_frames": model.train_frames(),
         }))?),
         generator: Some(format!("meshdeco {}", env!("CARGO_PKG_VERSION"))),
@@ -410,6 +659,9 @@ pub fn export_glb(model: &dyn Model, path: &Path, options: &ExportOptions) -> Re
         targets: n_targets,
         names: shapes.names,
         additivity_erms: additivity,
+        additivity_extreme_erms: additivity_extreme,
+        targets_fitted: fitted,
+        up_axis,
         animation_frames,
         bytes: bytes.len(),
     })
@@ -423,11 +675,29 @@ pub struct GlbMorphs {
     pub base: Vec<Vec3>,
     pub faces: Vec<[usize; 3]>,
     pub targets: Vec<Vec<Vec3>>,
+    /// Each target's normal change (empty where the file has none).
+    pub target_normals: Vec<Vec<Vec3>>,
     pub names: Vec<String>,
     pub animation: Vec<Vec<f64>>,
+    /// Key times of the animation, seconds.
+    pub times: Vec<f64>,
+    /// `asset.extras.rotation` (rows: data → file axes; identity when absent).
+    pub rotation: crate::math::mat3::Mat3,
+    /// `asset.extras.up_axis` (empty when absent).
+    pub up_axis: String,
 }
 
 impl GlbMorphs {
+    /// The same morphs rotated back into the model's data axes (Rᵀ of [`GlbMorphs::rotation`]).
+    pub fn in_data_axes(mut self) -> Self {
+        let rt = crate::math::mat3::transpose(&self.rotation);
+        self.base = rotate(&rt, &self.base);
+        for t in self.targets.iter_mut().chain(self.target_normals.iter_mut()) {
+            *t = rotate(&rt, t);
+        }
+        self
+    }
+
     /// base + Σ_t w_t·target_t (w in file order).
     pub fn blend(&self, w: &[f64]) -> Vec<Vec3> {
         blend(&self.base, &self.targets, w)
@@ -481,9 +751,23 @@ pub fn read_glb(path: &Path) -> Result<GlbMorphs> {
         .collect();
     let faces = idx.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
     let mut targets = Vec::new();
+    let mut target_normals = Vec::new();
     for t in prim.targets.iter().flatten() {
         targets.push(vec3s(t.positions.ok_or_else(|| bad("morph target without POSITION"))?)?);
+        if let Some(n) = t.normals {
+            target_normals.push(vec3s(n)?);
+        }
     }
+    let extras: serde_json::Value =
+        root.asset.extras.as_ref().and_then(|e| serde_json::from_str(e.get()).ok()).unwrap_or(serde_json::Value::Null);
+    let rotation: crate::math::mat3::Mat3 = match extras.get("rotation") {
+        None => [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+        Some(r) => serde_json::from_value(r.clone()).map_err(|_| bad("asset.extras.rotation is not a 3×3 matrix"))?,
+    };
+    if (crate::math::mat3::det(&rotation) - 1.0).abs() > 1e-6 {
+        return Err(bad("asset.extras.rotation is not a rotation"));
+    }
+    let up_axis = extras.get("up_axis").and_then(|u| u.as_str()).unwrap_or_default().to_string();
     let names: Vec<String> = mesh
         .extras
         .as_ref()
@@ -492,11 +776,16 @@ pub fn read_glb(path: &Path) -> Result<GlbMorphs> {
         .and_then(|v| serde_json::from_value(v).ok())
         .unwrap_or_default();
     let mut animation = Vec::new();
+    let mut times = Vec::new();
     if let Some(anim) = root.animations.first()
         && let Some(s) = anim.samplers.first()
     {
         let values = floats(s.output)?;
         animation = values.chunks_exact(targets.len().max(1)).map(<[f64]>::to_vec).collect();
+        times = floats(s.input)?;
+        if times.len() != animation.len() {
+            return Err(bad(&format!("{} key times for {} keyed weight sets", times.len(), animation.len())));
+        }
     }
-    Ok(GlbMorphs { base, faces, targets, names, animation })
+    Ok(GlbMorphs { base, faces, targets, target_normals, names, animation, times, rotation, up_axis })
 }

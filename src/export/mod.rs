@@ -2,4 +2,4 @@
 
 pub mod gltf;
 
-pub use gltf::{ExportOptions, ExportReport, export_glb, read_glb};
+pub use gltf::{ExportOptions, ExportReport, TargetFit, UpAxis, export_glb, read_glb};

@@ -23,6 +23,18 @@ pub fn is_numpy_path(path: &str) -> bool {
 /// `.npy`) as a sequence with the faces of the mesh file `template`.
 pub fn load_npy_sequence(path: &Path, array: Option<&str>, template: &Path) -> Result<MeshSequence> {
     let tmpl = super::load_mesh(template)?;
+    load_npy_with_faces(path, array, tmpl.n_vertices(), tmpl.faces)
+}
+
+/// Reads the F × N × 3 array of `path` as a sequence with the given connectivity (`n_vertices`
+/// vertices, `faces`: e.g. a trained model's rest mesh, which is the template it was trained
+/// with).
+pub fn load_npy_with_faces(
+    path: &Path,
+    array: Option<&str>,
+    n_vertices: usize,
+    faces: Vec<[usize; 3]>,
+) -> Result<MeshSequence> {
     let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
     let is_npz = path.extension().and_then(|e| e.to_str()).is_some_and(|e| e.eq_ignore_ascii_case("npz"));
     let (npy, what) = if is_npz {
@@ -39,11 +51,11 @@ pub fn load_npy_sequence(path: &Path, array: Option<&str>, template: &Path) -> R
         }
         (bytes, path.display().to_string())
     };
-    let frames = parse_frames(&npy, &what, tmpl.n_vertices())?;
+    let frames = parse_frames(&npy, &what, n_vertices)?;
     let stem = path.file_stem().and_then(|s| s.to_str()).unwrap_or("frame").to_string();
     let width = frames.len().to_string().len();
     let names = (1..=frames.len()).map(|i| format!("{stem}_{i:0width$}")).collect();
-    Ok(MeshSequence { faces: tmpl.faces, frames, names })
+    Ok(MeshSequence { faces, frames, names })
 }
 
 /// The bytes of `<name>.npy` inside the `.npz` archive `bytes`.

@@ -14,6 +14,16 @@
 //! vertices (P weights). β (boundary consistency, region PCA) is used as given: both the data
 //! and the boundary term are squared vertex differences in the same units.
 //!
+//! **What the pull measures (`PosePrior`).** The paper's pull is on the weights, ‖w − w0‖². It
+//! lets the solver buy a pin's motion with whichever weights are cheapest *at the pin*: a
+//! component small at the pin and large elsewhere gets a large weight, and the body folds over
+//! (SCAPE SPLOCS, one pin on the back: the largest motion 5.3× the drag, 55 % of the vertices
+//! moved more than half of it). [`PosePrior::Shape`] (the default) measures the change of the
+//! whole shape instead: `(w − w0)ᵀ G (w − w0)` with `G = BᵀB / N` (B the model's linear map from
+//! weights to the N×3 vertex positions, so `(w − w0)ᵀG(w − w0)` is the mean squared motion of a
+//! vertex), scaled by `K / trace(G)` so that for `G ∝ I` it is the paper's term exactly and γ
+//! keeps its meaning. The solver then moves the pins with the least motion of everything else.
+//!
 //! Factor once / solve many: a poser is built once per model and constraint-vertex set
 //! (assembling and factorising a P × P system) and then [`LinearPoser::solve`] /
 //! [`RegionPoser::solve`] run per drag event (one back-substitution, plus an active-set loop for
@@ -43,6 +53,90 @@ impl Default for PoseConfig {
     fn default() -> Self {
         PoseConfig { gamma: 0.025, beta: 1.0 }
     }
+}
+
+/// What the pull towards the start measures (module docs).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum PosePrior {
+    /// The change of the whole shape: mean squared vertex motion (meshdeco's default).
+    #[default]
+    Shape,
+    /// The change of the weights, ‖w − w0‖² (paper 002 Eq. 8/10).
+    Weights,
+}
+
+impl PosePrior {
+    /// Parses `shape` | `weights`.
+    pub fn parse(s: &str) -> Option<Self> {
+        match s {
+            "shape" => Some(PosePrior::Shape),
+            "weights" => Some(PosePrior::Weights),
+            _ => None,
+        }
+    }
+    /// Name as written in flags and requests.
+    pub fn name(self) -> &'static str {
+        match self {
+            PosePrior::Shape => "shape",
+            PosePrior::Weights => "weights",
+        }
+    }
+}
+
+/// The shape metric `G = BᵀB / N` (K × K) of a model whose shape is `offset + B·w`, from the
+/// K columns of B (each N×3 values, e.g. a component's vertex displacements).
+pub fn shape_metric(columns: &[Vec<f64>]) -> Mat<f64> {
+    let k = columns.len();
+    let n = columns.first().map_or(1, |c| (c.len() / 3).max(1));
+    let mut g = Mat::<f64>::zeros(k, k);
+    for i in 0..k {
+        for j in i..k {
+            let d: f64 = columns[i].iter().zip(&columns[j]).map(|(a, b)| a * b).sum::<f64>() / n as f64;
+            g[(i, j)] = d;
+            g[(j, i)] = d;
+        }
+    }
+    g
+}
+
+/// Adds the pull `γ·s·P` to `h` (K × K): P = I for the weights prior, `K·G / trace(G)` for the
+/// shape metric `G` (module docs), with s the mean diagonal of the data term `h` on entry.
+/// Returns the matrix added (to form the right-hand side `γ·s·P·w0`).
+fn add_pull(h: &mut Mat<f64>, gamma: f64, metric: Option<&Mat<f64>>) -> Result<Mat<f64>> {
+    let k = h.nrows();
+    let s = (0..k).map(|i| h[(i, i)]).sum::<f64>() / k.max(1) as f64;
+    let pull = match metric {
+        None => Mat::<f64>::from_fn(k, k, |i, j| if i == j { gamma * s } else { 0.0 }),
+        Some(g) => {
+            if g.nrows() != k || g.ncols() != k {
+                return Err(Error::Invalid(format!(
+                    "posing: a {}×{} shape metric for {k} weights",
+                    g.nrows(),
+                    g.ncols()
+                )));
+            }
+            let tr = (0..k).map(|i| g[(i, i)]).sum::<f64>();
+            // A component that moves nothing keeps the weights pull (the metric has no hold on it).
+            let floor = 1e-9 * tr / k.max(1) as f64;
+            let scale = if tr > 0.0 { gamma * s * k as f64 / tr } else { 0.0 };
+            Mat::<f64>::from_fn(k, k, |i, j| {
+                let x = scale * g[(i, j)];
+                if i == j && g[(i, i)] <= floor { x + gamma * s } else { x }
+            })
+        }
+    };
+    for i in 0..k {
+        for j in 0..k {
+            h[(i, j)] += pull[(i, j)];
+        }
+    }
+    Ok(pull)
+}
+
+/// `pull · w0`.
+fn pull_times(pull: &Mat<f64>, w0: &[f64]) -> Vec<f64> {
+    (0..pull.nrows()).map(|i| (0..pull.ncols()).map(|j| pull[(i, j)] * w0[j]).sum()).collect()
 }
 
 impl PoseConfig {
@@ -88,19 +182,38 @@ fn check_weights(w0: &[f64], p: usize) -> Result<()> {
 }
 
 /// Lewis–Anjyo posing of a [`LinearModel`] (paper 002 Eq. 8): w minimises
-/// `Σ_k ‖offset_k + Σ_j w_j C_j,k − t_k‖² + γ·s·‖w − w0‖²` subject to the model's weight
-/// constraint (`Nonnegative`: w ≥ 0, exact active-set NNLS; otherwise unconstrained).
+/// `Σ_k ‖offset_k + Σ_j w_j C_j,k − t_k‖² + γ·s·(w − w0)ᵀP(w − w0)` subject to the model's
+/// weight constraint (`Nonnegative`: w ≥ 0, exact active-set NNLS; otherwise unconstrained), P
+/// the identity (the paper) or the scaled shape metric (module docs).
 pub struct LinearPoser<'a> {
     model: &'a LinearModel,
     vertices: Vec<usize>,
     hessian: Mat<f64>,
     llt: faer::linalg::solvers::Llt<f64>,
-    reg: f64,
+    pull: Mat<f64>,
+}
+
+/// The shape metric of a per-vertex [`LinearModel`] (its components are the columns of B).
+pub fn linear_shape_metric(model: &LinearModel) -> Mat<f64> {
+    let cols: Vec<Vec<f64>> = (0..model.n_components).map(|j| model.component(j).to_vec()).collect();
+    shape_metric(&cols)
 }
 
 impl<'a> LinearPoser<'a> {
-    /// Assembles and factorises `C_S C_Sᵀ + γ s I` for the constrained `vertices`.
+    /// Assembles and factorises `C_S C_Sᵀ + γ s I` for the constrained `vertices` (the paper's
+    /// weights prior).
     pub fn new(model: &'a LinearModel, vertices: &[usize], config: &PoseConfig) -> Result<Self> {
+        Self::with_metric(model, vertices, config, None)
+    }
+
+    /// As [`LinearPoser::new`], with the pull measured by the shape `metric` when given
+    /// ([`linear_shape_metric`]; K × K).
+    pub fn with_metric(
+        model: &'a LinearModel,
+        vertices: &[usize],
+        config: &PoseConfig,
+        metric: Option<&Mat<f64>>,
+    ) -> Result<Self> {
         config.validate()?;
         model.validate()?;
         if model.width != 3 {
@@ -121,13 +234,9 @@ impl<'a> LinearPoser<'a> {
                 }
             }
         }
-        let s = (0..k).map(|i| h[(i, i)]).sum::<f64>() / k as f64;
-        let reg = config.gamma * s;
-        for i in 0..k {
-            h[(i, i)] += reg;
-        }
+        let pull = add_pull(&mut h, config.gamma, metric)?;
         let llt = factor_spd(h.clone(), "posing")?;
-        Ok(LinearPoser { model, vertices: vertices.to_vec(), hessian: h, llt, reg })
+        Ok(LinearPoser { model, vertices: vertices.to_vec(), hessian: h, llt, pull })
     }
 
     /// New weights (K) for `targets` (one per constrained vertex, data units) starting from
@@ -137,7 +246,7 @@ impl<'a> LinearPoser<'a> {
         let k = m.n_components;
         check_targets(targets, self.vertices.len())?;
         check_weights(w0, k)?;
-        let mut b: Vec<f64> = w0.iter().map(|w| self.reg * w).collect();
+        let mut b = pull_times(&self.pull, w0);
         for (&v, t) in self.vertices.iter().zip(targets) {
             for (j, bj) in b.iter_mut().enumerate() {
                 let c = &m.component(j)[3 * v..3 * v + 3];
@@ -179,12 +288,40 @@ pub struct RegionPoser<'a> {
     pairs: Vec<SharedPair>,
     llt: faer::linalg::solvers::Llt<f64>,
     beta: f64,
-    reg: f64,
+    pull: Mat<f64>,
+}
+
+/// The shape metric of a [`RegionPcaModel`]: the columns of B are the reconstructions of the
+/// unit coefficient vectors minus that of zero (boundary averaging included).
+pub fn region_shape_metric(model: &RegionPcaModel) -> Result<Mat<f64>> {
+    let p = model.n_components();
+    let base = model.reconstruct(&vec![0.0; p])?;
+    let mut cols = Vec::with_capacity(p);
+    let mut e = vec![0.0; p];
+    for i in 0..p {
+        e[i] = 1.0;
+        let x = model.reconstruct(&e)?;
+        e[i] = 0.0;
+        cols.push(x.iter().zip(&base).map(|(a, b)| a - b).collect());
+    }
+    Ok(shape_metric(&cols))
 }
 
 impl<'a> RegionPoser<'a> {
-    /// Assembles and factorises the Eq. 10 system for the constrained `vertices`.
+    /// Assembles and factorises the Eq. 10 system for the constrained `vertices` (the paper's
+    /// weights prior).
     pub fn new(model: &'a RegionPcaModel, vertices: &[usize], config: &PoseConfig) -> Result<Self> {
+        Self::with_metric(model, vertices, config, None)
+    }
+
+    /// As [`RegionPoser::new`], with the pull measured by the shape `metric` when given
+    /// ([`region_shape_metric`]; P × P).
+    pub fn with_metric(
+        model: &'a RegionPcaModel,
+        vertices: &[usize],
+        config: &PoseConfig,
+        metric: Option<&Mat<f64>>,
+    ) -> Result<Self> {
         config.validate()?;
         check_vertices(vertices, model.n_vertices)?;
         let p = model.n_components();
@@ -197,16 +334,18 @@ impl<'a> RegionPoser<'a> {
                 model.add_data_vertex(i, l, off[i], &mut h);
             }
         }
-        let s = (0..p).map(|i| h[(i, i)]).sum::<f64>() / p as f64;
-        let reg = config.gamma * s;
+        let mut pull_h = h.clone();
+        let pull = add_pull(&mut pull_h, config.gamma, metric)?;
         let pairs = model.shared_pairs();
         let mut dummy = vec![0.0; p];
         model.add_boundary(&pairs, config.beta, &mut h, &mut dummy);
         for i in 0..p {
-            h[(i, i)] += reg;
+            for j in 0..p {
+                h[(i, j)] += pull[(i, j)];
+            }
         }
         let llt = factor_spd(h, "region posing")?;
-        Ok(RegionPoser { model, vertices: vertices.to_vec(), memberships, pairs, llt, beta: config.beta, reg })
+        Ok(RegionPoser { model, vertices: vertices.to_vec(), memberships, pairs, llt, beta: config.beta, pull })
     }
 
     /// New coefficients ζ for `targets` (one per constrained vertex) starting from `zeta0`.
@@ -216,7 +355,7 @@ impl<'a> RegionPoser<'a> {
         check_targets(targets, self.vertices.len())?;
         check_weights(zeta0, p)?;
         let off = m.offsets();
-        let mut rhs: Vec<f64> = zeta0.iter().map(|z| self.reg * z).collect();
+        let mut rhs = pull_times(&self.pull, zeta0);
         for (mem, t) in self.memberships.iter().zip(targets) {
             for &(i, l) in mem {
                 let r = &m.regions[i];
@@ -266,6 +405,131 @@ mod tests {
     use crate::methods::segmentation::{SegmentationConfig, segment};
     use crate::methods::{DataMatrix, Pca, PcaCentering, PcaConfig, SplocsConfig, SplocsSolver, SupportDistances};
     use crate::synthetic;
+
+    /// A 6-vertex model with 3 components: A is 1 at vertex 0 (x) and nothing else; B is 0.5 at
+    /// vertex 0 and 0.1 at vertices 1..5; C is 0.2 at vertex 0 and 2 at vertices 1..5 (small at
+    /// the pin, large elsewhere: the weights prior likes it, the shape prior does not).
+    fn toy(constraint: WeightConstraint) -> LinearModel {
+        let n = 6;
+        let mut comps = vec![0.0; 3 * 3 * n];
+        comps[0] = 1.0;
+        comps[3 * n] = 0.5;
+        comps[2 * 3 * n] = 0.2;
+        for v in 1..n {
+            comps[3 * n + 3 * v] = 0.1;
+            comps[2 * 3 * n + 3 * v] = 2.0;
+        }
+        LinearModel {
+            n_elements: n,
+            width: 3,
+            n_components: 3,
+            n_frames: 1,
+            components: comps,
+            weights: vec![0.0; 3],
+            offset: vec![0.0; 3 * n],
+            constraint,
+        }
+    }
+
+    /// The objective of [`LinearPoser::with_metric`] at w (data term + γ·s·(w−w0)ᵀP(w−w0)).
+    fn objective(
+        m: &LinearModel,
+        v: &[usize],
+        t: &[Vec3],
+        w0: &[f64],
+        w: &[f64],
+        gamma: f64,
+        g: Option<&Mat<f64>>,
+    ) -> f64 {
+        let k = m.n_components;
+        let mut h = Mat::<f64>::zeros(k, k);
+        for &vv in v {
+            for i in 0..k {
+                for j in 0..k {
+                    h[(i, j)] += (0..3).map(|c| m.component(i)[3 * vv + c] * m.component(j)[3 * vv + c]).sum::<f64>();
+                }
+            }
+        }
+        let pull = add_pull(&mut h, gamma, g).unwrap();
+        let mut data = 0.0;
+        for (&vv, tt) in v.iter().zip(t) {
+            for c in 0..3 {
+                let x = m.offset[3 * vv + c] + (0..k).map(|j| w[j] * m.component(j)[3 * vv + c]).sum::<f64>();
+                data += (x - tt[c]).powi(2);
+            }
+        }
+        let d: Vec<f64> = w.iter().zip(w0).map(|(a, b)| a - b).collect();
+        data + (0..k).map(|i| (0..k).map(|j| d[i] * pull[(i, j)] * d[j]).sum::<f64>()).sum::<f64>()
+    }
+
+    #[test]
+    fn shape_prior_solves_its_normal_equations_and_keeps_motion_local() {
+        let m = toy(WeightConstraint::Signed);
+        let g = linear_shape_metric(&m);
+        let (v, t, w0) = ([0usize], [[1.0, 0.0, 0.0]], [0.1, -0.2, 0.05]);
+        let cfg = PoseConfig { gamma: 0.025, beta: 0.0 };
+        let w = LinearPoser::with_metric(&m, &v, &cfg, Some(&g)).unwrap().solve(&t, &w0).unwrap();
+        // Stationary: every partial derivative of the objective (central differences) is ~0.
+        for i in 0..3 {
+            let e = 1e-6;
+            let mut a = w.clone();
+            let mut b = w.clone();
+            a[i] += e;
+            b[i] -= e;
+            let d = (objective(&m, &v, &t, &w0, &a, 0.025, Some(&g)) - objective(&m, &v, &t, &w0, &b, 0.025, Some(&g)))
+                / (2.0 * e);
+            assert!(d.abs() < 1e-6, "∂/∂w{i} = {d} at the shape prior's solution {w:?}");
+        }
+        // The weights prior buys the pin with C (0.2 at the pin, 2 elsewhere) far more than the
+        // shape prior does: collateral motion at vertex 1.
+        let ww = LinearPoser::new(&m, &v, &cfg).unwrap().solve(&t, &[0.0; 3]).unwrap();
+        let ws = LinearPoser::with_metric(&m, &v, &cfg, Some(&g)).unwrap().solve(&t, &[0.0; 3]).unwrap();
+        let motion = |w: &[f64]| (0..3).map(|j| w[j] * m.component(j)[3]).sum::<f64>().abs();
+        assert!(
+            motion(&ws) < 0.25 * motion(&ww),
+            "collateral motion: shape {} vs weights {}",
+            motion(&ws),
+            motion(&ww)
+        );
+        let landing = |w: &[f64]| ((0..3).map(|j| w[j] * m.component(j)[0]).sum::<f64>() - 1.0).abs();
+        assert!(landing(&ws) < 0.05, "shape prior lands {}", landing(&ws));
+    }
+
+    #[test]
+    fn isotropic_metric_is_the_weights_prior_and_bounds_hold() {
+        let m = toy(WeightConstraint::Signed);
+        let cfg = PoseConfig { gamma: 0.025, beta: 0.0 };
+        let iso = Mat::<f64>::from_fn(3, 3, |i, j| if i == j { 7.0 } else { 0.0 });
+        let (v, t, w0) = ([0usize, 2], [[0.8, 0.1, 0.0], [0.0, 0.3, 0.0]], [0.3, 0.0, -0.1]);
+        let a = LinearPoser::new(&m, &v, &cfg).unwrap().solve(&t, &w0).unwrap();
+        let b = LinearPoser::with_metric(&m, &v, &cfg, Some(&iso)).unwrap().solve(&t, &w0).unwrap();
+        for (x, y) in a.iter().zip(&b) {
+            assert!((x - y).abs() < 1e-12, "{a:?} vs {b:?}");
+        }
+        // Non-negative weights stay non-negative (a target only negative weights reach) and
+        // satisfy the KKT conditions: ∂f/∂w_i ≈ 0 where w_i > 0, ≥ 0 where w_i = 0.
+        let m = toy(WeightConstraint::Nonnegative);
+        let g = linear_shape_metric(&m);
+        let t = [[-1.0, 0.0, 0.0]];
+        let w = LinearPoser::with_metric(&m, &[0], &cfg, Some(&g)).unwrap().solve(&t, &[0.0; 3]).unwrap();
+        assert!(w.iter().all(|&x| x >= 0.0), "{w:?}");
+        for i in 0..3 {
+            let e = 1e-6;
+            let mut a = w.clone();
+            a[i] += e;
+            let d = (objective(&m, &[0], &t, &[0.0; 3], &a, 0.025, Some(&g))
+                - objective(&m, &[0], &t, &[0.0; 3], &w, 0.025, Some(&g)))
+                / e;
+            if w[i] > 1e-9 {
+                assert!(d.abs() < 1e-4, "∂/∂w{i} = {d} at an interior weight");
+            } else {
+                assert!(d > -1e-4, "∂/∂w{i} = {d} < 0 at a bound: moving off it would help");
+            }
+        }
+        // A metric of the wrong size is refused.
+        let bad = Mat::<f64>::zeros(2, 2);
+        assert!(LinearPoser::with_metric(&m, &[0], &cfg, Some(&bad)).is_err());
+    }
 
     struct Graph(EdgeGraph);
     impl SupportDistances for Graph {

@@ -52,11 +52,14 @@ pub struct AePoseConfig {
     /// Stop when the objective decreases by less than this fraction in one iteration (> 0).
     /// Default 1e-6.
     pub tolerance: f64,
+    /// Stop after the iteration that passes this wall time (None: no limit).
+    #[serde(skip)]
+    pub time_limit: Option<std::time::Duration>,
 }
 
 impl Default for AePoseConfig {
     fn default() -> Self {
-        AePoseConfig { gamma: 0.025, max_iterations: 30, tolerance: 1e-6 }
+        AePoseConfig { gamma: 0.025, max_iterations: 30, tolerance: 1e-6, time_limit: None }
     }
 }
 
@@ -295,7 +298,11 @@ impl<'a> AePoser<'a> {
         let mut start_cost = f64::NAN;
         let mut cost = f64::NAN;
         let mut iterations = 0;
+        let started = std::time::Instant::now();
         for it in 0..self.config.max_iterations {
+            if it > 0 && self.config.time_limit.is_some_and(|l| started.elapsed() >= l) {
+                break;
+            }
             let (p, jac) = self.positions_and_jacobian(&z)?;
             let dc = data_cost(&p);
             let lam = *lambda.get_or_insert_with(|| {

@@ -428,7 +428,12 @@ impl Model for AeArtifact {
         let (weights, positions) = AePoser::new(
             self,
             vertices,
-            &AePoseConfig { gamma: options.gamma, max_iterations: options.max_iterations, ..Default::default() },
+            &AePoseConfig {
+                gamma: options.gamma,
+                max_iterations: options.max_iterations,
+                time_limit: options.time_limit,
+                ..Default::default()
+            },
         )?
         .solve(targets, w0)?;
         Ok(PoseResult { start, positions, weights })

@@ -19,14 +19,14 @@ use crate::config::{ConsistencyName, MethodConfig, MethodKind, PcaMethod, Splocs
 use crate::error::{Error, Result};
 use crate::mesh::{MeshSequence, TriMesh, Vec3};
 use crate::methods::pca::{Pca, PcaConfig};
-use crate::methods::posing::{LinearPoser, PoseConfig};
+use crate::methods::posing::{LinearPoser, PoseConfig, linear_shape_metric};
 use crate::methods::splocs::SplocsSolver;
 use crate::methods::support_map::{
     ComponentLocality, SupportDistances, TriangleSupport, component_locality, support_ramp,
 };
 use crate::methods::{DataMatrix, LinearModel, WeightConstraint};
 use crate::model::{Component, Model, PointFit, argmax};
-use crate::model::{PoseOptions, PoseResult};
+use crate::model::{PoseOptions, PosePrior, PoseResult};
 use crate::preprocess::{Prepared, UnitBox};
 use crate::representation::acap::Consistency;
 use crate::representation::roundtrip::Alignment;
@@ -60,6 +60,9 @@ pub struct LinearArtifact {
     pub rest: TriMesh,
     pub model: LinearModel,
     pub representation: Representation,
+    /// The posing shape metric ([`crate::methods::posing::linear_shape_metric`]), computed on
+    /// the first pose.
+    pub shape_metric: std::sync::OnceLock<faer::Mat<f64>>,
 }
 
 fn parse_consistency(s: Option<&str>) -> Consistency {
@@ -97,7 +100,7 @@ impl LinearArtifact {
             constraint: header.constraint,
         };
         model.validate()?;
-        Ok(LinearArtifact { header, rest, model, representation })
+        Ok(LinearArtifact { header, rest, model, representation, shape_metric: Default::default() })
     }
 
     /// Saves the model into `dir` (model.json + model.bin).
@@ -221,6 +224,7 @@ fn artifact_of(
         rest: prep.rest.clone(),
         model,
         representation,
+        shape_metric: Default::default(),
     }
 }
 
@@ -430,9 +434,12 @@ impl Model for LinearArtifact {
         }
         let start = self.synthesize(w0)?;
         let t = model_targets(vertices, targets, self.header.unit_box, Some(&self.rest.positions));
-        let weights =
-            LinearPoser::new(&self.model, vertices, &PoseConfig { gamma: options.gamma, beta: options.beta })?
-                .solve(&t, w0)?;
+        let metric = match options.prior {
+            PosePrior::Shape => Some(self.shape_metric.get_or_init(|| linear_shape_metric(&self.model))),
+            PosePrior::Weights => None,
+        };
+        let config = PoseConfig { gamma: options.gamma, beta: options.beta };
+        let weights = LinearPoser::with_metric(&self.model, vertices, &config, metric)?.solve(&t, w0)?;
         let positions = self.synthesize(&weights)?;
         Ok(PoseResult { start, positions, weights })
     }

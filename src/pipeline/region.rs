@@ -22,11 +22,11 @@ use crate::config::{MethodConfig, MethodKind, RegionPcaMethod, method_key};
 use crate::error::{Error, Result};
 use crate::mesh::{self, MeshSequence, TriMesh, Vec3};
 use crate::methods::DataMatrix;
-use crate::methods::posing::{PoseConfig, RegionPoser};
+use crate::methods::posing::{PoseConfig, RegionPoser, region_shape_metric};
 use crate::methods::region_pca::{RegionBasis, RegionPcaModel};
 use crate::methods::segmentation::segment;
 use crate::model::{Component, Model, PointFit, argmax};
-use crate::model::{PoseOptions, PoseResult};
+use crate::model::{PoseOptions, PosePrior, PoseResult};
 use crate::preprocess::{Prepared, UnitBox};
 use crate::representation::roundtrip::Alignment;
 use crate::representation::{Features, Representation, RepresentationKind, RepresentationOptions};
@@ -66,6 +66,9 @@ pub struct RegionArtifact {
     /// Coefficients ζ of the training frames (P each; empty for artefacts written before they
     /// were stored).
     pub train_weights: Vec<Vec<f64>>,
+    /// The posing shape metric ([`crate::methods::posing::region_shape_metric`]), computed on
+    /// the first pose.
+    pub shape_metric: std::sync::OnceLock<faer::Mat<f64>>,
 }
 
 impl RegionArtifact {
@@ -121,7 +124,15 @@ impl RegionArtifact {
         } else {
             Vec::new()
         };
-        Ok(RegionArtifact { header, rest, labels, model, representation, train_weights })
+        Ok(RegionArtifact {
+            header,
+            rest,
+            labels,
+            model,
+            representation,
+            train_weights,
+            shape_metric: Default::default(),
+        })
     }
 
     /// Positions (data units) of displacement rows (`n` × N·3).
@@ -188,6 +199,7 @@ pub fn fit(m: &RegionPcaMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> Re
         model,
         representation,
         train_weights: Vec::new(),
+        shape_metric: Default::default(),
     };
     let train_truth = MeshSequence {
         faces: prep.rest.faces.clone(),
@@ -320,9 +332,17 @@ impl Model for RegionArtifact {
     fn pose(&self, vertices: &[usize], targets: &[Vec3], w0: &[f64], options: &PoseOptions) -> Result<PoseResult> {
         let start = self.decode(&[w0.to_vec()])?.remove(0);
         let t = model_targets(vertices, targets, self.header.unit_box, Some(&self.rest.positions));
-        let weights =
-            RegionPoser::new(&self.model, vertices, &PoseConfig { gamma: options.gamma, beta: options.beta })?
-                .solve(&t, w0)?;
+        let metric = match options.prior {
+            PosePrior::Shape => {
+                if self.shape_metric.get().is_none() {
+                    let _ = self.shape_metric.set(region_shape_metric(&self.model)?);
+                }
+                self.shape_metric.get()
+            }
+            PosePrior::Weights => None,
+        };
+        let config = PoseConfig { gamma: options.gamma, beta: options.beta };
+        let weights = RegionPoser::with_metric(&self.model, vertices, &config, metric)?.solve(&t, w0)?;
         let positions = self.decode(std::slice::from_ref(&weights))?.remove(0);
         Ok(PoseResult { start, positions, weights })
     }

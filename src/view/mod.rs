@@ -24,6 +24,7 @@ pub mod overview;
 use std::net::{SocketAddr, TcpListener};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::mpsc::{Sender, channel};
 use std::time::Instant;
 
@@ -40,6 +41,14 @@ use http::{Request, Response};
 pub const INDEX_HTML: &str = include_str!("web/index.html");
 /// The page's script (WebGL2 viewer, panels, API client).
 pub const APP_JS: &str = include_str!("web/app.js");
+
+/// Most pins one `/api/pose` request may hold.
+pub const MAX_PINS: usize = 100;
+/// Most solver iterations one `/api/pose` request may ask for.
+pub const MAX_POSE_ITERATIONS: usize = 100;
+/// Time an iterative pose (the autoencoder's) may hold the model thread; it then answers with
+/// the best shape so far, so that a slider's decode waits at most about this long.
+pub const POSE_TIME_LIMIT: std::time::Duration = std::time::Duration::from_millis(300);
 
 /// What `meshdeco view` serves.
 #[derive(Debug, Clone)]
@@ -73,6 +82,9 @@ struct Shared {
     k: usize,
     n_frames: usize,
     summary: String,
+    /// Number of the newest `/api/pose` request: an older one still waiting for the model
+    /// thread is answered 409 without solving (a newer drag supersedes it).
+    pose_seq: Arc<AtomicU64>,
 }
 
 /// A started viewer: the model is loaded and the address bound; [`Viewer::serve`] answers.
@@ -145,7 +157,7 @@ fn open_session(opts: &ViewOptions) -> Result<Session> {
     let model = load_model(&opts.model)?;
     let (frames, data_name) = match &opts.data {
         Some(path) => {
-            let seq = crate::preprocess::load_frames(path)?;
+            let seq = crate::preprocess::load_frames_for(path, &model.rest())?;
             model::check_connectivity(model.as_ref(), &seq, path)?;
             (Some(seq), path.clone())
         }
@@ -303,6 +315,7 @@ fn describe(s: &Session, model_path: &Path) -> Result<Shared> {
         n_frames: s.frames.as_ref().map_or(0, |f| f.n_frames()),
         rest,
         summary,
+        pose_seq: Arc::new(AtomicU64::new(0)),
     })
 }
 
@@ -478,6 +491,12 @@ fn pose(req: &Request, shared: &Shared, jobs: &Sender<Job>) -> ApiResult<Respons
         .ok_or_else(|| bad("missing `constraints`: an array of {\"vertex\": index, \"target\": [x, y, z]}"))?;
     let Constraints { vertices, targets } =
         Constraints::from_json("`constraints`", list, n).map_err(|e| bad(e.to_string()))?;
+    if vertices.len() > MAX_PINS {
+        return Err(bad(format!(
+            "`constraints`: {} pins; a pose request takes at most {MAX_PINS} (the page's pins are a person's clicks)",
+            vertices.len()
+        )));
+    }
     crate::pipeline::pose::check_targets(&shared.rest, &vertices, &targets).map_err(|e| bad(e.to_string()))?;
     let start = match body.get("start") {
         Some(s) => Some(vector(s, "start", shared.k, false)?),
@@ -491,19 +510,32 @@ fn pose(req: &Request, shared: &Shared, jobs: &Sender<Job>) -> ApiResult<Respons
         }
     };
     let iterations = param("max_iterations", d.max_iterations as f64)?;
-    if !(1.0..=PoseOptions::MAX_ITERATIONS as f64).contains(&iterations) || iterations.fract() != 0.0 {
+    if !(1.0..=MAX_POSE_ITERATIONS as f64).contains(&iterations) || iterations.fract() != 0.0 {
         return Err(bad(format!(
-            "`max_iterations` {iterations}: must be an integer from 1 to {}",
-            PoseOptions::MAX_ITERATIONS
+            "`max_iterations` {iterations}: must be an integer from 1 to {MAX_POSE_ITERATIONS} (the viewer's bound per request)"
         )));
     }
+    let prior = match body.get("prior") {
+        None => d.prior,
+        Some(v) => v
+            .as_str()
+            .and_then(crate::model::PosePrior::parse)
+            .ok_or_else(|| bad(format!("`prior` {v}: must be \"shape\" or \"weights\"")))?,
+    };
     let options = PoseOptions {
         gamma: param("gamma", d.gamma)?,
         beta: param("beta", d.beta)?,
         max_iterations: iterations as usize,
+        prior,
+        time_limit: Some(POSE_TIME_LIMIT),
     };
     options.validate().map_err(|e| bad(e.to_string()))?;
+    let seq = shared.pose_seq.clone();
+    let mine = seq.fetch_add(1, Ordering::SeqCst) + 1;
     Ok(on_model(jobs, move |s| {
+        if seq.load(Ordering::SeqCst) != mine {
+            return Response::error(409, "superseded by a newer pose request; not solved");
+        }
         let m = s.model.as_ref();
         let r = (|| -> ApiResult<Response> {
             let w0 = match start {

@@ -234,7 +234,7 @@ function colours() {
     }
     note = `${S.desc.segmentation_groups} support groups`;
   } else if (S.overlay === 'error' && S.frameErr) {
-    note = `frame error: max ${ramp(S.frameErr).toPrecision(3)}, Erms ${S.frameErms}`;
+    note = `frame error: max ${ramp(S.frameErr).toPrecision(3)}, Erms ${(+S.frameErms).toPrecision(4)}`;
   } else C.fill(200);
   gl.bindBuffer(gl.ARRAY_BUFFER, G.bCol); gl.bufferData(gl.ARRAY_BUFFER, C, gl.DYNAMIC_DRAW);
   S.overlayNote = note;
@@ -296,7 +296,9 @@ async function pump() {
   try {
     const tSend = performance.now();
     const r = await fetch(job.url, { method: job.body ? 'POST' : 'GET', body: job.body ? JSON.stringify(job.body) : undefined, headers: { 'Content-Type': 'application/json' } });
-    if (!r.ok) {
+    if (r.status === 409) {
+      // A newer pose request superseded this one on the server; its answer follows.
+    } else if (!r.ok) {
       const e = await r.json().catch(() => ({ error: r.statusText }));
       showError(`${job.url}: ${r.status} ${e.error}`);
     } else {
@@ -349,7 +351,7 @@ function buildComponents() {
     const val = document.createElement('span'); val.className = 'val';
     const rs = document.createElement('button'); rs.textContent = '↺'; rs.title = 'reset to 0';
     row.append(name, sl, val, rs); box.append(row);
-    sliders.set(c.index, { sl, val, row });
+    sliders.set(c.index, { sl, val, row, range: c.range });
     name.onclick = () => select(c.index);
     let gesture = false;
     sl.addEventListener('input', () => {
@@ -359,13 +361,23 @@ function buildComponents() {
       submit({ url: '/api/decode', body: { dials: Array.from(S.dials) }, kind: 'slider', t0 });
     });
     sl.addEventListener('change', () => { gesture = false; });
-    sl.addEventListener('pointerdown', () => select(c.index));
+    // Pressing a slider highlights its row; its heat map is a click on its name.
+    sl.addEventListener('pointerdown', () => { for (const [j, s2] of sliders) s2.row.classList.toggle('sel', j === c.index); });
     rs.onclick = () => { pushUndo(); S.dials[c.index] = 0; syncSliders(); submit({ url: '/api/decode', body: { dials: Array.from(S.dials) }, kind: 'reset', t0: performance.now() }); };
   }
   syncSliders();
 }
+// A dial beyond its slider's range (a pose or a loaded weights file can go there) widens the
+// slider to show it and marks the value: beyond the training range.
 function syncSliders() {
-  for (const [i, s] of sliders) { s.sl.value = S.dials[i]; s.val.textContent = S.dials[i].toFixed(3); }
+  for (const [i, s] of sliders) {
+    const d = S.dials[i], c = s.range;
+    s.sl.min = Math.min(c[0], d); s.sl.max = Math.max(c[1], d);
+    s.sl.value = d; s.val.textContent = d.toFixed(3);
+    const out = d < c[0] || d > c[1];
+    s.val.classList.toggle('over', out);
+    s.val.title = out ? `beyond the training range [${c[0].toFixed(2)}, ${c[1].toFixed(2)}]` : '';
+  }
 }
 async function select(i) {
   S.selected = i;
@@ -422,6 +434,12 @@ let ptr = null;
 canvas.addEventListener('contextmenu', (e) => e.preventDefault());
 canvas.addEventListener('pointerdown', (e) => {
   canvas.setPointerCapture(e.pointerId);
+  if (e.button === 0 && e.altKey) {
+    // Alt-click: pin a point where it is, to hold its part in place while others are dragged.
+    const v = pick(e.clientX, e.clientY);
+    if (v >= 0) { pushUndo(); S.pins.set(v, vtx(v)); showPins(); redraw(); }
+    return;
+  }
   if (e.button === 0 && !e.shiftKey) {
     const v = pick(e.clientX, e.clientY);
     if (v >= 0) {
@@ -472,7 +490,8 @@ window.addEventListener('resize', redraw);
 
 // ---------- frames, save ----------
 function loadFrame(i) {
-  const n = S.desc.frames.names.length; i = Math.max(0, Math.min(n - 1, i)); $('frame-i').value = i;
+  // The box shows frame numbers from 1 (as the file names and --frames count); the API is 0-based.
+  const n = S.desc.frames.names.length; i = Math.max(0, Math.min(n - 1, i)); $('frame-i').value = i + 1;
   submit({ url: `/api/frame/${i}`, kind: 'frame', t0: performance.now() });
 }
 async function save(fmt) {
@@ -515,10 +534,10 @@ async function start() {
   for (const b of document.querySelectorAll('button.save')) b.onclick = () => save(b.dataset.fmt);
   if (S.desc.frames) {
     $('frames-box').style.display = ''; $('opt-error').disabled = false;
-    $('frame-i').max = S.desc.frames.names.length - 1;
-    $('prev').onclick = () => loadFrame(+$('frame-i').value - 1);
-    $('next').onclick = () => loadFrame(+$('frame-i').value + 1);
-    $('frame-i').onchange = () => loadFrame(+$('frame-i').value);
+    $('frame-i').max = S.desc.frames.names.length;
+    $('prev').onclick = () => loadFrame(+$('frame-i').value - 2);
+    $('next').onclick = () => loadFrame(+$('frame-i').value);
+    $('frame-i').onchange = () => loadFrame(+$('frame-i').value - 1);
     for (const r of document.querySelectorAll('input[name=fshow]')) r.onchange = () => { if (S.frameRec) { S.pos = r.value === 'frame' && r.checked ? S.frameTruth : S.frameRec; uploadGeometry(); redraw(); } };
   }
   draw(true);
