@@ -17,7 +17,9 @@ and stored in asset.extras: Erms between the model's decoding of its training fr
 pub struct ExportArgs {
     /// Model directory written by `meshdeco train` (or its model.json).
     pub model: PathBuf,
-    /// Output file (.glb, binary glTF 2.0), written atomically.
+    /// Output file, written atomically: .glb (binary glTF 2.0: morph targets, animation) or
+    /// .usda (USD text: UsdSkel blend shapes, the animation as a SkelAnimation; Y-up,
+    /// metersPerUnit 1 = one data unit).
     #[arg(long, short)]
     pub out: PathBuf,
     /// Add the training frames' weights as a glTF animation of the morph weights (one key per
@@ -55,8 +57,9 @@ fn parse_up(s: &str) -> std::result::Result<UpAxis, String> {
 }
 
 pub fn run(a: ExportArgs) -> Result<()> {
-    if !a.out.extension().and_then(|e| e.to_str()).is_some_and(|e| e.eq_ignore_ascii_case("glb")) {
-        bail!("--out {}: the export writes binary glTF; name the file .glb", a.out.display());
+    let ext = a.out.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).unwrap_or_default();
+    if ext != "glb" && ext != "usda" {
+        bail!("--out {}: name the file .glb (binary glTF 2.0) or .usda (USD text)", a.out.display());
     }
     if !(a.fps.is_finite() && a.fps > 0.0) {
         bail!("--fps {}: must be a positive number", a.fps);
@@ -71,7 +74,11 @@ pub fn run(a: ExportArgs) -> Result<()> {
         fit_regularisation: a.fit_regularisation,
         bake: a.bake,
     };
-    let r = export_glb(model.as_ref(), &a.out, &opts)?;
+    let r = if ext == "usda" {
+        meshdeco::export::export_usda(model.as_ref(), &a.out, &opts)?
+    } else {
+        export_glb(model.as_ref(), &a.out, &opts)?
+    };
     println!(
         "wrote {} ({} bytes): {} morph targets{}",
         a.out.display(),

@@ -469,9 +469,77 @@ fn support_colors(magnitudes: &[Vec<f64>], n: usize) -> Vec<f32> {
     out
 }
 
-/// Writes `model` as a `.glb` at `path`, atomically (see the module docs).
-pub fn export_glb(model: &dyn Model, path: &Path, options: &ExportOptions) -> Result<ExportReport> {
-    if options.animation && !(options.fps.is_finite() && options.fps > 0.0) {
+/// What every export format writes: the blendshapes (rotated to Y-up), their normals, the
+/// additivity measures and the orientation (module docs).
+pub struct Prepared {
+    pub shapes: Blendshapes,
+    pub base_normals: Vec<Vec3>,
+    /// Each target's change of the vertex normals.
+    pub target_normals: Vec<Vec<Vec3>>,
+    pub additivity: Option<f64>,
+    pub additivity_extreme: Option<f64>,
+    pub fitted: bool,
+    pub rotation: crate::math::mat3::Mat3,
+    pub up_axis: String,
+    /// Whether the mesh has a boundary (drawn double-sided).
+    pub open: bool,
+}
+
+impl Prepared {
+    /// The keyed weights (target order) of the animation: one row per training frame with
+    /// `animation` (the frame's dials) or `bake` (one-hot); empty otherwise.
+    pub fn keyed_weights(&self, model: &dyn Model, options: &ExportOptions) -> Result<Vec<Vec<f64>>> {
+        if !(options.animation || options.bake) || self.shapes.deltas.is_empty() {
+            return Ok(Vec::new());
+        }
+        let weights = model.train_weights().ok_or_else(|| {
+            Error::Invalid("--animation: the model stores no training weights to animate".to_string())
+        })?;
+        let n = self.shapes.deltas.len();
+        weights
+            .iter()
+            .enumerate()
+            .map(|(i, w)| {
+                if options.bake {
+                    Ok(one_hot(n, i))
+                } else {
+                    let dials = model.dials(w)?;
+                    Ok(self.shapes.index.iter().map(|&k| dials[k]).collect())
+                }
+            })
+            .collect()
+    }
+
+    /// `baked`, `fitted` or `extreme`.
+    pub fn targets_kind(&self, options: &ExportOptions) -> &'static str {
+        if options.bake {
+            "baked"
+        } else if self.fitted {
+            "fitted"
+        } else {
+            "extreme"
+        }
+    }
+
+    /// The report of a file of `bytes` with `frames` animation keys.
+    pub fn report(self, bytes: usize, frames: usize) -> ExportReport {
+        ExportReport {
+            targets: self.shapes.deltas.len(),
+            names: self.shapes.names,
+            additivity_erms: self.additivity,
+            additivity_extreme_erms: self.additivity_extreme,
+            targets_fitted: self.fitted,
+            up_axis: self.up_axis,
+            animation_frames: frames,
+            bytes,
+        }
+    }
+}
+
+/// Builds the blendshapes of `model` as `options` ask (fitted or baked targets, rotation to
+/// Y-up, normals) and checks that everything is finite.
+pub fn prepare(model: &dyn Model, options: &ExportOptions) -> Result<Prepared> {
+    if (options.animation || options.bake) && !(options.fps.is_finite() && options.fps > 0.0) {
         return Err(Error::Invalid(format!("--fps ({}) must be a positive number", options.fps)));
     }
     if !(options.fit_regularisation.is_finite() && options.fit_regularisation > 0.0) {
@@ -504,14 +572,6 @@ pub fn export_glb(model: &dyn Model, path: &Path, options: &ExportOptions) -> Re
             (s, extreme, None, false)
         }
     };
-    let train = if options.animation || options.bake {
-        let w = model.train_weights().ok_or_else(|| {
-            Error::Invalid("--animation: the model stores no training weights to animate".to_string())
-        })?;
-        Some(w)
-    } else {
-        None
-    };
     // Orientation: rotate the base and the targets so that the chosen axis is +Y.
     let (rotation, up_axis) = orientation(&shapes.base, options.up);
     shapes.base = rotate(&rotation, &shapes.base);
@@ -528,41 +588,68 @@ pub fn export_glb(model: &dyn Model, path: &Path, options: &ExportOptions) -> Re
     let open =
         crate::mesh::topology::Topology::new(rest.n_vertices(), &rest.faces).is_boundary_vertex.iter().any(|&b| b);
 
+    let target_normals: Vec<Vec<Vec3>> = shapes
+        .deltas
+        .iter()
+        .map(|d| {
+            let shape: Vec<Vec3> =
+                shapes.base.iter().zip(d).map(|(p, q)| [p[0] + q[0], p[1] + q[1], p[2] + q[2]]).collect();
+            normals_of(&shape).iter().zip(&base_normals).map(|(a, b)| [a[0] - b[0], a[1] - b[1], a[2] - b[2]]).collect()
+        })
+        .collect();
+    let finite = |p: &[Vec3]| p.iter().flatten().all(|x| x.is_finite() && x.abs() <= f32::MAX as f64);
+    if !(finite(&shapes.base) && shapes.deltas.iter().all(|d| finite(d)) && target_normals.iter().all(|d| finite(d))) {
+        return Err(Error::Invalid(format!(
+            "the {} model's shapes are not finite single-precision numbers; nothing written",
+            model.kind().name()
+        )));
+    }
+    Ok(Prepared {
+        shapes,
+        base_normals,
+        target_normals,
+        additivity,
+        additivity_extreme,
+        fitted,
+        rotation,
+        up_axis,
+        open,
+    })
+}
+
+/// Writes `model` as a `.glb` at `path`, atomically (see the module docs).
+pub fn export_glb(model: &dyn Model, path: &Path, options: &ExportOptions) -> Result<ExportReport> {
+    let p = prepare(model, options)?;
+    let rest = model.rest();
+    let keys = p.keyed_weights(model, options)?;
     let mut b = Builder::new();
     use json::accessor::Type;
     use json::buffer::Target;
-    let positions = b.floats(&flat(&shapes.base), Type::Vec3, Some(Target::ArrayBuffer), true, "positions");
-    let normals = b.floats(&flat(&base_normals), Type::Vec3, Some(Target::ArrayBuffer), false, "normals");
+    let positions = b.floats(&flat(&p.shapes.base), Type::Vec3, Some(Target::ArrayBuffer), true, "positions");
+    let normals = b.floats(&flat(&p.base_normals), Type::Vec3, Some(Target::ArrayBuffer), false, "normals");
     let indices = b.indices(&rest.faces)?;
     let mut attributes = BTreeMap::new();
     attributes.insert(Valid(json::mesh::Semantic::Positions), positions);
     attributes.insert(Valid(json::mesh::Semantic::Normals), normals);
     if options.colors {
-        let c = support_colors(&shapes.magnitudes, rest.n_vertices());
+        let c = support_colors(&p.shapes.magnitudes, rest.n_vertices());
         let colors = b.floats(&c, Type::Vec3, Some(Target::ArrayBuffer), false, "support colours");
         attributes.insert(Valid(json::mesh::Semantic::Colors(0)), colors);
     }
-    let targets: Vec<json::mesh::MorphTarget> = shapes
+    let targets: Vec<json::mesh::MorphTarget> = p
+        .shapes
         .deltas
         .iter()
-        .zip(&shapes.names)
-        .map(|(d, name)| {
-            let shape: Vec<Vec3> =
-                shapes.base.iter().zip(d).map(|(p, q)| [p[0] + q[0], p[1] + q[1], p[2] + q[2]]).collect();
-            let dn: Vec<Vec3> = normals_of(&shape)
-                .iter()
-                .zip(&base_normals)
-                .map(|(a, b)| [a[0] - b[0], a[1] - b[1], a[2] - b[2]])
-                .collect();
-            json::mesh::MorphTarget {
-                positions: Some(b.floats(&flat(d), Type::Vec3, Some(Target::ArrayBuffer), true, name)),
-                normals: Some(b.floats(&flat(&dn), Type::Vec3, Some(Target::ArrayBuffer), false, "normal change")),
-                tangents: None,
-            }
+        .zip(&p.shapes.names)
+        .zip(&p.target_normals)
+        .map(|((d, name), dn)| json::mesh::MorphTarget {
+            positions: Some(b.floats(&flat(d), Type::Vec3, Some(Target::ArrayBuffer), true, name)),
+            normals: Some(b.floats(&flat(dn), Type::Vec3, Some(Target::ArrayBuffer), false, "normal change")),
+            tangents: None,
         })
         .collect();
     let material = b.root.push(json::Material {
-        double_sided: open,
+        double_sided: p.open,
         pbr_metallic_roughness: json::material::PbrMetallicRoughness {
             base_color_factor: json::material::PbrBaseColorFactor([0.8, 0.8, 0.8, 1.0]),
             metallic_factor: json::material::StrengthFactor(0.0),
@@ -583,7 +670,7 @@ pub fn export_glb(model: &dyn Model, path: &Path, options: &ExportOptions) -> Re
     };
     let mesh = b.root.push(json::Mesh {
         extensions: None,
-        extras: Some(raw(serde_json::json!({ "targetNames": shapes.names }))?),
+        extras: Some(raw(serde_json::json!({ "targetNames": p.shapes.names }))?),
         name: Some(format!("meshdeco {}", model.kind().name())),
         primitives: vec![primitive],
         weights: (n_targets > 0).then(|| vec![0.0; n_targets]),
@@ -592,20 +679,9 @@ pub fn export_glb(model: &dyn Model, path: &Path, options: &ExportOptions) -> Re
     let scene = b.root.push(json::Scene { extensions: None, extras: None, name: None, nodes: vec![node] });
     b.root.scene = Some(scene);
 
-    let mut animation_frames = 0;
-    if let Some(weights) = &train
-        && n_targets > 0
-    {
-        let times: Vec<f32> = (0..weights.len()).map(|i| (i as f64 / options.fps) as f32).collect();
-        let mut values = Vec::with_capacity(weights.len() * n_targets);
-        for (i, w) in weights.iter().enumerate() {
-            if options.bake {
-                values.extend(one_hot(n_targets, i).iter().map(|&x| x as f32));
-            } else {
-                let dials = model.dials(w)?;
-                values.extend(shapes.index.iter().map(|&k| dials[k] as f32));
-            }
-        }
+    if !keys.is_empty() {
+        let times: Vec<f32> = (0..keys.len()).map(|i| (i as f64 / options.fps) as f32).collect();
+        let values: Vec<f32> = keys.iter().flatten().map(|&x| x as f32).collect();
         let input = b.floats(&times, Type::Scalar, None, true, "frame times");
         let output = b.floats(&values, Type::Scalar, None, false, "frame weights");
         let sampler = json::animation::Sampler {
@@ -632,7 +708,6 @@ pub fn export_glb(model: &dyn Model, path: &Path, options: &ExportOptions) -> Re
             name: Some("training frames".into()),
             samplers: vec![sampler],
         });
-        animation_frames = weights.len();
     }
     b.root.asset = json::Asset {
         copyright: None,
@@ -641,12 +716,12 @@ pub fn export_glb(model: &dyn Model, path: &Path, options: &ExportOptions) -> Re
             "method": model.kind().name(),
             "representation": model.representation().name(),
             "components": n_targets,
-            "additivity_erms": additivity,
-            "additivity_extreme_erms": additivity_extreme,
-            "targets": if options.bake { "baked" } else if fitted { "fitted" } else { "extreme" },
+            "additivity_erms": p.additivity,
+            "additivity_extreme_erms": p.additivity_extreme,
+            "targets": p.targets_kind(options),
             "additivity_note": "Erms (1000 × RMS of the coordinates, data units: the unit of every Erms of meshdeco) between the model's decoding of its training frames and the base mesh plus the weighted morph targets",
-            "up_axis": up_axis,
-            "rotation": rotation,
+            "up_axis": p.up_axis,
+            "rotation": p.rotation,
             "train_frames": model.train_frames(),
         }))?),
         generator: Some(format!("meshdeco {}", env!("CARGO_PKG_VERSION"))),
@@ -655,16 +730,7 @@ pub fn export_glb(model: &dyn Model, path: &Path, options: &ExportOptions) -> Re
     };
     let bytes = b.finish()?;
     crate::artifact::write_atomic(path, &bytes)?;
-    Ok(ExportReport {
-        targets: n_targets,
-        names: shapes.names,
-        additivity_erms: additivity,
-        additivity_extreme_erms: additivity_extreme,
-        targets_fitted: fitted,
-        up_axis,
-        animation_frames,
-        bytes: bytes.len(),
-    })
+    Ok(p.report(bytes.len(), keys.len()))
 }
 
 /// The parts of a `.glb` written by [`export_glb`] that a reader needs to replay it: base
