@@ -303,3 +303,91 @@ fn numpy_sequences_train_like_mesh_files() {
     }
     std::fs::remove_dir_all(&d).unwrap();
 }
+
+/// `node_modules/three` installed with npm under the target directory on first use (like the
+/// validator); `None` (a printed skip) locally without npm, a failure in CI.
+fn three_dir() -> Option<PathBuf> {
+    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("three");
+    let three = dir.join("node_modules/three");
+    if !three.join("examples/jsm/loaders/GLTFLoader.js").exists() {
+        std::fs::create_dir_all(&dir).unwrap();
+        let o = Command::new("npm")
+            .args(["install", "--no-audit", "--no-fund", "--silent", "three@0.170.0"])
+            .current_dir(&dir)
+            .output();
+        match o {
+            Ok(o) if o.status.success() => {}
+            other => {
+                assert!(std::env::var_os("CI").is_none(), "CI: npm install three failed: {other:?}");
+                eprintln!("SKIP three.js check: npm install three failed: {other:?}");
+                return None;
+            }
+        }
+    }
+    Some(three)
+}
+
+/// SCAPE (lying along +x in its data) and face-poses exports as three.js (Node) and Blender load
+/// them: the rest mesh's tallest bounding-box axis is Y in three.js and Z in Blender (its up),
+/// every morph target carries normals, the material is not metallic, the animation has one key
+/// per training frame, Blender makes K + 1 shape keys.
+#[test]
+fn real_exports_stand_up_in_three_js() {
+    let (Some(scape), Some(face)) = (common::shared_or_skip("data/scape"), common::shared_or_skip("data/face-poses"))
+    else {
+        return;
+    };
+    let d = tmp("three");
+    let mut files = Vec::new();
+    for (name, path, train_sel) in [("scape", &scape, "1-36"), ("face", &face, "1-7")] {
+        let data = format!("path = \"{}\"\ntrain = \"{train_sel}\"\ntest = \"rest\"", path.display());
+        let dir = train(&d, name, &data, "kind = \"pca\"\ncomponents = 6");
+        let glb = d.join(format!("{name}.glb"));
+        let o = meshdeco(&["export", dir.to_str().unwrap(), "--out", glb.to_str().unwrap(), "--animation"], &d);
+        assert!(o.status.success(), "{name}: {}", output_text(&o));
+        println!("{name}: {}", output_text(&o).lines().find(|l| l.starts_with("up axis")).unwrap_or(""));
+        let frames: usize = train_sel.split('-').nth(1).unwrap().parse().unwrap();
+        files.push((glb, frames));
+    }
+    // Blender (Z-up): the import stands along Z with K + 1 shape keys (Basis included).
+    let blender = Command::new("blender").arg("--version").output().is_ok_and(|o| o.status.success());
+    if blender {
+        let script = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/blender/import_glb.py");
+        let mut cmd = Command::new("blender");
+        cmd.args(["--background", "--factory-startup", "--python", script, "--"]).args(files.iter().map(|f| f.0.clone()));
+        let o = cmd.output().unwrap();
+        let text = output_text(&o);
+        let lines: Vec<serde_json::Value> = text
+            .lines()
+            .filter_map(|l| l.strip_prefix("BLENDER "))
+            .map(|l| serde_json::from_str(l).unwrap())
+            .collect();
+        assert_eq!(lines.len(), files.len(), "blender: {text}");
+        for r in &lines {
+            println!("blender: {r}");
+            assert_eq!(r["meshes"][0]["shape_keys"].as_u64(), Some(7), "{r}");
+            assert_eq!(r["meshes"][0]["tallest"], "Z", "{r}");
+        }
+    } else {
+        assert!(std::env::var_os("CI").is_none(), "CI: blender is not on the PATH (.ci/run installs Debian's)");
+        eprintln!("SKIP Blender check: no `blender` on the PATH (apt-get install blender python3-numpy)");
+    }
+    let Some(three) = three_dir() else { return };
+    let script = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/js/three_bbox.mjs");
+    let mut cmd = Command::new("node");
+    cmd.arg(script).args(files.iter().map(|f| f.0.clone())).env("THREE_DIR", &three);
+    let o = cmd.output().unwrap();
+    assert!(o.status.success(), "three_bbox.mjs: {}", output_text(&o));
+    let lines: Vec<serde_json::Value> =
+        String::from_utf8_lossy(&o.stdout).lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    assert_eq!(lines.len(), files.len());
+    for (r, (_, frames)) in lines.iter().zip(&files) {
+        println!("three.js: {r}");
+        assert_eq!(r["tallest"], "Y", "{r}");
+        assert_eq!(r["morph_targets"], serde_json::json!([6]), "{r}");
+        assert_eq!(r["morph_normals"], serde_json::json!([6]), "{r}");
+        assert_eq!(r["metalness"], serde_json::json!([0]), "{r}");
+        assert_eq!(r["clips"][0]["keys"].as_u64(), Some(*frames as u64), "{r}");
+    }
+    std::fs::remove_dir_all(&d).unwrap();
+}

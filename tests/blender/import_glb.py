@@ -1,14 +1,31 @@
-# Imports a .glb with Blender's glTF importer and prints each mesh's vertex and shape-key counts:
-#   blender --background --factory-startup --python tests/blender/import_glb.py -- model.glb
-# (a manual check, not part of `cargo test`: Debian's blender is large.)
-import bpy, sys
+# Imports .glb files with Blender's glTF importer and prints one JSON line per file: the mesh
+# objects' vertex and shape-key counts (Basis included) and the tallest world-space axis of their
+# bounding box (Blender is Z-up: a Y-up glTF standing upright stands along Z here).
+#   blender --background --factory-startup --python tests/blender/import_glb.py -- a.glb [b.glb ...]
+# Run by tests/export_gltf.rs when `blender` is on the PATH (.ci/run installs Debian's).
+import json
+import sys
+
+import bpy
 import numpy
+
 if not hasattr(numpy, "bool"):
     numpy.bool = bool  # Debian blender 3.4 importer vs numpy 1.24
-path = sys.argv[sys.argv.index("--") + 1]
-bpy.ops.wm.read_factory_settings(use_empty=True)
-bpy.ops.import_scene.gltf(filepath=path)
-for o in bpy.data.objects:
-    if o.type == 'MESH':
+
+for path in sys.argv[sys.argv.index("--") + 1:]:
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    bpy.ops.import_scene.gltf(filepath=path)
+    out = {"file": path, "meshes": []}
+    for o in bpy.data.objects:
+        if o.type != 'MESH':
+            continue
         keys = o.data.shape_keys.key_blocks if o.data.shape_keys else []
-        print("BLENDER", o.name, "vertices", len(o.data.vertices), "shape keys", len(keys), "(incl. Basis)", [k.name for k in keys][:4])
+        pts = [o.matrix_world @ v.co for v in o.data.vertices]
+        ext = [max(p[i] for p in pts) - min(p[i] for p in pts) for i in range(3)]
+        out["meshes"].append({
+            "name": o.name,
+            "vertices": len(o.data.vertices),
+            "shape_keys": len(keys),
+            "tallest": "XYZ"[ext.index(max(ext))],
+        })
+    print("BLENDER " + json.dumps(out), flush=True)
