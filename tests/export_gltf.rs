@@ -354,14 +354,12 @@ fn real_exports_stand_up_in_three_js() {
     if blender {
         let script = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/blender/import_glb.py");
         let mut cmd = Command::new("blender");
-        cmd.args(["--background", "--factory-startup", "--python", script, "--"]).args(files.iter().map(|f| f.0.clone()));
+        cmd.args(["--background", "--factory-startup", "--python", script, "--"])
+            .args(files.iter().map(|f| f.0.clone()));
         let o = cmd.output().unwrap();
         let text = output_text(&o);
-        let lines: Vec<serde_json::Value> = text
-            .lines()
-            .filter_map(|l| l.strip_prefix("BLENDER "))
-            .map(|l| serde_json::from_str(l).unwrap())
-            .collect();
+        let lines: Vec<serde_json::Value> =
+            text.lines().filter_map(|l| l.strip_prefix("BLENDER ")).map(|l| serde_json::from_str(l).unwrap()).collect();
         assert_eq!(lines.len(), files.len(), "blender: {text}");
         for r in &lines {
             println!("blender: {r}");

@@ -361,3 +361,71 @@ fn view_screenshots_and_latency() {
     std::fs::write(out.join("view-latency.md"), &table).unwrap();
     eprintln!("{table}");
 }
+
+/// One pin dragged with the mouse on a SPLOCS model (the synthetic bumps tube, localized
+/// components): the pin follows, and the rest of the shape stays put — the largest motion of any
+/// vertex is at most 1.5 × the drag and at most 15 % of the vertices move more than half of it
+/// (the bounds of the drag benchmark's one-pin rows).
+#[test]
+fn one_pin_drag_on_splocs_moves_little_else() {
+    let Some(chromium) = chromium_or_skip() else { return };
+    let d = fresh_dir("view-browser", "splocs-drag");
+    let model = train(&d, "splocs", "synthetic:bumps", "kind = \"splocs\"\ncomponents = 6\nweights = \"signed\"");
+    let v = Viewer::start(&[model.to_str().unwrap()]);
+    let mut b = Browser::launch(&chromium, 1200, 800);
+    open_page(&mut b, &v);
+    assert_eq!(b.eval("meshdeco.S.lastError"), "", "page error at start");
+    let before = positions(&mut b);
+    // Grab a point where a component lives (at least half its peak magnitude): the vertex
+    // nearest the camera among those.
+    let m = meshdeco::pipeline::load_model(&model).unwrap();
+    let comps = m.components().unwrap();
+    let live: Vec<usize> = (0..before.len())
+        .filter(|&v| {
+            comps.iter().any(|c| {
+                let peak = c.magnitudes.iter().cloned().fold(0.0, f64::max);
+                peak > 0.0 && c.magnitudes[v] >= 0.5 * peak
+            })
+        })
+        .collect();
+    assert!(!live.is_empty());
+    // The bumps move along the surface normal: grab a front-facing live vertex whose normal
+    // lies most in the screen plane, and drag it outward along the normal's projection.
+    let grab = b.eval(&format!(
+        "(() => {{ const live = {live:?}, S = meshdeco.S; let best = null; \
+         for (const i of live) {{ const p = meshdeco.vertex(i), n = [S.nrm[3 * i], S.nrm[3 * i + 1], S.nrm[3 * i + 2]]; \
+           const s0 = meshdeco.screenOf(p), s1 = meshdeco.screenOf([p[0] + 0.05 * n[0], p[1] + 0.05 * n[1], p[2] + 0.05 * n[2]]); \
+           if (s1[2] > s0[2] - 1e-4) continue; const dx = s1[0] - s0[0], dy = s1[1] - s0[1], l = Math.hypot(dx, dy); \
+           if (!best || l > best[4]) best = [s0[0], s0[1], dx / l, dy / l, l, i]; }} return best; }})()"
+    ));
+    assert!(!grab.is_null(), "no front-facing vertex where a component lives");
+    let (gx, gy, ux, uy) = (f(&grab[0]), f(&grab[1]), f(&grab[2]), f(&grab[3]));
+    // Pressed a few pixels inside the silhouette (the picked vertex is the nearest to the hit).
+    let (px, py) = (gx - 4.0 * ux, gy - 4.0 * uy);
+    b.drag((px, py), (px + 25.0 * ux, py + 25.0 * uy), 12);
+    settle(&mut b);
+    let last = b.eval("meshdeco.S.lastDrag");
+    assert!(!last.is_null(), "the press did not grab a vertex");
+    let gv = f(&last["v"]) as usize;
+    let target: Vec<f64> = last["target"].as_array().unwrap().iter().map(f).collect();
+    let target = [target[0], target[1], target[2]];
+    let after = positions(&mut b);
+    let drag = dist(before[gv], target);
+    assert!(drag > 0.01, "drag of {drag} is too short to judge");
+    assert_eq!(b.eval("meshdeco.S.lastError"), "", "page error after the drag");
+    let motion: Vec<f64> = before.iter().zip(&after).map(|(p, q)| dist(*p, *q)).collect();
+    let landing = dist(after[gv], target) / drag;
+    let max_ratio = motion.iter().cloned().fold(0.0, f64::max) / drag;
+    let moved = motion.iter().filter(|&&m| m > 0.5 * drag).count() as f64 / motion.len() as f64;
+    eprintln!(
+        "one pin on SPLOCS, vertex {gv}, drag {drag:.4}: landing {:.2} %, max motion {max_ratio:.2} × the drag, {:.1} % of the vertices moved > ½ drag",
+        100.0 * landing,
+        100.0 * moved
+    );
+    // The bumps move along their normals only, so a drag in the screen plane is reached in part:
+    // the pin must come closer to its target, and nothing else may run away.
+    assert!(landing <= 0.95, "the pin did not move towards its target ({:.1} % of the drag left)", 100.0 * landing);
+    assert!(max_ratio <= 1.5, "a vertex moved {max_ratio:.2} × the drag");
+    assert!(moved <= 0.15, "{:.1} % of the vertices moved more than half the drag", 100.0 * moved);
+    assert_eq!(b.eval("meshdeco.S.lastError"), "", "page error after the drag");
+}
