@@ -108,7 +108,7 @@ pub fn export_usda(model: &dyn Model, path: &Path, options: &ExportOptions) -> R
     }
     s.push_str("    }\n\n");
     s.push_str("    def Mesh \"Mesh\" (\n        prepend apiSchemas = [\"SkelBindingAPI\"]\n    )\n    {\n");
-    let _ = write!(s, "        int[] faceVertexCounts = [{}]\n", vec!["3"; rest.n_faces()].join(", "));
+    let _ = writeln!(s, "        int[] faceVertexCounts = [{}]", vec!["3"; rest.n_faces()].join(", "));
     s.push_str("        int[] faceVertexIndices = [");
     s.push_str(&rest.faces.iter().flatten().map(|i| i.to_string()).collect::<Vec<_>>().join(", "));
     s.push_str("]\n        point3f[] points = ");

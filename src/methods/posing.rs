@@ -453,9 +453,9 @@ mod tests {
         let pull = add_pull(&mut h, gamma, g).unwrap();
         let mut data = 0.0;
         for (&vv, tt) in v.iter().zip(t) {
-            for c in 0..3 {
+            for (c, &tc) in tt.iter().enumerate() {
                 let x = m.offset[3 * vv + c] + (0..k).map(|j| w[j] * m.component(j)[3 * vv + c]).sum::<f64>();
-                data += (x - tt[c]).powi(2);
+                data += (x - tc).powi(2);
             }
         }
         let d: Vec<f64> = w.iter().zip(w0).map(|(a, b)| a - b).collect();
