@@ -89,14 +89,25 @@ pub struct InterpolateArgs {
     pub out: PathBuf,
 }
 
-pub fn encode(a: EncodeArgs) -> Result<()> {
-    let m = load_model(&a.model).with_context(|| format!("loading model {}", a.model.display()))?;
-    let mut seq = meshdeco::preprocess::load_frames_for(&a.path, &m.rest())?;
-    if let Some(spec) = &a.frames {
+/// The frames of `path` for `model` (a `.npy` takes the model's connectivity), only those of
+/// `--frames` when given.
+pub fn load_frames_for_model(
+    model: &dyn meshdeco::model::Model,
+    path: &str,
+    frames: Option<&str>,
+) -> Result<meshdeco::mesh::MeshSequence> {
+    let mut seq = meshdeco::preprocess::load_frames_for(path, &model.rest())?;
+    if let Some(spec) = frames {
         let sel =
             meshdeco::config::FrameSelection::parse("--frames", spec)?.resolve("--frames", seq.n_frames(), None)?;
         seq = seq.select(&sel);
     }
+    Ok(seq)
+}
+
+pub fn encode(a: EncodeArgs) -> Result<()> {
+    let m = load_model(&a.model).with_context(|| format!("loading model {}", a.model.display()))?;
+    let seq = load_frames_for_model(m.as_ref(), &a.path, a.frames.as_deref())?;
     if a.fit == Some(0) {
         anyhow::bail!("--fit 0: the number of vertices to fit must be at least 1");
     }

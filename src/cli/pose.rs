@@ -202,12 +202,7 @@ pub struct DragBenchArgs {
 pub fn drag_bench(a: DragBenchArgs) -> Result<()> {
     use meshdeco::eval::drag::{DragBenchConfig, drag_bench};
     let model = load_model(&a.model).with_context(|| format!("loading model {}", a.model.display()))?;
-    let mut seq = meshdeco::preprocess::load_frames_for(&a.data, &model.rest())?;
-    if let Some(spec) = &a.frames {
-        let sel =
-            meshdeco::config::FrameSelection::parse("--frames", spec)?.resolve("--frames", seq.n_frames(), None)?;
-        seq = seq.select(&sel);
-    }
+    let seq = super::apply::load_frames_for_model(model.as_ref(), &a.data, a.frames.as_deref())?;
     check_connectivity(model.as_ref(), &seq, &a.data)?;
     let pins = a
         .pins
