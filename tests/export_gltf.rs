@@ -42,39 +42,9 @@ fn max_dist(a: &[Vec3], b: &[Vec3]) -> f64 {
     a.iter().zip(b).map(|(p, q)| mesh::dist(*p, *q)).fold(0.0, f64::max)
 }
 
-/// `<target tmp>/<dir>/node_modules/<package>` of the npm package `spec`, installed on first use;
-/// `None` (with the reason printed) where Node or npm is absent or the install fails. In CI (`CI`
-/// set) either is an error, since `.ci/run` installs Node.
-fn npm_package(dir: &str, package: &str, spec: &str) -> Option<PathBuf> {
-    let node = Command::new("node").arg("--version").output();
-    if node.as_ref().map_or(true, |o| !o.status.success()) {
-        assert!(std::env::var_os("CI").is_none(), "CI: node is missing (.ci/run installs nodejs)");
-        eprintln!("SKIP {package}: `node` not found");
-        return None;
-    }
-    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(dir);
-    let installed = dir.join("node_modules").join(package);
-    if !installed.join("package.json").is_file() {
-        std::fs::create_dir_all(&dir).unwrap();
-        let o = Command::new("npm")
-            .args(["install", "--no-audit", "--no-fund", "--silent", spec])
-            .current_dir(&dir)
-            .output();
-        match o {
-            Ok(o) if o.status.success() => {}
-            other => {
-                assert!(std::env::var_os("CI").is_none(), "CI: npm install {spec} failed: {other:?}");
-                eprintln!("SKIP {package}: npm install failed: {other:?}");
-                return None;
-            }
-        }
-    }
-    Some(installed)
-}
-
 /// The directory holding `node_modules/gltf-validator` (the Khronos validator).
 fn validator_dir() -> Option<PathBuf> {
-    npm_package("gltf-validator", "gltf-validator", "gltf-validator@2.0.0-dev.3.10")
+    common::npm_package("gltf-validator", "gltf-validator", "gltf-validator@2.0.0-dev.3.10")
         .map(|p| p.parent().unwrap().parent().unwrap().to_path_buf())
 }
 
@@ -313,7 +283,7 @@ fn numpy_sequences_train_like_mesh_files() {
 
 /// `node_modules/three` (three.js 0.170), installed like the validator.
 fn three_dir() -> Option<PathBuf> {
-    npm_package("three", "three", "three@0.170.0")
+    common::npm_package("three", "three", common::THREE_SPEC)
 }
 
 /// SCAPE (lying along +x in its data) and face-poses exports as three.js (Node) and Blender load

@@ -429,3 +429,123 @@ fn one_pin_drag_on_splocs_moves_little_else() {
     assert!(moved <= 0.15, "{:.1} % of the vertices moved more than half the drag", 100.0 * moved);
     assert_eq!(b.eval("meshdeco.S.lastError"), "", "page error after the drag");
 }
+
+/// Serves the files under `root` over HTTP on 127.0.0.1 (a thread per connection; GET only):
+/// enough for a page that imports three.js as ES modules, which Chromium refuses from file://.
+fn static_server(root: PathBuf) -> String {
+    let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let addr = listener.local_addr().unwrap().to_string();
+    std::thread::spawn(move || {
+        for stream in listener.incoming().flatten() {
+            let root = root.clone();
+            std::thread::spawn(move || {
+                use std::io::{BufRead, BufReader, Write};
+                let mut s = stream;
+                let mut line = String::new();
+                if BufReader::new(&s).read_line(&mut line).is_err() {
+                    return;
+                }
+                let path = line.split_whitespace().nth(1).unwrap_or("/").split('?').next().unwrap_or("/").to_string();
+                let file = root.join(path.trim_start_matches('/'));
+                let ok = !path.contains("..") && file.is_file();
+                let body = if ok { std::fs::read(&file).unwrap_or_default() } else { b"not found".to_vec() };
+                let kind = match file.extension().and_then(|e| e.to_str()) {
+                    Some("js") => "text/javascript",
+                    Some("html") => "text/html",
+                    _ => "application/octet-stream",
+                };
+                let head = format!(
+                    "HTTP/1.1 {}\r\nContent-Type: {kind}\r\nContent-Length: {}\r\nConnection: close\r\n\r\n",
+                    if ok { "200 OK" } else { "404 Not Found" },
+                    body.len()
+                );
+                let _ = s.write_all(head.as_bytes());
+                let _ = s.write_all(&body);
+            });
+        }
+    });
+    addr
+}
+
+/// SCAPE (lying along +x in its data) and face-poses exports loaded by three.js's GLTFLoader in
+/// headless Chromium and drawn with WebGL: the rest mesh's tallest bounding-box axis is Y, the
+/// morph targets are there with normals, and the picture is taller than wide. With
+/// `MESHDECO_SCREENSHOTS=DIR` the SCAPE picture is saved as `DIR/export-three-scape.png`.
+#[test]
+fn exports_stand_up_in_three_js_in_chromium() {
+    let Some(chromium) = chromium_or_skip() else { return };
+    let (Some(scape), Some(face)) = (common::shared_or_skip("data/scape"), common::shared_or_skip("data/face-poses"))
+    else {
+        return;
+    };
+    let Some(three) = common::npm_package("three", "three", common::THREE_SPEC) else { return };
+    let d = fresh_dir("view-browser", "three");
+    std::os::unix::fs::symlink(&three, d.join("three")).unwrap();
+    for (name, path) in [("scape", &scape), ("face", &face)] {
+        let cfg = meshdeco::config::Config::from_toml(&format!(
+            "name = \"{name}\"\n[data]\npath = \"{}\"\ntrain = \"1-7\"\n[method]\nkind = \"pca\"\ncomponents = 4\n",
+            path.display()
+        ))
+        .unwrap();
+        let out = d.join(name);
+        meshdeco::pipeline::train(&cfg, &out, &Default::default(), &mut meshdeco::pipeline::Silent).unwrap();
+        let o = meshdeco(&["export", out.to_str().unwrap(), "--out", &format!("{name}.glb")], &d);
+        assert!(o.status.success(), "{}", output_text(&o));
+    }
+    std::fs::write(d.join("index.html"), THREE_PAGE).unwrap();
+    let addr = static_server(d.clone());
+    let mut b = Browser::launch(&chromium, 500, 700);
+    for name in ["scape", "face"] {
+        b.navigate(&format!("http://{addr}/index.html?model={name}.glb"));
+        b.wait_for("!!window.result", 60);
+        let r = b.eval("window.result");
+        println!("three.js in Chromium, {name}: {r}");
+        assert_eq!(r["error"], Value::Null, "{r}");
+        assert_eq!(r["tallest"], "Y", "{name}: {r}");
+        assert_eq!((r["morph_targets"].as_u64(), r["morph_normals"].as_u64()), (Some(4), Some(4)), "{r}");
+        assert_eq!(r["metalness"].as_f64(), Some(0.0), "{r}");
+        if name == "scape" {
+            let img = b.screenshot();
+            let (w, h) = (img.width(), img.height());
+            let ink: Vec<(u32, u32)> = (0..h)
+                .flat_map(|y| (0..w).map(move |x| (x, y)))
+                .filter(|&(x, y)| img.get_pixel(x, y).0 != [255, 255, 255])
+                .collect();
+            let (x0, x1) = (ink.iter().map(|p| p.0).min().unwrap(), ink.iter().map(|p| p.0).max().unwrap());
+            let (y0, y1) = (ink.iter().map(|p| p.1).min().unwrap(), ink.iter().map(|p| p.1).max().unwrap());
+            println!("SCAPE's picture: {}×{} pixels of ink", x1 - x0, y1 - y0);
+            assert!(y1 - y0 > 2 * (x1 - x0), "SCAPE is not drawn standing: {}×{} px", x1 - x0, y1 - y0);
+            if let Some(dir) = std::env::var_os("MESHDECO_SCREENSHOTS") {
+                img.save(PathBuf::from(dir).join("export-three-scape.png")).unwrap();
+            }
+        }
+    }
+    std::fs::remove_dir_all(&d).unwrap();
+}
+
+/// The page of [`exports_stand_up_in_three_js_in_chromium`]: loads `?model=` with three.js,
+/// frames it from +Z (glTF's front) and sets `window.result`.
+const THREE_PAGE: &str = r#"<!doctype html><html><body style="margin:0;background:#fff">
+<script type="importmap">{"imports":{"three":"./three/build/three.module.js","three/addons/":"./three/examples/jsm/"}}</script>
+<script type="module">
+import * as THREE from 'three';
+import { GLTFLoader } from 'three/addons/loaders/GLTFLoader.js';
+const r = new THREE.WebGLRenderer({ antialias: true, preserveDrawingBuffer: true });
+r.setSize(innerWidth, innerHeight); r.setClearColor(0xffffff); document.body.appendChild(r.domElement);
+const scene = new THREE.Scene();
+scene.add(new THREE.HemisphereLight(0xffffff, 0x888888, 2.0));
+const light = new THREE.DirectionalLight(0xffffff, 2.0); light.position.set(1, 2, 3); scene.add(light);
+const url = new URLSearchParams(location.search).get('model');
+new GLTFLoader().load(url, (g) => {
+  scene.add(g.scene);
+  const box = new THREE.Box3().setFromObject(g.scene), c = box.getCenter(new THREE.Vector3()), s = box.getSize(new THREE.Vector3());
+  const cam = new THREE.PerspectiveCamera(35, innerWidth / innerHeight, 0.01, 1000);
+  cam.position.set(c.x, c.y, c.z + 1.9 * Math.max(s.x, s.y, s.z)); cam.lookAt(c);
+  r.render(scene, cam);
+  let mesh = null; g.scene.traverse((o) => { if (o.isMesh) mesh = o; });
+  const ext = [s.x, s.y, s.z];
+  window.result = { size: ext, tallest: 'XYZ'[ext.indexOf(Math.max(...ext))],
+    morph_targets: (mesh.geometry.morphAttributes.position || []).length,
+    morph_normals: (mesh.geometry.morphAttributes.normal || []).length, metalness: mesh.material.metalness, error: null };
+}, undefined, (e) => { window.result = { error: String(e) }; });
+</script></body></html>"#;

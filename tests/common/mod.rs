@@ -174,3 +174,36 @@ pub fn planted_bumps(nx: usize, ny: usize, frames: usize, seed: u64) -> PlantedB
     }
     (p, f, feat, [c1, c2])
 }
+
+/// The three.js release the export checks load (`npm install three@…`).
+pub const THREE_SPEC: &str = "three@0.170.0";
+
+/// `<target tmp>/<dir>/node_modules/<package>` of the npm package `spec`, installed on first use;
+/// `None` (with the reason printed) where Node or npm is absent or the install fails. In CI (`CI`
+/// set) either is an error, since `.ci/run` installs Node.
+pub fn npm_package(dir: &str, package: &str, spec: &str) -> Option<PathBuf> {
+    let node = std::process::Command::new("node").arg("--version").output();
+    if node.as_ref().map_or(true, |o| !o.status.success()) {
+        assert!(std::env::var_os("CI").is_none(), "CI: node is missing (.ci/run installs nodejs)");
+        eprintln!("SKIP {package}: `node` not found");
+        return None;
+    }
+    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(dir);
+    let installed = dir.join("node_modules").join(package);
+    if !installed.join("package.json").is_file() {
+        std::fs::create_dir_all(&dir).unwrap();
+        let o = std::process::Command::new("npm")
+            .args(["install", "--no-audit", "--no-fund", "--silent", spec])
+            .current_dir(&dir)
+            .output();
+        match o {
+            Ok(o) if o.status.success() => {}
+            other => {
+                assert!(std::env::var_os("CI").is_none(), "CI: npm install {spec} failed: {other:?}");
+                eprintln!("SKIP {package}: npm install failed: {other:?}");
+                return None;
+            }
+        }
+    }
+    Some(installed)
+}
