@@ -231,6 +231,21 @@ fn view_in_headless_chromium_draws_dials_poses_and_recovers() {
     let rec = view_support::parse_shape(&body).positions;
     assert!(view_support::max_diff(&positions(&mut b), &rec) < 1e-6, "the page shows frame 1's reconstruction");
     assert_eq!(f(&b.eval("meshdeco.S.frameErr.length")), rec.len() as f64);
+    // The error overlay has an absolute scale: a colour bar from 0 to the largest error (auto),
+    // or to the value typed into the range box, in data units.
+    select_overlay(&mut b, "error");
+    let peak = f(&b.eval("Math.max(...meshdeco.S.frameErr)"));
+    assert_eq!(f(&b.eval("meshdeco.S.colorbar.hi")), peak, "automatic range");
+    assert_eq!(b.eval("meshdeco.S.colorbar.unit"), "data units");
+    assert!(b.eval("document.getElementById('cbar-row').style.display") != "none");
+    b.eval(&format!(
+        "(() => {{ const r = document.getElementById('range-max'); r.value = '{}'; r.dispatchEvent(new Event('change')); return true; }})()",
+        10.0 * peak
+    ));
+    let fixed = f(&b.eval("meshdeco.S.colorbar.hi"));
+    assert!((fixed - 10.0 * peak).abs() <= 1e-9 * fixed, "fixed range {fixed} vs {}", 10.0 * peak);
+    let shown: f64 = b.eval("document.getElementById('cbar-hi').textContent").as_str().unwrap().parse().unwrap();
+    assert!((shown - fixed).abs() <= 1e-2 * fixed, "the colour bar reads {shown}, the range is {fixed}");
 
     let lat = b.eval("meshdeco.latencies()");
     eprintln!("latencies (ms): {lat}");

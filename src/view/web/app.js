@@ -209,8 +209,11 @@ function computeNormals() {
 }
 
 const RAMP = [[68,1,84],[71,44,122],[59,81,139],[44,113,142],[33,144,141],[39,173,129],[92,200,99],[170,220,50],[253,231,37]];
+// Colours `values` on the ramp from 0 to the fixed range (the range box) or, when it is empty,
+// to the largest value; returns that upper end (the colour bar shows it with its unit).
 function ramp(values) {
   let hi = 0; for (let i = 0; i < values.length; i++) if (values[i] > hi) hi = values[i];
+  if (S.fixedMax > 0) hi = S.fixedMax;
   const out = S.col;
   for (let i = 0; i < values.length; i++) {
     const t = hi > 0 ? Math.min(1, Math.max(0, values[i] / hi)) : 0, x = t * 8, k = Math.min(7, Math.floor(x)), a = x - k;
@@ -220,13 +223,15 @@ function ramp(values) {
 }
 function colours() {
   const C = S.col, n = S.n;
-  let note = '';
+  let note = '', bar = null;
   if (S.overlay === 'displacement') {
     const d = new Float32Array(n);
     for (let i = 0; i < n; i++) d[i] = Math.hypot(S.pos[3 * i] - S.rest[3 * i], S.pos[3 * i + 1] - S.rest[3 * i + 1], S.pos[3 * i + 2] - S.rest[3 * i + 2]);
-    note = `displacement from rest: max ${ramp(d).toPrecision(3)}`;
+    bar = { hi: ramp(d), unit: 'data units' };
+    note = `displacement from rest: scale 0 … ${bar.hi.toPrecision(3)} data units`;
   } else if (S.overlay === 'heat' && S.selected >= 0 && S.heat.has(S.selected)) {
-    note = `heat map of component ${S.selected}: peak ${ramp(S.heat.get(S.selected)).toPrecision(3)}`;
+    bar = { hi: ramp(S.heat.get(S.selected)), unit: 'magnitude (data units at dial 1)' };
+    note = `heat map of component ${S.selected}: scale 0 … ${bar.hi.toPrecision(3)}`;
   } else if (S.overlay === 'segmentation' && S.seg) {
     for (let i = 0; i < n; i++) {
       const h = (S.seg[i] * 0.618034) % 1, rgb = hsv(h, 0.55, 0.95);
@@ -234,8 +239,12 @@ function colours() {
     }
     note = `${S.desc.segmentation_groups} support groups`;
   } else if (S.overlay === 'error' && S.frameErr) {
-    note = `frame error: max ${ramp(S.frameErr).toPrecision(3)}, Erms ${(+S.frameErms).toPrecision(4)}`;
+    bar = { hi: ramp(S.frameErr), unit: 'data units' };
+    note = `frame error: scale 0 … ${bar.hi.toPrecision(3)} data units, Erms ${(+S.frameErms).toPrecision(4)}`;
   } else C.fill(200);
+  S.colorbar = bar;
+  $('cbar-row').style.display = bar ? '' : 'none'; $('range-row').style.display = bar ? '' : 'none';
+  if (bar) { $('cbar-hi').textContent = `${bar.hi.toPrecision(3)}`; $('range-unit').textContent = bar.unit; }
   gl.bindBuffer(gl.ARRAY_BUFFER, G.bCol); gl.bufferData(gl.ARRAY_BUFFER, C, gl.DYNAMIC_DRAW);
   S.overlayNote = note;
 }
@@ -526,6 +535,7 @@ async function start() {
   applyShape(await r.arrayBuffer(), r, { kind: 'start' }); uploadGeometry();
   $('overlay').onchange = () => { S.overlay = $('overlay').value; if (S.overlay === 'heat' && S.selected < 0) select(S.desc.components[0].index); colours(); redraw(); };
   $('wire').onchange = () => { S.wire = $('wire').checked; redraw(); };
+  $('range-max').onchange = () => { const x = parseFloat($('range-max').value); S.fixedMax = x > 0 ? x : 0; colours(); redraw(); };
   $('frame-btn').onclick = () => { frameCamera(); redraw(); };
   $('reset-all').onclick = () => { pushUndo(); S.dials.fill(0); syncSliders(); submit({ url: '/api/decode', body: { dials: Array.from(S.dials) }, kind: 'reset', t0: performance.now() }); };
   $('undo').onclick = undo;
