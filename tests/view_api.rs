@@ -344,6 +344,13 @@ fn view_api_decodes_an_autoencoder_like_synthesize() {
     assert_eq!(desc["kind"], "autoencoder");
     // The page shows the pose options the model reads, with the one set of defaults.
     assert_eq!(desc["pose_parameters"], json!(["gamma", "max_iterations"]));
+    // Its segmentation overlay is one group per component, not a single colour.
+    assert_eq!(desc["segmentation_groups"], json!(4));
+    let (s, _, seg) = v.request("GET", "/api/segmentation", b"");
+    assert_eq!(s, 200);
+    let labels: std::collections::BTreeSet<u32> =
+        seg.chunks_exact(4).map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect();
+    assert!(labels.len() >= 2, "the autoencoder's segmentation has {} label(s)", labels.len());
     let d = meshdeco::model::PoseOptions::default();
     assert_eq!(desc["pose_defaults"]["gamma"], json!(d.gamma));
     assert_eq!(desc["pose_defaults"]["prior"], json!("shape"));

@@ -221,8 +221,14 @@ fn dial_ranges(model: &dyn Model) -> Result<(Vec<[f64; 2]>, bool)> {
 
 /// Groups components with the same support (vertices above 1e-6 of the component's peak) and
 /// labels each vertex with the group of its dominant component: the region model's regions
-/// (its components of one region share a support), one group per component elsewhere.
+/// (its components of one region share a support), one group per component elsewhere. Where
+/// every component reaches every vertex (the autoencoder's feature changes are nowhere exactly
+/// 0), each component is its own group and a vertex goes to the component largest there
+/// relative to its own peak.
 fn segmentation(components: &[model::Component], n: usize) -> (Vec<u32>, usize) {
+    if let Some(soft) = soft_segmentation(components, n) {
+        return soft;
+    }
     let mut supports: Vec<Vec<bool>> = Vec::new();
     let mut group_of = Vec::with_capacity(components.len());
     for c in components {
@@ -245,6 +251,26 @@ fn segmentation(components: &[model::Component], n: usize) -> (Vec<u32>, usize) 
         })
         .collect();
     (labels, supports.len())
+}
+
+/// [`segmentation`] of components that all reach every vertex: `None` unless that is so.
+fn soft_segmentation(components: &[model::Component], n: usize) -> Option<(Vec<u32>, usize)> {
+    let peaks: Vec<f64> = components.iter().map(|c| c.magnitudes.iter().cloned().fold(0.0, f64::max)).collect();
+    let everywhere = components.len() > 1
+        && components.iter().zip(&peaks).all(|(c, &p)| p > 0.0 && c.magnitudes.iter().all(|&m| m > 1e-6 * p));
+    if !everywhere {
+        return None;
+    }
+    let labels = (0..n)
+        .map(|v| {
+            (0..components.len())
+                .max_by(|&a, &b| {
+                    (components[a].magnitudes[v] / peaks[a]).total_cmp(&(components[b].magnitudes[v] / peaks[b]))
+                })
+                .unwrap_or(0) as u32
+        })
+        .collect();
+    Some((labels, components.len()))
 }
 
 fn describe(s: &Session, model_path: &Path) -> Result<Shared> {
