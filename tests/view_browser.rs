@@ -291,6 +291,75 @@ fn latency_report(b: &mut Browser, name: &str) -> String {
     out
 }
 
+/// The README's before/after pictures of posing (run by hand, see `scripts/view-screenshots`):
+/// `MESHDECO_VIEW_OUT` (output folder), `MESHDECO_VIEW_SPLOCS` (SCAPE SPLOCS,
+/// `configs/scape-splocs.toml`), `MESHDECO_VIEW_REGION` (face-poses region-pca). Each model is
+/// posed with the papers' posing (`?prior=weights&gamma=0.025&beta=1`) and with the defaults:
+/// one pin dragged, then two points held and a third dragged; coloured by displacement. Writes
+/// `pose-scape-splocs.png` and `pose-face-region.png` (rows: 1 / 3 pins; columns: before / after).
+#[test]
+#[ignore]
+fn pose_screenshots_before_after() {
+    let chromium = find_chromium().expect("no Chromium");
+    let out = PathBuf::from(std::env::var("MESHDECO_VIEW_OUT").expect("MESHDECO_VIEW_OUT"));
+    std::fs::create_dir_all(&out).unwrap();
+    // (env, file stem, one-pin press and move (fractions, px), held points, three-pin move)
+    type Drag = (f64, f64, f64, f64);
+    type Case<'a> = (&'a str, &'a str, Drag, [(f64, f64); 2], Drag);
+    let cases: [Case; 2] = [
+        (
+            "MESHDECO_VIEW_SPLOCS",
+            "scape-splocs",
+            (0.5, 0.32, 0.0, -45.0),
+            [(0.5, 0.8), (0.5, 0.55)],
+            (0.42, 0.3, -40.0, -20.0),
+        ),
+        (
+            "MESHDECO_VIEW_REGION",
+            "face-region",
+            (0.42, 0.45, -25.0, -30.0),
+            [(0.5, 0.25), (0.6, 0.45)],
+            (0.42, 0.62, 0.0, 30.0),
+        ),
+    ];
+    // Each picture: the canvas (left 560 px), halved; a 2 × 2 grid per model: rows 1 pin / 3
+    // pins, columns before / after.
+    let panel = |img: &image::RgbImage| {
+        let c = image::imageops::crop_imm(img, 0, 0, 560, 700).to_image();
+        image::imageops::resize(&c, 280, 350, image::imageops::FilterType::Triangle)
+    };
+    for (env, stem, one, held, three) in cases {
+        let Ok(model) = std::env::var(env) else { continue };
+        let v = Viewer::start(&[&model]);
+        let mut grid = image::RgbImage::new(560, 700);
+        // Columns: the papers' posing, then the defaults.
+        for (col, query) in ["?prior=weights&gamma=0.025&beta=1", ""].into_iter().enumerate() {
+            let mut b = Browser::launch(&chromium, 900, 700);
+            b.navigate(&format!("{}{query}", v.url()));
+            b.wait_for("!!(window.meshdeco && meshdeco.ready())", 60);
+            select_overlay(&mut b, "displacement");
+            drag_surface(&mut b, one.0, one.1, one.2, one.3, 25);
+            image::imageops::replace(&mut grid, &panel(&b.screenshot()), 280 * col as i64, 0);
+            // Start again; hold two points where they are, drag a third.
+            b.navigate(&format!("{}{query}", v.url()));
+            b.wait_for("!!(window.meshdeco && meshdeco.ready())", 60);
+            select_overlay(&mut b, "displacement");
+            for (fx, fy) in held {
+                b.eval(&format!(
+                    "(() => {{ const r = document.getElementById('gl').getBoundingClientRect(), x = r.left + {fx} * r.width, y = r.top + {fy} * r.height; \
+                     let best = null; for (let i = 0; i < meshdeco.S.n; i++) {{ const s = meshdeco.screenOf(meshdeco.vertex(i)); \
+                       const d = Math.hypot(s[0] - x, s[1] - y) + 1e-3 * s[2]; if (!best || d < best[0]) best = [d, i]; }} \
+                     meshdeco.S.pins.set(best[1], meshdeco.vertex(best[1])); return true; }})()"
+                ));
+            }
+            drag_surface(&mut b, three.0, three.1, three.2, three.3, 25);
+            image::imageops::replace(&mut grid, &panel(&b.screenshot()), 280 * col as i64, 350);
+        }
+        grid.save(out.join(format!("pose-{stem}.png"))).unwrap();
+        eprintln!("wrote pose-{stem}.png");
+    }
+}
+
 /// Drags component `rank`'s slider from its middle towards its end in `steps` moves.
 fn drag_slider(b: &mut Browser, rank: usize, to: f64, steps: usize) {
     let r = b.eval(&format!(

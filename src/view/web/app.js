@@ -433,7 +433,7 @@ function requestPose(t0, final) {
   if (S.drag) cons.push({ vertex: S.drag.v, target: S.drag.target });
   if (!cons.length) return;
   const p = poseParams();
-  const body = { constraints: cons, start: Array.from(S.weights), gamma: p.gamma, beta: p.beta };
+  const body = { constraints: cons, start: Array.from(S.weights), gamma: p.gamma, beta: p.beta, prior: S.prior };
   if (!final) body.max_iterations = DRAG_ITERATIONS;
   submit({ url: '/api/pose', body, kind: final ? 'release' : 'drag', t0 });
 }
@@ -525,7 +525,10 @@ async function start() {
   $('title').textContent = `${S.desc.model} — ${S.desc.kind}`;
   $('info').textContent = `${S.desc.representation} representation, ${S.n} vertices, ${S.desc.n_faces} faces, ${S.k} weights; start: ${S.desc.start.description}`;
   $('ranges').textContent = `(ranges: ${S.desc.ranges_from})`;
-  const g = S.desc.pose_defaults; $('gamma').value = Math.log10(g.gamma); $('beta').value = Math.log10(g.beta);
+  // Pose options: the model's defaults, or ?gamma=…&beta=…&prior=shape|weights in the page's URL.
+  const Q = new URLSearchParams(location.search), g = S.desc.pose_defaults;
+  $('gamma').value = Math.log10(+(Q.get('gamma') || g.gamma)); $('beta').value = Math.log10(+(Q.get('beta') || g.beta));
+  S.prior = Q.get('prior') || g.prior;
   const pv = () => { const p = poseParams(); $('gamma-v').textContent = p.gamma.toPrecision(2); $('beta-v').textContent = p.beta.toPrecision(2); };
   $('gamma').oninput = pv; $('beta').oninput = pv; pv();
   if (!S.desc.pose_parameters.includes('beta')) $('beta-row').style.display = 'none';
