@@ -47,9 +47,10 @@ use json::validation::USize64;
 use serde_json::value::RawValue;
 
 use crate::error::{Error, Result};
+use crate::math::vec3::{add, norm, sub};
 use crate::mesh::normals::{NormalWeighting, vertex_normals};
 use crate::mesh::{MeshSequence, Vec3};
-use crate::metrics::erms::erms;
+use crate::metrics::erms::{Alignment, erms};
 use crate::model::{Model, ranked, synthesize};
 
 /// Options of [`export_glb`].
@@ -187,7 +188,7 @@ impl Blendshapes {
             let mut dials = vec![0.0; k];
             dials[c.index] = 1.0;
             let shape = synthesize(model, &dials)?;
-            deltas.push(shape.iter().zip(&base).map(|(s, b)| [s[0] - b[0], s[1] - b[1], s[2] - b[2]]).collect());
+            deltas.push(shape.iter().zip(&base).map(|(s, b)| sub(*s, *b)).collect());
             names.push(format!("r{} k{} v{}", c.rank, c.index, c.center));
             index.push(c.index);
             magnitudes.push(c.magnitudes);
@@ -197,19 +198,15 @@ impl Blendshapes {
 
     /// Replaces the targets by their least-squares fit to the model's decoding of its training
     /// frames, regularised towards the current targets with `mu_rel × trace(WᵀW)/K` (module
-    /// docs). Returns `false` (nothing changed) when the model stores no training weights.
-    pub fn fit_to_training(&mut self, model: &dyn Model, mu_rel: f64) -> Result<bool> {
-        let Some(weights) = model.train_weights() else { return Ok(false) };
-        let truth = model.decode(&weights)?;
+    /// docs). Returns `false` (nothing changed) when there is no target or no frame.
+    pub fn fit_to_training(&mut self, training: &Training, mu_rel: f64) -> Result<bool> {
+        let truth = &training.decoded;
         let k = self.deltas.len();
-        if k == 0 || weights.is_empty() {
+        if k == 0 || truth.is_empty() {
             return Ok(false);
         }
         // W: F × K dials in target order.
-        let w: Vec<Vec<f64>> = weights
-            .iter()
-            .map(|wf| model.dials(wf).map(|d| self.index.iter().map(|&i| d[i]).collect()))
-            .collect::<Result<_>>()?;
+        let w: Vec<Vec<f64>> = training.dials.iter().map(|d| self.index.iter().map(|&i| d[i]).collect()).collect();
         let mut a = faer::Mat::<f64>::zeros(k, k);
         for row in &w {
             for i in 0..k {
@@ -226,7 +223,7 @@ impl Blendshapes {
         let n = self.base.len();
         // Right-hand sides: Wᵀ(D_f − base) + μ·E, one column per coordinate (3N).
         let mut rhs = faer::Mat::<f64>::zeros(k, 3 * n);
-        for (row, d) in w.iter().zip(&truth) {
+        for (row, d) in w.iter().zip(truth) {
             for v in 0..n {
                 for c in 0..3 {
                     let r = d[v][c] - self.base[v][c];
@@ -259,21 +256,15 @@ impl Blendshapes {
         Ok(true)
     }
 
-    /// One target per training frame: its decoding minus the base (`bake`).
-    pub fn baked(model: &dyn Model) -> Result<Self> {
-        let weights = model
-            .train_weights()
-            .ok_or_else(|| Error::Invalid("--bake: the model stores no training weights to bake".to_string()))?;
-        let k = model.n_components();
-        let base = synthesize(model, &vec![0.0; k])?;
-        let frames = model.decode(&weights)?;
+    /// One target per training frame: its decoding minus the base (`bake`). Target t is keyed
+    /// by "dial" t: [`Blendshapes::blend`] of a one-hot vector is frame t.
+    pub fn baked(model: &dyn Model, training: &Training) -> Result<Self> {
+        let base = synthesize(model, &vec![0.0; model.n_components()])?;
         let names: Vec<String> = model.train_frames().iter().map(|f| format!("frame {f}")).collect();
-        let deltas: Vec<Vec<Vec3>> = frames
-            .iter()
-            .map(|f| f.iter().zip(&base).map(|(s, b)| [s[0] - b[0], s[1] - b[1], s[2] - b[2]]).collect())
-            .collect();
-        let magnitudes = deltas.iter().map(|d| d.iter().map(|x| crate::mesh::dist(*x, [0.0; 3])).collect()).collect();
-        let index = (0..frames.len()).collect();
+        let deltas: Vec<Vec<Vec3>> =
+            training.decoded.iter().map(|f| f.iter().zip(&base).map(|(s, b)| sub(*s, *b)).collect()).collect();
+        let magnitudes = deltas.iter().map(|d| d.iter().map(|x| norm(*x)).collect()).collect();
+        let index = (0..deltas.len()).collect();
         Ok(Blendshapes { base, index, names, deltas, magnitudes })
     }
 
@@ -303,13 +294,28 @@ pub fn blend(base: &[Vec3], targets: &[Vec<Vec3>], w: &[f64]) -> Vec<Vec3> {
     out
 }
 
-/// Additivity error of `shapes` against the model over its training frames (see the module
-/// docs); `None` when the model stores no training weights.
-pub fn additivity_error(model: &dyn Model, shapes: &Blendshapes) -> Result<Option<f64>> {
-    let Some(weights) = model.train_weights() else { return Ok(None) };
-    let truth = model.decode(&weights)?;
-    let blends = weights.iter().map(|w| Ok(shapes.blend(&model.dials(w)?))).collect::<Result<Vec<_>>>()?;
-    Ok(Some(erms(&truth, &blends, model.alignment())?))
+/// A model's training frames as the export uses them, decoded once: their dials (component
+/// index order) and the model's own decoding of them (data units).
+pub struct Training {
+    pub dials: Vec<Vec<f64>>,
+    pub decoded: Vec<Vec<Vec3>>,
+}
+
+impl Training {
+    /// `None` when the model stores no training weights.
+    pub fn of(model: &dyn Model) -> Result<Option<Self>> {
+        let Some(weights) = model.train_weights() else { return Ok(None) };
+        let dials = weights.iter().map(|w| model.dials(w)).collect::<Result<Vec<_>>>()?;
+        let decoded = model.decode(&weights)?;
+        Ok(Some(Training { dials, decoded }))
+    }
+}
+
+/// Additivity error of `shapes` against the model's decoding of its training frames (see the
+/// module docs): Erms with the model's `alignment`.
+pub fn additivity_error(shapes: &Blendshapes, training: &Training, alignment: Alignment) -> Result<f64> {
+    let blends: Vec<Vec<Vec3>> = training.dials.iter().map(|d| shapes.blend(d)).collect();
+    erms(&training.decoded, &blends, alignment)
 }
 
 /// Growing binary buffer of the `.glb` with its views and accessors.
@@ -483,31 +489,21 @@ pub struct Prepared {
     pub up_axis: String,
     /// Whether the mesh has a boundary (drawn double-sided).
     pub open: bool,
+    /// The training frames (`None` when the model stores no training weights).
+    pub training: Option<Training>,
 }
 
 impl Prepared {
     /// The keyed weights (target order) of the animation: one row per training frame with
     /// `animation` (the frame's dials) or `bake` (one-hot); empty otherwise.
-    pub fn keyed_weights(&self, model: &dyn Model, options: &ExportOptions) -> Result<Vec<Vec<f64>>> {
+    pub fn keyed_weights(&self, options: &ExportOptions) -> Result<Vec<Vec<f64>>> {
         if !(options.animation || options.bake) || self.shapes.deltas.is_empty() {
             return Ok(Vec::new());
         }
-        let weights = model.train_weights().ok_or_else(|| {
+        let training = self.training.as_ref().ok_or_else(|| {
             Error::Invalid("--animation: the model stores no training weights to animate".to_string())
         })?;
-        let n = self.shapes.deltas.len();
-        weights
-            .iter()
-            .enumerate()
-            .map(|(i, w)| {
-                if options.bake {
-                    Ok(one_hot(n, i))
-                } else {
-                    let dials = model.dials(w)?;
-                    Ok(self.shapes.index.iter().map(|&k| dials[k]).collect())
-                }
-            })
-            .collect()
+        Ok(training.dials.iter().map(|d| self.shapes.index.iter().map(|&k| d[k]).collect()).collect())
     }
 
     /// `baked`, `fitted` or `extreme`.
@@ -549,27 +545,36 @@ pub fn prepare(model: &dyn Model, options: &ExportOptions) -> Result<Prepared> {
         )));
     }
     let rest = model.rest();
+    let alignment = model.alignment();
+    let mut training = Training::of(model)?;
     let (mut shapes, additivity, additivity_extreme, fitted) = if options.bake {
-        let s = Blendshapes::baked(model)?;
-        let weights = model.train_weights().unwrap_or_default();
-        let truth = model.decode(&weights)?;
-        let blends: Vec<Vec<Vec3>> = (0..s.deltas.len()).map(|i| s.blend(&one_hot(s.deltas.len(), i))).collect();
-        let e = erms(&truth, &blends, model.alignment())?;
+        let t = training
+            .as_mut()
+            .ok_or_else(|| Error::Invalid("--bake: the model stores no training weights to bake".to_string()))?;
+        let s = Blendshapes::baked(model, t)?;
+        // Frame i is keyed by the one-hot vector of target i.
+        t.dials = (0..s.deltas.len()).map(|i| one_hot(s.deltas.len(), i)).collect();
+        let e = additivity_error(&s, t, alignment)?;
         (s, Some(e), None, false)
     } else {
         let mut s = Blendshapes::of(model)?;
-        let extreme = additivity_error(model, &s)?;
+        let extreme = training.as_ref().map(|t| additivity_error(&s, t, alignment)).transpose()?;
         // Displacement models blend exactly (0 up to rounding): nothing to fit.
         let scale = {
             let (lo, hi) = rest.bounding_box();
             1000.0 * crate::mesh::dist(lo, hi)
         };
         let nonlinear = extreme.is_some_and(|e| e > 1e-9 * scale.max(f64::MIN_POSITIVE));
-        if options.targets == TargetFit::Fitted && nonlinear && s.fit_to_training(model, options.fit_regularisation)? {
-            let after = additivity_error(model, &s)?;
-            (s, after, extreme, true)
-        } else {
-            (s, extreme, None, false)
+        match training.as_ref() {
+            Some(t)
+                if options.targets == TargetFit::Fitted
+                    && nonlinear
+                    && s.fit_to_training(t, options.fit_regularisation)? =>
+            {
+                let after = additivity_error(&s, t, alignment)?;
+                (s, Some(after), extreme, true)
+            }
+            _ => (s, extreme, None, false),
         }
     };
     // Orientation: rotate the base and the targets so that the chosen axis is +Y.
@@ -592,9 +597,8 @@ pub fn prepare(model: &dyn Model, options: &ExportOptions) -> Result<Prepared> {
         .deltas
         .iter()
         .map(|d| {
-            let shape: Vec<Vec3> =
-                shapes.base.iter().zip(d).map(|(p, q)| [p[0] + q[0], p[1] + q[1], p[2] + q[2]]).collect();
-            normals_of(&shape).iter().zip(&base_normals).map(|(a, b)| [a[0] - b[0], a[1] - b[1], a[2] - b[2]]).collect()
+            let shape: Vec<Vec3> = shapes.base.iter().zip(d).map(|(p, q)| add(*p, *q)).collect();
+            normals_of(&shape).iter().zip(&base_normals).map(|(a, b)| sub(*a, *b)).collect()
         })
         .collect();
     let finite = |p: &[Vec3]| p.iter().flatten().all(|x| x.is_finite() && x.abs() <= f32::MAX as f64);
@@ -614,6 +618,7 @@ pub fn prepare(model: &dyn Model, options: &ExportOptions) -> Result<Prepared> {
         rotation,
         up_axis,
         open,
+        training,
     })
 }
 
@@ -621,7 +626,7 @@ pub fn prepare(model: &dyn Model, options: &ExportOptions) -> Result<Prepared> {
 pub fn export_glb(model: &dyn Model, path: &Path, options: &ExportOptions) -> Result<ExportReport> {
     let p = prepare(model, options)?;
     let rest = model.rest();
-    let keys = p.keyed_weights(model, options)?;
+    let keys = p.keyed_weights(options)?;
     let mut b = Builder::new();
     use json::accessor::Type;
     use json::buffer::Target;

@@ -71,7 +71,7 @@ pub fn export_usda(model: &dyn Model, path: &Path, options: &ExportOptions) -> R
     let n_targets = p.shapes.deltas.len();
     let mut used = std::collections::BTreeSet::new();
     let ids: Vec<String> = p.shapes.names.iter().map(|n| identifier(n, &mut used)).collect();
-    let keys = p.keyed_weights(model, options)?;
+    let keys = p.keyed_weights(options)?;
     let fps = options.fps;
     let mut s = String::new();
     s.push_str("#usda 1.0\n(\n    defaultPrim = \"Model\"\n    metersPerUnit = 1\n    upAxis = \"Y\"\n");
