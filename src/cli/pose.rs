@@ -217,7 +217,6 @@ pub fn drag_bench(a: DragBenchArgs) -> Result<()> {
         prior: a.prior,
         time_limit: None,
     };
-    options.validate()?;
     let cfg = DragBenchConfig { drags: a.drags, pins, seed: a.seed, options };
     let (rows, summary) = drag_bench(model.as_ref(), &seq, &cfg)?;
     println!(
@@ -236,18 +235,19 @@ pub fn drag_bench(a: DragBenchArgs) -> Result<()> {
     );
     println!("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
     for s in &summary {
+        let m = &s.medians;
         println!(
             "| {} | {} | {:.3} | {:.2} | {:.1} % | {:.1} % | {:.3} | {:.3} | {:.0} % | {:.1} |",
             s.pins,
             s.drags,
-            s.landing_percent,
-            s.max_motion_ratio,
-            100.0 * s.moved_share,
-            100.0 * s.frame_moved_share,
-            s.posed_erms,
-            s.neutral_erms,
+            m.landing_percent,
+            m.max_motion_ratio,
+            100.0 * m.moved_share,
+            100.0 * m.frame_moved_share,
+            m.posed_erms,
+            m.neutral_erms,
             100.0 * s.improved_share,
-            1e3 * s.seconds
+            1e3 * m.seconds
         );
     }
     if let Some(p) = &a.json {

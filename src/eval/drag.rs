@@ -37,12 +37,9 @@ pub struct DragBenchConfig {
     pub options: PoseOptions,
 }
 
-/// One drag's measures.
-#[derive(Debug, Clone, Serialize)]
-pub struct DragResult {
-    pub pins: usize,
-    pub frame: usize,
-    pub vertices: Vec<usize>,
+/// What one drag measures (module docs); a summary holds their medians.
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct DragMeasures {
     /// Mean landing error, % of the drag.
     pub landing_percent: f64,
     /// Largest motion of any vertex ÷ the largest drag.
@@ -58,35 +55,44 @@ pub struct DragResult {
     pub seconds: f64,
 }
 
+impl DragMeasures {
+    /// Each measure's median over `all`.
+    fn medians(all: &[DragMeasures]) -> DragMeasures {
+        // `all` is never empty: a summary has at least one drag.
+        let col = |g: fn(&DragMeasures) -> f64| {
+            crate::pipeline::metrics_file::median(&all.iter().map(g).collect::<Vec<_>>()).unwrap_or(0.0)
+        };
+        DragMeasures {
+            landing_percent: col(|m| m.landing_percent),
+            max_motion_ratio: col(|m| m.max_motion_ratio),
+            moved_share: col(|m| m.moved_share),
+            frame_moved_share: col(|m| m.frame_moved_share),
+            posed_erms: col(|m| m.posed_erms),
+            neutral_erms: col(|m| m.neutral_erms),
+            seconds: col(|m| m.seconds),
+        }
+    }
+}
+
+/// One drag.
+#[derive(Debug, Clone, Serialize)]
+pub struct DragResult {
+    pub pins: usize,
+    pub frame: usize,
+    pub vertices: Vec<usize>,
+    #[serde(flatten)]
+    pub measures: DragMeasures,
+}
+
 /// Medians over the drags of one pin count.
 #[derive(Debug, Clone, Serialize)]
 pub struct DragSummary {
     pub pins: usize,
     pub drags: usize,
-    pub landing_percent: f64,
-    pub max_motion_ratio: f64,
-    pub moved_share: f64,
-    pub frame_moved_share: f64,
-    pub posed_erms: f64,
-    pub neutral_erms: f64,
+    #[serde(flatten)]
+    pub medians: DragMeasures,
     /// Share of drags whose posed Erms is below the neutral shape's.
     pub improved_share: f64,
-    pub seconds: f64,
-}
-
-/// The median of `v` (NaN-free), 0 for none.
-pub fn median(mut v: Vec<f64>) -> f64 {
-    if v.is_empty() {
-        return 0.0;
-    }
-    v.sort_by(f64::total_cmp);
-    let n = v.len();
-    if n % 2 == 1 { v[n / 2] } else { 0.5 * (v[n / 2 - 1] + v[n / 2]) }
-}
-
-fn centroid(p: &[Vec3]) -> Vec3 {
-    let n = p.len().max(1) as f64;
-    std::array::from_fn(|k| p.iter().map(|q| q[k]).sum::<f64>() / n)
 }
 
 /// Runs the benchmark on `test` frames (the model's connectivity). Returns every drag and the
@@ -117,7 +123,6 @@ pub fn drag_bench(
     let (lo, hi) = rest.bounding_box();
     let diag = crate::mesh::dist(lo, hi);
     let alignment = model.alignment();
-    let c0 = centroid(&p0);
     let mut rng = Rng::new(cfg.seed);
     let mut all = Vec::new();
     let mut summaries = Vec::new();
@@ -132,12 +137,7 @@ pub fn drag_bench(
             let f = rng.below(test.n_frames());
             let mut t = test.frames[f].clone();
             if alignment == Alignment::Centroid {
-                let ct = centroid(&t);
-                for q in &mut t {
-                    for k in 0..3 {
-                        q[k] += c0[k] - ct[k];
-                    }
-                }
+                super::centroid_align(&mut t, &p0);
             }
             let vertices = {
                 let mut v = rng.sample_distinct(n, pins);
@@ -163,10 +163,7 @@ pub fn drag_bench(
             let motion: Vec<f64> = p.iter().zip(&p0).map(|(a, b)| crate::mesh::dist(*a, *b)).collect();
             let max_drag = drags.iter().cloned().fold(0.0, f64::max);
             let share = |m: &dyn Fn(usize) -> f64| (0..n).filter(|&v| m(v) > 0.5 * mean_drag).count() as f64 / n as f64;
-            rows.push(DragResult {
-                pins,
-                frame: f,
-                vertices,
+            let measures = DragMeasures {
                 landing_percent: 100.0 * landing,
                 max_motion_ratio: motion.iter().cloned().fold(0.0, f64::max) / max_drag,
                 moved_share: share(&|v| motion[v]),
@@ -174,20 +171,16 @@ pub fn drag_bench(
                 posed_erms: erms(std::slice::from_ref(&t), std::slice::from_ref(&p), alignment)?,
                 neutral_erms: erms(std::slice::from_ref(&t), std::slice::from_ref(&p0), alignment)?,
                 seconds,
-            });
+            };
+            rows.push(DragResult { pins, frame: f, vertices, measures });
         }
-        let col = |g: &dyn Fn(&DragResult) -> f64| median(rows.iter().map(g).collect());
+        let measures: Vec<DragMeasures> = rows.iter().map(|r| r.measures).collect();
+        let improved = measures.iter().filter(|m| m.posed_erms < m.neutral_erms).count();
         summaries.push(DragSummary {
             pins,
             drags: rows.len(),
-            landing_percent: col(&|r| r.landing_percent),
-            max_motion_ratio: col(&|r| r.max_motion_ratio),
-            moved_share: col(&|r| r.moved_share),
-            frame_moved_share: col(&|r| r.frame_moved_share),
-            posed_erms: col(&|r| r.posed_erms),
-            neutral_erms: col(&|r| r.neutral_erms),
-            improved_share: rows.iter().filter(|r| r.posed_erms < r.neutral_erms).count() as f64 / rows.len() as f64,
-            seconds: col(&|r| r.seconds),
+            medians: DragMeasures::medians(&measures),
+            improved_share: improved as f64 / rows.len() as f64,
         });
         all.extend(rows);
     }

@@ -208,7 +208,7 @@ impl DatasetData {
 }
 
 /// Translates `result` so that its vertex centroid equals that of `truth`.
-fn centroid_align(result: &mut [Vec3], truth: &[Vec3]) {
+pub(crate) fn centroid_align(result: &mut [Vec3], truth: &[Vec3]) {
     let n = truth.len().max(1) as f64;
     let shift: Vec3 =
         std::array::from_fn(|k| truth.iter().zip(result.iter()).map(|(t, r)| t[k] - r[k]).sum::<f64>() / n);
