@@ -96,9 +96,7 @@ pub fn load_frames_for(path: &str, rest: &crate::mesh::TriMesh) -> Result<MeshSe
     };
     if mesh::npy::is_numpy_path(file) {
         if file.to_ascii_lowercase().ends_with(".npz") && array.is_none() {
-            return Err(crate::error::Error::Invalid(format!(
-                "{path}: name the array of the .npz to read, as `{path}:<array>`"
-            )));
+            return Err(Error::Invalid(format!("{path}: name the array of the .npz to read, as `{path}:<array>`")));
         }
         return mesh::npy::load_npy_with_faces(Path::new(file), array, rest.n_vertices(), rest.faces.clone());
     }

@@ -100,12 +100,12 @@ pub fn shape_metric(columns: &[Vec<f64>]) -> Mat<f64> {
     g
 }
 
-/// Adds the pull `γ·s·P` to `h` (K × K): P = I for the weights prior, `K·G / trace(G)` for the
-/// shape metric `G` (module docs), with s the mean diagonal of the data term `h` on entry.
-/// Returns the matrix added (to form the right-hand side `γ·s·P·w0`).
-fn add_pull(h: &mut Mat<f64>, gamma: f64, metric: Option<&Mat<f64>>) -> Result<Mat<f64>> {
-    let k = h.nrows();
-    let s = (0..k).map(|i| h[(i, i)]).sum::<f64>() / k.max(1) as f64;
+/// The pull `γ·s·P` (K × K) for the data term `data`: P = I for the weights prior, `K·G /
+/// trace(G)` for the shape metric `G` (module docs), s the mean diagonal of `data`. The system
+/// adds it to its Hessian ([`add_into`]) and its right-hand side takes `γ·s·P·w0`.
+fn pull_matrix(data: &Mat<f64>, gamma: f64, metric: Option<&Mat<f64>>) -> Result<Mat<f64>> {
+    let k = data.nrows();
+    let s = (0..k).map(|i| data[(i, i)]).sum::<f64>() / k.max(1) as f64;
     let pull = match metric {
         None => Mat::<f64>::from_fn(k, k, |i, j| if i == j { gamma * s } else { 0.0 }),
         Some(g) => {
@@ -126,12 +126,16 @@ fn add_pull(h: &mut Mat<f64>, gamma: f64, metric: Option<&Mat<f64>>) -> Result<M
             })
         }
     };
-    for i in 0..k {
-        for j in 0..k {
-            h[(i, j)] += pull[(i, j)];
+    Ok(pull)
+}
+
+/// `h += m` (same shape).
+fn add_into(h: &mut Mat<f64>, m: &Mat<f64>) {
+    for i in 0..h.nrows() {
+        for j in 0..h.ncols() {
+            h[(i, j)] += m[(i, j)];
         }
     }
-    Ok(pull)
 }
 
 /// `pull · w0`.
@@ -234,7 +238,8 @@ impl<'a> LinearPoser<'a> {
                 }
             }
         }
-        let pull = add_pull(&mut h, config.gamma, metric)?;
+        let pull = pull_matrix(&h, config.gamma, metric)?;
+        add_into(&mut h, &pull);
         let llt = factor_spd(h.clone(), "posing")?;
         Ok(LinearPoser { model, vertices: vertices.to_vec(), hessian: h, llt, pull })
     }
@@ -334,16 +339,12 @@ impl<'a> RegionPoser<'a> {
                 model.add_data_vertex(i, l, off[i], &mut h);
             }
         }
-        let mut pull_h = h.clone();
-        let pull = add_pull(&mut pull_h, config.gamma, metric)?;
+        // The pull is scaled by the data term alone (before the boundary term).
+        let pull = pull_matrix(&h, config.gamma, metric)?;
         let pairs = model.shared_pairs();
         let mut dummy = vec![0.0; p];
         model.add_boundary(&pairs, config.beta, &mut h, &mut dummy);
-        for i in 0..p {
-            for j in 0..p {
-                h[(i, j)] += pull[(i, j)];
-            }
-        }
+        add_into(&mut h, &pull);
         let llt = factor_spd(h, "region posing")?;
         Ok(RegionPoser { model, vertices: vertices.to_vec(), memberships, pairs, llt, beta: config.beta, pull })
     }
@@ -450,7 +451,7 @@ mod tests {
                 }
             }
         }
-        let pull = add_pull(&mut h, gamma, g).unwrap();
+        let pull = pull_matrix(&h, gamma, g).unwrap();
         let mut data = 0.0;
         for (&vv, tt) in v.iter().zip(t) {
             for (c, &tc) in tt.iter().enumerate() {

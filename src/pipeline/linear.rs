@@ -25,8 +25,7 @@ use crate::methods::support_map::{
     ComponentLocality, SupportDistances, TriangleSupport, component_locality, support_ramp,
 };
 use crate::methods::{DataMatrix, LinearModel, WeightConstraint};
-use crate::model::{Component, Model, PointFit, argmax};
-use crate::model::{PoseOptions, PosePrior, PoseResult};
+use crate::model::{Component, Model, PointFit, PoseOptions, PosePrior, PoseResult, argmax};
 use crate::preprocess::{Prepared, UnitBox};
 use crate::representation::acap::Consistency;
 use crate::representation::roundtrip::Alignment;
