@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 mod common;
-use common::{meshdeco, output_text};
+use common::{json_lines, meshdeco, output_text, train_cli as train};
 
 use meshdeco::export::read_glb;
 use meshdeco::mesh::{self, Vec3};
@@ -16,15 +16,6 @@ use meshdeco::pipeline::load_model;
 
 fn tmp(tag: &str) -> PathBuf {
     common::fresh_dir("export", tag)
-}
-
-fn train(d: &Path, name: &str, data: &str, method: &str) -> PathBuf {
-    let cfg = d.join(format!("{name}.toml"));
-    std::fs::write(&cfg, format!("name = \"{name}\"\n[data]\n{data}\n[method]\n{method}\n")).unwrap();
-    let out = d.join(name);
-    let o = meshdeco(&["train", "--config", cfg.to_str().unwrap(), "--out", out.to_str().unwrap()], d);
-    assert!(o.status.success(), "{name}: {}", output_text(&o));
-    out
 }
 
 const BUMPS: &str = "path = \"synthetic:bumps\"\ntrain = \"1-30\"\ntest = \"rest\"";
@@ -119,8 +110,7 @@ fn every_kind_exports_valid_gltf_that_replays_the_model() {
         args.extend(files.iter().map(|f| f.display().to_string()));
         let o = Command::new("node").args(&args).env("NODE_PATH", dir.join("node_modules")).output().unwrap();
         assert!(o.status.success(), "validator: {}", output_text(&o));
-        let lines: Vec<serde_json::Value> =
-            String::from_utf8_lossy(&o.stdout).lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+        let lines = json_lines(&o);
         assert_eq!(lines.len(), files.len());
         for r in &lines {
             println!("validator: {r}");
@@ -281,17 +271,11 @@ fn numpy_sequences_train_like_mesh_files() {
     std::fs::remove_dir_all(&d).unwrap();
 }
 
-/// `node_modules/three` (three.js 0.170), installed like the validator.
-fn three_dir() -> Option<PathBuf> {
-    common::npm_package("three", "three", common::THREE_SPEC)
-}
-
-/// SCAPE (lying along +x in its data) and face-poses exports as three.js (Node) and Blender load
-/// them: the rest mesh's tallest bounding-box axis is Y in three.js and Z in Blender (its up),
-/// every morph target carries normals, the material is not metallic, the animation has one key
-/// per training frame, Blender makes K + 1 shape keys.
+/// SCAPE (lying along +x in its data) and face-poses exports as Blender imports them: the rest
+/// mesh's tallest bounding-box axis is Z (Blender's up), with K + 1 shape keys. (three.js:
+/// `tests/view_browser.rs::exports_stand_up_in_three_js_in_chromium`.)
 #[test]
-fn real_exports_stand_up_in_three_js() {
+fn real_exports_stand_up_in_blender() {
     let (Some(scape), Some(face)) = (common::shared_or_skip("data/scape"), common::shared_or_skip("data/face-poses"))
     else {
         return;
@@ -305,16 +289,14 @@ fn real_exports_stand_up_in_three_js() {
         let o = meshdeco(&["export", dir.to_str().unwrap(), "--out", glb.to_str().unwrap(), "--animation"], &d);
         assert!(o.status.success(), "{name}: {}", output_text(&o));
         println!("{name}: {}", output_text(&o).lines().find(|l| l.starts_with("up axis")).unwrap_or(""));
-        let frames: usize = train_sel.split('-').nth(1).unwrap().parse().unwrap();
-        files.push((glb, frames));
+        files.push(glb);
     }
     // Blender (Z-up): the import stands along Z with K + 1 shape keys (Basis included).
     let blender = Command::new("blender").arg("--version").output().is_ok_and(|o| o.status.success());
     if blender {
         let script = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/blender/import_glb.py");
         let mut cmd = Command::new("blender");
-        cmd.args(["--background", "--factory-startup", "--python", script, "--"])
-            .args(files.iter().map(|f| f.0.clone()));
+        cmd.args(["--background", "--factory-startup", "--python", script, "--"]).args(&files);
         let o = cmd.output().unwrap();
         let text = output_text(&o);
         let lines: Vec<serde_json::Value> =
@@ -328,23 +310,6 @@ fn real_exports_stand_up_in_three_js() {
     } else {
         assert!(std::env::var_os("CI").is_none(), "CI: blender is not on the PATH (.ci/run installs Debian's)");
         eprintln!("SKIP Blender check: no `blender` on the PATH (apt-get install blender python3-numpy)");
-    }
-    let Some(three) = three_dir() else { return };
-    let script = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/js/three_bbox.mjs");
-    let mut cmd = Command::new("node");
-    cmd.arg(script).args(files.iter().map(|f| f.0.clone())).env("THREE_DIR", &three);
-    let o = cmd.output().unwrap();
-    assert!(o.status.success(), "three_bbox.mjs: {}", output_text(&o));
-    let lines: Vec<serde_json::Value> =
-        String::from_utf8_lossy(&o.stdout).lines().map(|l| serde_json::from_str(l).unwrap()).collect();
-    assert_eq!(lines.len(), files.len());
-    for (r, (_, frames)) in lines.iter().zip(&files) {
-        println!("three.js: {r}");
-        assert_eq!(r["tallest"], "Y", "{r}");
-        assert_eq!(r["morph_targets"], serde_json::json!([6]), "{r}");
-        assert_eq!(r["morph_normals"], serde_json::json!([6]), "{r}");
-        assert_eq!(r["metalness"], serde_json::json!([0]), "{r}");
-        assert_eq!(r["clips"][0]["keys"].as_u64(), Some(*frames as u64), "{r}");
     }
     std::fs::remove_dir_all(&d).unwrap();
 }

@@ -8,11 +8,11 @@
 //! `.ci/run` makes (`$CARGO_TARGET_DIR/tmp/usd-venv`, `pip install usd-core`). In CI (`CI` set)
 //! its absence is a failure; locally the test says it skipped and why.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::process::Command;
 
 mod common;
-use common::{meshdeco, output_text};
+use common::{json_lines, meshdeco, output_text, train_cli};
 
 fn usd_python() -> Option<PathBuf> {
     let candidates = [
@@ -34,20 +34,7 @@ fn usd_python() -> Option<PathBuf> {
     None
 }
 
-fn train(d: &Path, name: &str, method: &str) -> PathBuf {
-    let cfg = d.join(format!("{name}.toml"));
-    std::fs::write(
-        &cfg,
-        format!(
-            "name = \"{name}\"\n[data]\npath = \"synthetic:bumps\"\ntrain = \"1-30\"\ntest = \"rest\"\n[method]\n{method}\n"
-        ),
-    )
-    .unwrap();
-    let out = d.join(name);
-    let o = meshdeco(&["train", "--config", cfg.to_str().unwrap(), "--out", out.to_str().unwrap()], d);
-    assert!(o.status.success(), "{name}: {}", output_text(&o));
-    out
-}
+const BUMPS: &str = "path = \"synthetic:bumps\"\ntrain = \"1-30\"\ntest = \"rest\"";
 
 #[test]
 fn usd_exports_pass_every_pxr_validator() {
@@ -58,7 +45,7 @@ fn usd_exports_pass_every_pxr_validator() {
     ];
     let mut files = Vec::new();
     for (name, method, k) in models {
-        let dir = train(&d, name, method);
+        let dir = train_cli(&d, name, BUMPS, method);
         for (tag, extra) in [("anim", "--animation"), ("bake", "--bake")] {
             let f = d.join(format!("{name}-{tag}.usda"));
             let o = meshdeco(&["export", dir.to_str().unwrap(), "--out", f.to_str().unwrap(), extra], &d);
@@ -81,8 +68,7 @@ fn usd_exports_pass_every_pxr_validator() {
         cmd.arg(script).args(files.iter().map(|f| f.0.clone()));
         let o = cmd.output().unwrap();
         assert!(o.status.success(), "validate_usd.py: {}", output_text(&o));
-        let lines: Vec<serde_json::Value> =
-            String::from_utf8_lossy(&o.stdout).lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+        let lines = json_lines(&o);
         assert_eq!(lines.len(), files.len());
         for (r, (_, shapes)) in lines.iter().zip(&files) {
             println!("usd: {r}");

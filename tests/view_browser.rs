@@ -51,7 +51,12 @@ fn positions(b: &mut Browser) -> Vec<[f64; 3]> {
 }
 
 fn open_page(b: &mut Browser, v: &Viewer) {
-    b.navigate(&v.url());
+    open_page_with(b, v, "");
+}
+
+/// Opens the page with a `query` (e.g. `?prior=weights`) and waits until it is ready.
+fn open_page_with(b: &mut Browser, v: &Viewer, query: &str) {
+    b.navigate(&format!("{}{query}", v.url()));
     b.wait_for("!!(window.meshdeco && meshdeco.ready())", 60);
 }
 
@@ -291,7 +296,8 @@ fn latency_report(b: &mut Browser, name: &str) -> String {
     out
 }
 
-/// The README's before/after pictures of posing (run by hand, see `scripts/view-screenshots`):
+/// The README's before/after pictures of posing (run by hand: the command in
+/// `docs/posing-drag-bench.md`, "Pictures"):
 /// `MESHDECO_VIEW_OUT` (output folder), `MESHDECO_VIEW_SPLOCS` (SCAPE SPLOCS,
 /// `configs/scape-splocs.toml`), `MESHDECO_VIEW_REGION` (face-poses region-pca). Each model is
 /// posed with the papers' posing (`?prior=weights&gamma=0.025&beta=1`) and with the defaults:
@@ -335,14 +341,12 @@ fn pose_screenshots_before_after() {
         // Columns: the papers' posing, then the defaults.
         for (col, query) in ["?prior=weights&gamma=0.025&beta=1", ""].into_iter().enumerate() {
             let mut b = Browser::launch(&chromium, 900, 700);
-            b.navigate(&format!("{}{query}", v.url()));
-            b.wait_for("!!(window.meshdeco && meshdeco.ready())", 60);
+            open_page_with(&mut b, &v, query);
             select_overlay(&mut b, "displacement");
             drag_surface(&mut b, one.0, one.1, one.2, one.3, 25);
             image::imageops::replace(&mut grid, &panel(&b.screenshot()), 280 * col as i64, 0);
             // Start again; hold two points where they are, drag a third.
-            b.navigate(&format!("{}{query}", v.url()));
-            b.wait_for("!!(window.meshdeco && meshdeco.ready())", 60);
+            open_page_with(&mut b, &v, query);
             select_overlay(&mut b, "displacement");
             for (fx, fy) in held {
                 b.eval(&format!(
@@ -553,7 +557,8 @@ fn static_server(root: PathBuf) -> String {
 
 /// SCAPE (lying along +x in its data) and face-poses exports loaded by three.js's GLTFLoader in
 /// headless Chromium and drawn with WebGL: the rest mesh's tallest bounding-box axis is Y, the
-/// morph targets are there with normals, and the picture is taller than wide. With
+/// morph targets are there with normals, the material is not metallic, the animation has one
+/// key per training frame, and the picture is taller than wide. With
 /// `MESHDECO_SCREENSHOTS=DIR` the SCAPE picture is saved as `DIR/export-three-scape.png`.
 #[test]
 fn exports_stand_up_in_three_js_in_chromium() {
@@ -573,7 +578,7 @@ fn exports_stand_up_in_three_js_in_chromium() {
         .unwrap();
         let out = d.join(name);
         meshdeco::pipeline::train(&cfg, &out, &Default::default(), &mut meshdeco::pipeline::Silent).unwrap();
-        let o = meshdeco(&["export", out.to_str().unwrap(), "--out", &format!("{name}.glb")], &d);
+        let o = meshdeco(&["export", out.to_str().unwrap(), "--out", &format!("{name}.glb"), "--animation"], &d);
         assert!(o.status.success(), "{}", output_text(&o));
     }
     std::fs::write(d.join("index.html"), THREE_PAGE).unwrap();
@@ -588,6 +593,7 @@ fn exports_stand_up_in_three_js_in_chromium() {
         assert_eq!(r["tallest"], "Y", "{name}: {r}");
         assert_eq!((r["morph_targets"].as_u64(), r["morph_normals"].as_u64()), (Some(4), Some(4)), "{r}");
         assert_eq!(r["metalness"].as_f64(), Some(0.0), "{r}");
+        assert_eq!(r["clip_keys"], serde_json::json!([7]), "one key per training frame: {r}");
         if name == "scape" {
             let img = b.screenshot();
             let (w, h) = (img.width(), img.height());
@@ -630,6 +636,7 @@ new GLTFLoader().load(url, (g) => {
   const ext = [s.x, s.y, s.z];
   window.result = { size: ext, tallest: 'XYZ'[ext.indexOf(Math.max(...ext))],
     morph_targets: (mesh.geometry.morphAttributes.position || []).length,
-    morph_normals: (mesh.geometry.morphAttributes.normal || []).length, metalness: mesh.material.metalness, error: null };
+    morph_normals: (mesh.geometry.morphAttributes.normal || []).length, metalness: mesh.material.metalness,
+    clip_keys: g.animations.map((a) => a.tracks[0].times.length), error: null };
 }, undefined, (e) => { window.result = { error: String(e) }; });
 </script></body></html>"#;

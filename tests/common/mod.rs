@@ -207,3 +207,23 @@ pub fn npm_package(dir: &str, package: &str, spec: &str) -> Option<PathBuf> {
     }
     Some(installed)
 }
+
+/// Trains `method` on `data` (the lines of a `[data]` table) with `meshdeco train`, as a user
+/// runs it, into `d/<name>` (config `d/<name>.toml`); panics with the command's output on failure.
+pub fn train_cli(d: &Path, name: &str, data: &str, method: &str) -> PathBuf {
+    let cfg = d.join(format!("{name}.toml"));
+    std::fs::write(&cfg, format!("name = \"{name}\"\n[data]\n{data}\n[method]\n{method}\n")).unwrap();
+    let out = d.join(name);
+    let o = meshdeco(&["train", "--config", cfg.to_str().unwrap(), "--out", out.to_str().unwrap()], d);
+    assert!(o.status.success(), "{name}: {}", output_text(&o));
+    out
+}
+
+/// A checking script's stdout, one JSON value per line (the scripts under `tests/js`,
+/// `tests/python`); panics on a line that is not JSON.
+pub fn json_lines(o: &std::process::Output) -> Vec<serde_json::Value> {
+    String::from_utf8_lossy(&o.stdout)
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap_or_else(|e| panic!("not JSON ({e}): {l}")))
+        .collect()
+}
