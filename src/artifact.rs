@@ -13,10 +13,14 @@
 //!
 //! Writing: a run locks the directory ([`DirLock`], one writer), writes everything into a
 //! staging directory beside it and commits it at the end ([`Staging`]): one sync for the whole
-//! directory, the manifest last, nothing changed in `<out>` by a run that fails. Single files
-//! outside a staging directory are written atomically ([`write_atomic_with`]: temporary file
-//! in the same directory, sync, rename). Non-finite numbers are refused. Reading:
-//! [`verify_manifest`] checks every listed file before a model is loaded.
+//! directory, the staging directory renamed to a commit directory in one step, the manifest
+//! replaced last, and a commit that a killed run left half done finished by the next open — the
+//! directory is always the old model or the new one. Single files outside a staging directory
+//! are written atomically ([`write_atomic_with`]: a temporary file unique to the process in the
+//! same directory, sync, rename). Non-finite or implausibly large numbers are refused. Reading:
+//! [`open_for_reading`] checks every listed file against the manifest (which must list every
+//! file the loaders read; `config.toml` is not checked) and says when a training is writing the
+//! directory; [`load_model`] checks the array table against `model.bin` and every value.
 
 use std::collections::BTreeMap;
 use std::fs::File;
@@ -29,6 +33,12 @@ use crate::error::{Error, Result};
 
 /// Version of the model file format written by this build.
 pub const FORMAT_VERSION: u32 = 1;
+
+/// Largest magnitude of a number a model stores (`model.bin`'s arrays, `model.json`'s numbers,
+/// the autoencoder's parameters): far beyond any mesh's coordinates or a trained model's values,
+/// far below what overflows a decoded shape (or its single-precision glTF copy). A larger value
+/// is refused when saving and when loading: it is damage, not a model.
+pub const MAX_MODEL_VALUE: f64 = 1e15;
 
 /// Shape and location of one array inside `model.bin`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -64,6 +74,12 @@ impl ArrayStore {
                 "array `{name}` has a non-finite value at element {i}; refusing to save it"
             )));
         }
+        if let Some(i) = data.iter().position(|x| x.abs() > MAX_MODEL_VALUE) {
+            return Err(Error::Numerical(format!(
+                "array `{name}` has the value {:e} at element {i}, beyond the ±{MAX_MODEL_VALUE:e} a model stores",
+                data[i]
+            )));
+        }
         self.arrays.insert(name.to_string(), (shape, data));
         Ok(())
     }
@@ -97,21 +113,21 @@ struct HeaderFile<H> {
     arrays: BTreeMap<String, ArrayEntry>,
 }
 
-/// Writes `path` atomically, streaming the content: `body` writes into the temporary file
-/// `<path>.tmp` in the same directory (buffered), which is then flushed, synced to disk and renamed
-/// over `path`, so a reader never sees a half-written file. On any failure, including an error
-/// returned by `body`, the temporary file is removed and `path` is left as it was; the error is
-/// [`Error::Io`] naming `path`. The parent directory must exist ([`write_atomic`] creates it).
+/// Writes `path` atomically, streaming the content: `body` writes into a temporary file in the
+/// same directory ([`temp_path`]: unique to this process and call, so two writers of one file
+/// never share it), which is then flushed, synced to disk and renamed over `path`, so a reader
+/// never sees a half-written file (two writers: the last rename wins, each file whole). On any
+/// failure, including an error returned by `body`, the temporary file is removed and `path` is
+/// left as it was; the error is [`Error::Io`] naming `path`. The parent directory must exist
+/// ([`write_atomic`] creates it).
 ///
 /// This is the one atomic writer of the crate; every file meshdeco writes goes through it.
 /// Inside [`deferred_sync`] (the write phase of a [`Staging`] directory) the per-file sync is
 /// skipped: the directory is synced once when it is committed.
 pub fn write_atomic_with(path: &Path, body: impl FnOnce(&mut BufWriter<File>) -> std::io::Result<()>) -> Result<()> {
-    let mut tmp = path.as_os_str().to_owned();
-    tmp.push(".tmp");
-    let tmp = PathBuf::from(tmp);
+    let tmp = temp_path(path);
     let result = crate::timing::timed("write", || -> std::io::Result<()> {
-        let file = File::create(&tmp)?;
+        let file = std::fs::OpenOptions::new().write(true).create_new(true).open(&tmp)?;
         let mut w = BufWriter::new(file);
         body(&mut w)?;
         let file = w.into_inner().map_err(|e| e.into_error())?;
@@ -124,6 +140,26 @@ pub fn write_atomic_with(path: &Path, body: impl FnOnce(&mut BufWriter<File>) ->
         let _ = std::fs::remove_file(&tmp);
         Error::io(path, e)
     })
+}
+
+/// Longest file name (bytes) of the common file systems (ext4, XFS, Btrfs, APFS, NTFS).
+pub const MAX_FILE_NAME: usize = 255;
+
+/// The temporary file [`write_atomic_with`] writes before renaming it to `path`:
+/// `.<name>.<pid>.<n>.tmp` beside it (hidden; `n` counts the calls of this process), with
+/// `<name>` shortened (at a character boundary) so that the whole name fits in
+/// [`MAX_FILE_NAME`] bytes when `path`'s own name does.
+pub fn temp_path(path: &Path) -> PathBuf {
+    static COUNTER: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+    let n = COUNTER.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let suffix = format!(".{}.{n}.tmp", std::process::id());
+    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    let room = MAX_FILE_NAME - 1 - suffix.len();
+    let mut end = name.len().min(room);
+    while !name.is_char_boundary(end) {
+        end -= 1;
+    }
+    path.with_file_name(format!(".{}{suffix}", &name[..end]))
 }
 
 /// Writes `bytes` to `path` atomically (see [`write_atomic_with`]), creating the parent
@@ -178,31 +214,105 @@ pub fn load_model<H: for<'de> Deserialize<'de>>(dir: &Path) -> Result<(H, ArrayS
             format!("model format version {version} is not supported by this build (expects {FORMAT_VERSION})"),
         ));
     }
+    check_plausible_json(&json, &probe)?;
     let file: HeaderFile<H> =
         serde_json::from_str(&text).map_err(|e| Error::parse(&json, Some(e.line()), e.to_string()))?;
     let bin = dir.join("model.bin");
-    let bytes = std::fs::read(&bin).map_err(|e| Error::io(&bin, e))?;
-    if bytes.len() % 8 != 0 {
-        return Err(Error::parse(&bin, None, format!("size {} is not a multiple of 8 bytes", bytes.len())));
+    let meta = std::fs::metadata(&bin).map_err(|e| Error::io(&bin, e))?;
+    // The table must tile model.bin exactly (as `save_model` writes it): every array where the
+    // previous one ends, the last one ending at the end of the file. Checked before reading, with
+    // checked arithmetic, so absurd shapes neither allocate nor wrap.
+    let mut spans: Vec<(&String, usize, usize)> = Vec::with_capacity(file.arrays.len());
+    for (name, entry) in &file.arrays {
+        let n = entry.shape.iter().try_fold(1usize, |a, &d| a.checked_mul(d)).ok_or_else(|| {
+            Error::parse(&json, None, format!("array `{name}`: shape {:?} is too large", entry.shape))
+        })?;
+        spans.push((name, entry.offset, n));
     }
-    let all: Vec<f64> = bytes.chunks_exact(8).map(|c| f64::from_le_bytes(c.try_into().expect("8 bytes"))).collect();
+    spans.sort_by_key(|&(_, offset, _)| offset);
+    let (mut end, mut before) = (0usize, None);
+    for &(name, offset, n) in &spans {
+        if offset != end {
+            let prev = before.map_or("the start of the file".to_string(), |p| format!("array `{p}`"));
+            return Err(Error::parse(
+                &json,
+                None,
+                format!(
+                    "array `{name}` starts at number {offset} of model.bin, but {prev} ends at {end}: the table does not describe model.bin"
+                ),
+            ));
+        }
+        before = Some(name);
+        end = offset.checked_add(n).filter(|&e| e <= usize::MAX / 8).ok_or_else(|| {
+            Error::parse(&json, None, format!("array `{name}` ({n} numbers at {offset}) is too large"))
+        })?;
+    }
+    if meta.len() != 8 * end as u64 {
+        return Err(Error::parse(
+            &bin,
+            None,
+            format!(
+                "{} bytes, but the array table of model.json describes {} numbers ({} bytes): the file does not belong to this model.json",
+                meta.len(),
+                end,
+                8 * end as u64
+            ),
+        ));
+    }
+    let bytes = std::fs::read(&bin).map_err(|e| Error::io(&bin, e))?;
+    if bytes.len() as u64 != meta.len() {
+        return Err(Error::parse(&bin, None, "changed while it was read".to_string()));
+    }
     let mut store = ArrayStore::new();
     for (name, entry) in file.arrays {
         let n: usize = entry.shape.iter().product();
-        let data = all.get(entry.offset..entry.offset + n).ok_or_else(|| {
-            Error::parse(
-                &bin,
-                None,
-                format!(
-                    "array `{name}` ({n} numbers at {}) lies past the end of the file ({} numbers)",
-                    entry.offset,
-                    all.len()
-                ),
-            )
-        })?;
-        store.insert(&name, entry.shape, data.to_vec()).map_err(|e| Error::parse(&bin, None, e.to_string()))?;
+        let data: Vec<f64> = bytes[8 * entry.offset..8 * (entry.offset + n)]
+            .chunks_exact(8)
+            .map(|c| f64::from_le_bytes(c.try_into().expect("8 bytes")))
+            .collect();
+        store.insert(&name, entry.shape, data).map_err(|e| Error::parse(&bin, None, e.to_string()))?;
     }
     Ok((file.header, store))
+}
+
+/// Refuses a number of a model header beyond ±[`MAX_MODEL_VALUE`], naming its key.
+fn check_plausible_json(path: &Path, v: &serde_json::Value) -> Result<()> {
+    fn walk(v: &serde_json::Value, key: &mut String, path: &Path) -> Result<()> {
+        match v {
+            serde_json::Value::Number(n) => {
+                let x = n.as_f64().unwrap_or(f64::INFINITY);
+                if !x.is_finite() || x.abs() > MAX_MODEL_VALUE {
+                    return Err(Error::parse(
+                        path,
+                        None,
+                        format!("`{key}` is {n}, beyond the ±{MAX_MODEL_VALUE:e} a model stores"),
+                    ));
+                }
+            }
+            serde_json::Value::Array(a) => {
+                for (i, x) in a.iter().enumerate() {
+                    let len = key.len();
+                    key.push_str(&format!("[{i}]"));
+                    walk(x, key, path)?;
+                    key.truncate(len);
+                }
+            }
+            serde_json::Value::Object(o) => {
+                for (k, x) in o {
+                    let len = key.len();
+                    if !key.is_empty() {
+                        key.push('.');
+                    }
+                    key.push_str(k);
+                    walk(x, key, path)?;
+                    key.truncate(len);
+                }
+            }
+            _ => {}
+        }
+        Ok(())
+    }
+    walk(v, &mut String::new(), path)
 }
 
 /// The model directory for a path that is either the directory or its `model.json`.
@@ -286,7 +396,7 @@ mod tests {
         let bytes = std::fs::read(&bin).unwrap();
         std::fs::write(&bin, &bytes[..16]).unwrap();
         let e = load_model::<H>(&d).unwrap_err().to_string();
-        assert!(e.contains("model.bin") && e.contains("past the end"), "{e}");
+        assert!(e.contains("model.bin") && e.contains("describes 4 numbers"), "{e}");
         std::fs::remove_dir_all(&d).unwrap();
     }
 }
@@ -363,13 +473,40 @@ pub struct Manifest {
     pub files: BTreeMap<String, ManifestEntry>,
 }
 
+impl Manifest {
+    /// Errors unless every file of `names` is listed: a loader reads only files the manifest
+    /// vouches for (a manifest listing no files, or one without `model.bin`, is refused).
+    pub fn require(&self, dir: &Path, names: &[&str]) -> Result<()> {
+        if let Some(missing) = names.iter().find(|n| !self.files.contains_key(**n)) {
+            return Err(Error::Invalid(format!(
+                "{}: does not list `{missing}`, which the model's loader reads ({} files listed): the manifest does not vouch for this artefact; train it again",
+                dir.join(MANIFEST_FILE).display(),
+                self.files.len()
+            )));
+        }
+        Ok(())
+    }
+}
+
 /// CRC-32 of `bytes` as 8 lowercase hex digits.
 pub fn crc32_hex(bytes: &[u8]) -> String {
     format!("{:08x}", crc32fast::hash(bytes))
 }
 
+/// Files of an artefact that the manifest does not check, because no loader reads them:
+/// `config.toml`, the resolved config, is for people (and for training again) — editing it,
+/// even adding a comment, leaves the model loadable.
+pub const UNCHECKED_FILES: &[&str] = &["config.toml"];
+
+/// Files every model's loader reads ([`load_model`]): a manifest must list them.
+pub const MODEL_FILES: &[&str] = &["model.json", "model.bin"];
+
 fn manifest_listed(name: &str) -> bool {
-    name != MANIFEST_FILE && !WORK_FILES.contains(&name) && !name.ends_with(".tmp") && !name.starts_with('.')
+    name != MANIFEST_FILE
+        && !WORK_FILES.contains(&name)
+        && !UNCHECKED_FILES.contains(&name)
+        && !name.ends_with(".tmp")
+        && !name.starts_with('.')
 }
 
 /// Computes the manifest of the top-level files of `dir` (see [`Manifest`]).
@@ -404,7 +541,11 @@ pub fn verify_manifest(dir: &Path) -> Result<Manifest> {
         )));
     }
     let manifest: Manifest = read_json(&path)?;
+    manifest.require(dir, MODEL_FILES)?;
     for (name, entry) in &manifest.files {
+        if UNCHECKED_FILES.contains(&name.as_str()) {
+            continue;
+        }
         let file = dir.join(name);
         if name.contains(['/', '\\']) || name.starts_with('.') {
             return Err(Error::parse(&path, None, format!("lists `{name}`, which is not a file of the artefact")));
@@ -470,6 +611,16 @@ pub fn staging_path(out: &Path) -> Result<PathBuf> {
     sibling(out, STAGING_SUFFIX)
 }
 
+/// Suffix of the directory beside an artefact directory `<parent>/.<name>` + this into which a
+/// complete staging directory is renamed when its commit starts ([`Staging::commit`]): while it
+/// exists, a commit is under way or was interrupted, and the next open finishes it.
+pub const COMMIT_SUFFIX: &str = ".meshdeco-commit";
+
+/// The directory of artefact directory `out` holding a commit under way (beside it, hidden).
+pub fn commit_path(out: &Path) -> Result<PathBuf> {
+    sibling(out, COMMIT_SUFFIX)
+}
+
 /// Where a resumed training of `out` finds its checkpoint: an interrupted run's (in the staging
 /// directory) before a finished run's (in `out`).
 pub fn resumable_checkpoint(out: &Path) -> Option<PathBuf> {
@@ -524,31 +675,179 @@ impl Drop for DirLock {
     }
 }
 
+/// The process id of the meshdeco process writing artefact directory `out` right now (holding
+/// its [`DirLock`]), if any. Only looks: creates nothing, takes nothing.
+pub fn writer_of(out: &Path) -> Option<String> {
+    let path = lock_path(out).ok()?;
+    let file = File::open(&path).ok()?;
+    match file.try_lock_shared() {
+        Ok(()) => None,
+        Err(std::fs::TryLockError::WouldBlock) => {
+            Some(std::fs::read_to_string(&path).unwrap_or_default().trim().to_string())
+        }
+        Err(std::fs::TryLockError::Error(_)) => None,
+    }
+}
+
+/// Opens artefact directory `dir` for reading: finishes a commit that an interrupted run left
+/// half done (so the directory is the new model, [`Staging::commit`]), then verifies it
+/// ([`verify_manifest`]). While another process writes `dir` (it holds the lock), a commit under
+/// way or a failed check is reported as that: "being written".
+pub fn open_for_reading(dir: &Path) -> Result<Manifest> {
+    let under_way = commit_path(dir).is_ok_and(|c| c.is_dir());
+    if under_way {
+        match DirLock::acquire(dir) {
+            Ok(_lock) => finish_commit(dir)?,
+            Err(e) => return Err(being_written(dir, e)),
+        }
+    }
+    verify_manifest(dir).map_err(|e| being_written(dir, e))
+}
+
+/// `e`, or — when another meshdeco process holds `dir`'s lock — an error saying that `dir` is
+/// being written (with `e` after it): what a reader is told when it meets a directory that a
+/// training is writing.
+pub fn being_written(dir: &Path, e: Error) -> Error {
+    match writer_of(dir) {
+        Some(pid) => Error::Invalid(format!(
+            "{} is being written by meshdeco process {pid} (a training is writing or replacing the model), so it cannot be read now; try again when that run has finished (reading it gave: {e})",
+            dir.display()
+        )),
+        None => e,
+    }
+}
+
+/// File in a commit's directory: what the commit moves into the artefact directory.
+const PLAN_FILE: &str = ".meshdeco-plan.json";
+
+/// What a commit does, written into its directory before it starts: the entries it moves into
+/// the artefact directory, and whether entries of an earlier run that it did not write are
+/// removed. Finishing a commit twice does what finishing it once does.
+#[derive(Debug, Serialize, Deserialize)]
+struct CommitPlan {
+    earlier: bool,
+    names: Vec<String>,
+}
+
+/// Environment variable of the crash tests: `<step>` or `<step>#<n>` kills this process (SIGKILL,
+/// nothing cleaned up) the n-th time (default 1st) a commit reaches `<step>`: `staged` (before
+/// the staging directory becomes the commit's), `renamed` (after), `remove` (before removing an
+/// earlier run's entry), `move` (before moving an entry in), `manifest` (before the new manifest
+/// replaces the old), `cleanup` (before the commit's directory goes). Unset in normal use.
+pub const KILL_AT_ENV: &str = "MESHDECO_TEST_KILL_AT";
+
+fn kill_point(step: &str) {
+    static COUNTS: std::sync::Mutex<BTreeMap<String, usize>> = std::sync::Mutex::new(BTreeMap::new());
+    let Ok(spec) = std::env::var(KILL_AT_ENV) else { return };
+    let (name, nth) = match spec.split_once('#') {
+        Some((n, k)) => (n.to_string(), k.parse().unwrap_or(1)),
+        None => (spec, 1usize),
+    };
+    if name != step {
+        return;
+    }
+    let mut counts = COUNTS.lock().unwrap_or_else(|e| e.into_inner());
+    let c = counts.entry(name).or_insert(0);
+    *c += 1;
+    if *c == nth {
+        #[cfg(unix)]
+        // SAFETY: sends a signal to this very process; no memory is touched.
+        unsafe {
+            libc::kill(libc::getpid(), libc::SIGKILL);
+        }
+        std::process::abort();
+    }
+}
+
+/// Finishes the commit of artefact directory `out` that its commit directory ([`commit_path`])
+/// describes, if there is one; the caller holds `out`'s lock. Every step can be repeated: a run
+/// killed at any point of a commit leaves `out` as the old model (commit not started) or as a
+/// commit that this finishes into the new one.
+fn finish_commit(out: &Path) -> Result<()> {
+    let dir = commit_path(out)?;
+    if !dir.is_dir() {
+        return Ok(());
+    }
+    let plan_path = dir.join(PLAN_FILE);
+    let plan: CommitPlan = match std::fs::read(&plan_path) {
+        Ok(bytes) => serde_json::from_slice(&bytes).map_err(|e| Error::parse(&plan_path, None, e.to_string()))?,
+        // The plan is the last thing removed: without it, nothing is left to do.
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            return std::fs::remove_dir_all(&dir).map_err(|e| Error::io(&dir, e));
+        }
+        Err(e) => return Err(Error::io(&plan_path, e)),
+    };
+    std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
+    if plan.earlier {
+        for name in ARTEFACT_NAMES {
+            let target = out.join(name);
+            if !plan.names.iter().any(|w| w == name) && std::fs::symlink_metadata(&target).is_ok() {
+                kill_point("remove");
+                remove_entry(&target)?;
+            }
+        }
+    }
+    // The manifest last: until it is replaced, the old one stays (the directory is the old
+    // model or a commit under way, never a directory without a manifest).
+    let mut names: Vec<&String> = plan.names.iter().filter(|n| *n != MANIFEST_FILE).collect();
+    names.extend(plan.names.iter().filter(|n| *n == MANIFEST_FILE));
+    for name in names {
+        let (from, to) = (dir.join(name), out.join(name));
+        if std::fs::symlink_metadata(&from).is_err() {
+            continue; // moved before an interruption
+        }
+        kill_point(if name == MANIFEST_FILE { "manifest" } else { "move" });
+        if std::fs::symlink_metadata(&to).is_ok_and(|m| m.is_dir()) {
+            std::fs::remove_dir_all(&to).map_err(|e| Error::io(&to, e))?;
+        }
+        std::fs::rename(&from, &to).map_err(|e| Error::io(&to, e))?;
+    }
+    File::open(out).and_then(|d| d.sync_all()).map_err(|e| Error::io(out, e))?;
+    kill_point("cleanup");
+    std::fs::remove_file(&plan_path).map_err(|e| Error::io(&plan_path, e))?;
+    std::fs::remove_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
+    sync_parent(out);
+    Ok(())
+}
+
+/// Syncs the directory holding `path` (so a rename of `path` is durable); best effort.
+fn sync_parent(path: &Path) {
+    if let Some(parent) = path.parent() {
+        let parent = if parent.as_os_str().is_empty() { Path::new(".") } else { parent };
+        let _ = File::open(parent).and_then(|d| d.sync_all());
+    }
+}
+
 /// An artefact directory being written: every file goes into a hidden staging directory beside
 /// `out` ([`staging_path`]); [`Self::commit`] writes the manifest, syncs the staging directory
-/// once, and moves its entries into `out` (manifest last). A run that fails or is dropped
-/// before committing leaves `out` as it was and removes the staging directory — unless it holds
-/// an autoencoder checkpoint, which a `--resume` continues from.
+/// once, and moves its entries into `out` (manifest last, crash-safe). A run that fails or is
+/// dropped before committing leaves `out` as it was and removes the staging directory — unless
+/// it holds an autoencoder checkpoint that this run wrote, which a `--resume` continues from.
 #[derive(Debug)]
 pub struct Staging {
     out: PathBuf,
     dir: PathBuf,
+    resume_from: Option<PathBuf>,
     committed: bool,
     _lock: DirLock,
 }
 
 impl Staging {
-    /// Locks `out` and prepares its staging directory. With `resume`, the checkpoint of an
-    /// interrupted run (in the staging directory) or else of the finished run in `out` is
-    /// carried over; it is an error when there is none.
+    /// Locks `out` (finishing a commit an interrupted run left half done) and prepares its
+    /// staging directory. With `resume`, the run continues from the checkpoint of an
+    /// interrupted run (in the staging directory) or else of the finished run in `out`
+    /// ([`Self::resume_from`]; it is read where it is, never copied into hiding); it is an error
+    /// when there is none.
     pub fn begin(out: &Path, resume: bool) -> Result<Self> {
         if out.exists() && !out.is_dir() {
             return Err(Error::Invalid(format!("output directory {}: exists and is not a directory", out.display())));
         }
         let lock = DirLock::acquire(out)?;
+        finish_commit(out)?;
         let dir = staging_path(out)?;
-        let staged_checkpoint = dir.join(CHECKPOINT_FILE).is_file();
-        if resume && staged_checkpoint {
+        let staged_checkpoint = dir.join(CHECKPOINT_FILE);
+        let mut resume_from = None;
+        if resume && staged_checkpoint.is_file() {
             // An interrupted run: keep its work files, drop anything else it left.
             for entry in std::fs::read_dir(&dir).map_err(|e| Error::io(&dir, e))? {
                 let entry = entry.map_err(|e| Error::io(&dir, e))?;
@@ -556,6 +855,7 @@ impl Staging {
                     remove_entry(&entry.path())?;
                 }
             }
+            resume_from = Some(staged_checkpoint);
         } else {
             if dir.exists() {
                 std::fs::remove_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
@@ -571,15 +871,16 @@ impl Staging {
                         dir.join(CHECKPOINT_FILE).display()
                     )));
                 }
-                for name in WORK_FILES {
-                    let from = out.join(name);
-                    if from.is_file() {
-                        std::fs::copy(&from, dir.join(name)).map_err(|e| Error::io(&from, e))?;
-                    }
+                // The log goes on where the run writes; the checkpoint is read in place, so a
+                // refused one is not left behind in the staging directory.
+                let log = out.join(LOG_FILE);
+                if log.is_file() {
+                    std::fs::copy(&log, dir.join(LOG_FILE)).map_err(|e| Error::io(&log, e))?;
                 }
+                resume_from = Some(finished);
             }
         }
-        Ok(Staging { out: out.to_path_buf(), dir, committed: false, _lock: lock })
+        Ok(Staging { out: out.to_path_buf(), dir, resume_from, committed: false, _lock: lock })
     }
 
     /// The staging directory: write every file of the artefact here.
@@ -592,47 +893,45 @@ impl Staging {
         &self.out
     }
 
-    /// Writes the manifest, syncs the staging directory once, and moves its entries into `out`:
-    /// the old manifest first goes (so a half-replaced directory is never loaded), entries of
-    /// an earlier run that this one did not write go, the new manifest comes last.
+    /// With `--resume`: the checkpoint the run continues from (the interrupted run's in the
+    /// staging directory, or the finished run's in `out`).
+    pub fn resume_from(&self) -> Option<&Path> {
+        self.resume_from.as_deref()
+    }
+
+    /// Writes the manifest, syncs the staging directory once, and moves its entries into `out`,
+    /// crash-safe: the staging directory, complete and with a plan of what moves, is renamed to
+    /// the commit directory ([`commit_path`]) in one step; then entries of an earlier run that
+    /// this one did not write go, the new entries move in and the new manifest replaces the old
+    /// one last. A process killed at any point leaves the old model (before the rename) or a
+    /// commit that the next open of `out` finishes ([`open_for_reading`], [`Self::begin`]).
     pub fn commit(mut self) -> Result<()> {
         let manifest = compute_manifest(&self.dir)?;
         write_json(&self.dir.join(MANIFEST_FILE), &manifest)?;
-        sync_tree(&self.dir)?;
-        std::fs::create_dir_all(&self.out).map_err(|e| Error::io(&self.out, e))?;
-        let earlier = holds_artefact(&self.out);
-        let old_manifest = self.out.join(MANIFEST_FILE);
-        if old_manifest.exists() {
-            std::fs::remove_file(&old_manifest).map_err(|e| Error::io(&old_manifest, e))?;
-        }
-        let mut written = Vec::new();
+        let mut names = Vec::new();
         for entry in std::fs::read_dir(&self.dir).map_err(|e| Error::io(&self.dir, e))? {
             let entry = entry.map_err(|e| Error::io(&self.dir, e))?;
-            written.push(entry.file_name());
+            names.push(entry.file_name().to_string_lossy().into_owned());
         }
-        for name in ARTEFACT_NAMES {
-            let target = self.out.join(name);
-            if earlier && !written.iter().any(|w| w == name) && std::fs::symlink_metadata(&target).is_ok() {
-                remove_entry(&target)?;
-            }
-        }
-        written.sort_by_key(|n| n == MANIFEST_FILE);
-        for name in &written {
-            let (from, to) = (self.dir.join(name), self.out.join(name));
-            if to.is_dir() {
-                std::fs::remove_dir_all(&to).map_err(|e| Error::io(&to, e))?;
-            }
-            std::fs::rename(&from, &to).map_err(|e| Error::io(&to, e))?;
-        }
-        std::fs::remove_dir(&self.dir).map_err(|e| Error::io(&self.dir, e))?;
-        File::open(&self.out).and_then(|d| d.sync_all()).map_err(|e| Error::io(&self.out, e))?;
+        names.sort();
+        std::fs::create_dir_all(&self.out).map_err(|e| Error::io(&self.out, e))?;
+        let plan = CommitPlan { earlier: holds_artefact(&self.out), names };
+        write_json(&self.dir.join(PLAN_FILE), &plan)?;
+        sync_tree(&self.dir)?;
+        kill_point("staged");
+        let commit = commit_path(&self.out)?;
+        std::fs::rename(&self.dir, &commit).map_err(|e| Error::io(&commit, e))?;
+        sync_parent(&commit);
         self.committed = true;
-        Ok(())
+        kill_point("renamed");
+        finish_commit(&self.out)
     }
 }
 
 impl Drop for Staging {
     fn drop(&mut self) {
+        // A checkpoint in the staging directory is this run's or an interrupted one's (never a
+        // copy of the finished run's): `--resume` continues from it.
         if !self.committed && !self.dir.join(CHECKPOINT_FILE).is_file() {
             let _ = std::fs::remove_dir_all(&self.dir);
         }

@@ -24,6 +24,19 @@ pub struct UnitBox {
 }
 
 impl UnitBox {
+    /// Checks a stored transform (read from a model header): finite offset, positive finite
+    /// scale; the message names the bad value.
+    pub fn validate(&self) -> std::result::Result<(), String> {
+        let max = crate::artifact::MAX_MODEL_VALUE;
+        if !(self.scale.is_finite() && (1.0 / max..=max).contains(&self.scale)) {
+            return Err(format!("scale {} must be a number in [{:e}, {max:e}]", self.scale, 1.0 / max));
+        }
+        if let Some(x) = self.offset.iter().find(|x| !x.is_finite()) {
+            return Err(format!("offset {x} must be finite"));
+        }
+        Ok(())
+    }
+
     /// The identity transform.
     pub fn identity() -> Self {
         UnitBox { offset: [0.0; 3], scale: 1.0 }

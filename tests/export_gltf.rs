@@ -26,7 +26,7 @@ const KINDS: [(&str, &str); 6] = [
     ("splocs-acap", "kind = \"splocs\"\ncomponents = 3\nrepresentation = \"acap\""),
     ("splocs-gradient", "kind = \"splocs\"\ncomponents = 3\nrepresentation = \"triangle-gradient\""),
     ("region", "kind = \"region-pca\"\ncomponents = 12\nregions = 3"),
-    ("ae", "kind = \"autoencoder\"\ncomponents = 3\niterations = 100\ncheckpoint_every = 100\nfit_test = false"),
+    ("ae", "kind = \"autoencoder\"\ncomponents = 4\niterations = 100\ncheckpoint_every = 100\nfit_test = false"),
 ];
 
 fn max_dist(a: &[Vec3], b: &[Vec3]) -> f64 {
@@ -91,10 +91,35 @@ fn every_kind_exports_valid_gltf_that_replays_the_model() {
         if linear {
             assert!(err < 1e-5, "{name}: blended morph targets differ from synthesize by {err}");
         }
+        // The file's targets are in rank order; for the autoencoder that differs from the index
+        // order. Read with the index order instead (dial i on target i), the blend must be worse:
+        // a writer or reader that mixes the two orders fails here even where blending is
+        // approximate.
+        let index_order: Vec<usize> = ranked.iter().map(|c| c.index).collect();
+        let reordered = index_order.windows(2).any(|w| w[0] > w[1]);
+        // K = 4, seed 0: the autoencoder ranks its components 3, 1, 0, 2 (this check must run).
+        assert!(reordered || name != "ae", "{name}: rank order {index_order:?} equals the index order");
+        if reordered {
+            let wrong = max_dist(&g.blend(&dials), &want);
+            println!("{name}: the same dials in index order: max distance {wrong:.3e}");
+            assert!(err < 0.5 * wrong, "{name}: rank-order blend {err} is not clearly better than index order {wrong}");
+        }
         // The animation replays the training frames: frame i of a linear model equals the model's
         // reconstruction of training frame i.
         let train = m.train_weights().unwrap();
         assert_eq!(g.animation.len(), train.len(), "{name}");
+        // Every kind: key i holds training frame i's dials, target t the dial of rank t.
+        for (i, (keys, w)) in g.animation.iter().zip(&train).enumerate() {
+            let d = m.dials(w).unwrap();
+            for (t, c) in ranked.iter().enumerate() {
+                assert!(
+                    (keys[t] - d[c.index]).abs() <= 1e-6 * (1.0 + d[c.index].abs()),
+                    "{name}: key {i}, target {t}: {} vs dial {}",
+                    keys[t],
+                    d[c.index]
+                );
+            }
+        }
         if linear {
             let rec = m.decode(&train).unwrap();
             for (i, (keys, r)) in g.animation.iter().zip(&rec).enumerate() {
@@ -310,6 +335,7 @@ fn real_exports_stand_up_in_blender() {
     } else {
         assert!(std::env::var_os("CI").is_none(), "CI: blender is not on the PATH (.ci/run installs Debian's)");
         eprintln!("SKIP Blender check: no `blender` on the PATH (apt-get install blender python3-numpy)");
+        common::record_skip("blender");
     }
     std::fs::remove_dir_all(&d).unwrap();
 }

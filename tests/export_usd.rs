@@ -31,6 +31,7 @@ fn usd_python() -> Option<PathBuf> {
         env!("CARGO_TARGET_TMPDIR")
     );
     eprintln!("SKIPPED USD validation: no Python with usd-core (pip install usd-core; MESHDECO_USD_PYTHON)");
+    common::record_skip("python with usd-core");
     None
 }
 

@@ -114,3 +114,29 @@ fn scape_frame_round_trips_through_obj_and_ply() {
     assert_eq!(read_mesh(&out.join("1.ply")).unwrap().mesh, mesh);
     std::fs::remove_dir_all(&out).unwrap();
 }
+
+/// `render --view auto`, the page and the glTF export see SCAPE from the front (issue 25: it
+/// opened seen from behind) and the face-poses mask from outside. The front is checked
+/// independently of the normals rule the view uses: a standing person's toes reach forward of the
+/// ankles, so the feet (the lowest 3 % of the height) lie on the front side of the shins (5–12 %).
+#[test]
+fn scape_and_the_face_are_seen_from_the_front() {
+    use meshdeco::mesh::render::View;
+    let Some(dir) = dataset("scape") else { return };
+    let m = read_mesh(&dir.join("1.obj")).unwrap().mesh;
+    let View::Axes { up, view, negative } = View::auto(&m) else { panic!("auto gives axes") };
+    assert_eq!((up, view), (0, 1), "SCAPE stands along x, its depth is y");
+    let (lo, hi) = m.bounding_box();
+    let h = hi[up] - lo[up];
+    let mean_depth = |a: f64, b: f64| {
+        let d: Vec<f64> =
+            m.positions.iter().filter(|p| p[up] >= lo[up] + a * h && p[up] < lo[up] + b * h).map(|p| p[view]).collect();
+        d.iter().sum::<f64>() / d.len() as f64
+    };
+    let (feet, shins) = (mean_depth(0.0, 0.03), mean_depth(0.05, 0.12));
+    println!("SCAPE feet depth {feet:.4}, shins {shins:.4}, camera on the {} side", if negative { "−" } else { "+" });
+    assert_eq!(negative, feet < shins, "the camera must sit on the toes' side");
+    let Some(dir) = dataset("face-poses") else { return };
+    let f = read_mesh(&dir.join("1.obj")).unwrap().mesh;
+    assert_eq!(View::auto(&f), View::Axes { up: 1, view: 2, negative: false });
+}

@@ -147,6 +147,14 @@ fn view_api_serves_decode_pose_heat_frames_and_export() {
     }
     let own = meshdeco::model::encode_frames(m.as_ref(), &seq.select(&[5]), "t", None).unwrap();
     assert!((own.total_erms - erms).abs() <= 1e-9 * erms.max(1.0), "Erms {erms} vs encode's {}", own.total_erms);
+    // The frame index's bounds: the last of the 60 frames is served, one past it is a 400.
+    let (s, _, body) = v.request("GET", "/api/frame/59", b"");
+    assert_eq!(s, 200, "{}", String::from_utf8_lossy(&body));
+    let last = parse_shape(&body);
+    let truth: Vec<[f64; 3]> = f32s(&last.rest[..12 * n]).chunks(3).map(|c| [c[0], c[1], c[2]]).collect();
+    assert!(max_diff(&truth, &seq.frames[59]) < 1e-6, "frame 59 is the data's last frame");
+    let (s, _, body) = v.request("GET", "/api/frame/60", b"");
+    assert_eq!(s, 400, "{}", String::from_utf8_lossy(&body));
 }
 
 #[test]
@@ -168,6 +176,8 @@ fn view_api_refuses_bad_requests_and_keeps_serving() {
         ("POST", "/api/pose", many_pins, 400, "101 pins; a pose request takes at most 100"),
         ("POST", "/api/pose", one_pin(r#", "max_iterations": 1000"#), 400, "`max_iterations` 1000"),
         ("POST", "/api/pose", one_pin(r#", "max_iterations": 100"#), 200, ""),
+        ("POST", "/api/pose", one_pin(r#", "max_iterations": 101"#), 400, "`max_iterations` 101"),
+        ("POST", "/api/pose", one_pin(r#", "max_iterations": 0"#), 400, "`max_iterations` 0"),
         ("POST", "/api/pose", one_pin(r#", "prior": "maximal""#), 400, "`prior`"),
         ("POST", "/api/pose", one_pin(r#", "prior": "weights""#), 200, ""),
         ("POST", "/api/decode", b"{\"dials\": [1, 2".to_vec(), 400, "malformed JSON"),

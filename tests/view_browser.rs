@@ -30,14 +30,7 @@ fn chromium_or_skip() -> Option<PathBuf> {
         panic!("CI is set but no Chromium is installed (chromium-headless-shell or chromium; needed by {test})");
     }
     eprintln!("SKIPPED {test}: no chromium-headless-shell / chromium on the PATH (set MESHDECO_CHROMIUM to a binary)");
-    let log = common::skip_log();
-    if let Some(dir) = log.parent() {
-        let _ = std::fs::create_dir_all(dir);
-    }
-    if let Ok(mut f) = std::fs::OpenOptions::new().create(true).append(true).open(&log) {
-        use std::io::Write;
-        let _ = writeln!(f, "{}\t{test}\tchromium (not installed)", env!("CARGO_CRATE_NAME"));
-    }
+    common::record_skip("chromium (not installed)");
     None
 }
 
@@ -394,6 +387,7 @@ fn select_overlay(b: &mut Browser, value: &str) {
 
 /// The README's screenshots and latency figures (run by `scripts/view-screenshots`, which trains
 /// the models): `MESHDECO_VIEW_OUT` (output folder), `MESHDECO_VIEW_AE` (SCAPE autoencoder),
+/// `MESHDECO_VIEW_SPLOCS` (SCAPE SPLOCS, `configs/scape-splocs-signed.toml`),
 /// `MESHDECO_VIEW_REGION` (face-poses region-pca), `MESHDECO_VIEW_LINEAR` (face-poses PCA).
 #[test]
 #[ignore]
@@ -413,11 +407,7 @@ fn view_screenshots_and_latency() {
         let v = Viewer::start(&[&ae]);
         let mut b = Browser::launch(&chromium, 1280, 800);
         open_page(&mut b, &v);
-        // The automatic framing looks at SCAPE's back (front and back are not told apart):
-        // orbit half a turn by dragging the background (0.008 rad per pixel).
-        let p = b.eval("(() => { const r = document.getElementById('gl').getBoundingClientRect(); return [r.left + 0.05 * r.width, r.top + 0.5 * r.height]; })()");
-        let (x, y) = (f(&p[0]), f(&p[1]));
-        b.drag((x, y), (x + std::f64::consts::PI / 0.008, y), 20);
+        // The automatic framing sees SCAPE's front (the side most vertex normals face).
         // Select the first-ranked component (its heat map), dial it.
         let name = b.centre(".comp .name");
         b.click(name.0, name.1);
@@ -426,6 +416,14 @@ fn view_screenshots_and_latency() {
         save(&mut b, "view-scape-autoencoder.png");
         drag_surface(&mut b, 0.5, 0.3, 40.0, 0.0, 40);
         table += &latency_report(&mut b, "SCAPE autoencoder");
+    }
+    if let Ok(splocs) = std::env::var("MESHDECO_VIEW_SPLOCS") {
+        let v = Viewer::start(&[&splocs]);
+        let mut b = Browser::launch(&chromium, 1280, 800);
+        open_page(&mut b, &v);
+        drag_slider(&mut b, 0, 0.95, 40);
+        drag_surface(&mut b, 0.5, 0.3, 40.0, 0.0, 40);
+        table += &latency_report(&mut b, "SCAPE splocs");
     }
     if let Ok(region) = std::env::var("MESHDECO_VIEW_REGION") {
         let v = Viewer::start(&[&region]);

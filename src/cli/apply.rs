@@ -116,27 +116,27 @@ pub fn encode(a: EncodeArgs) -> Result<()> {
     }
     let refine = a.fit.map(|points| RefineOptions { points, gamma: a.fit_gamma });
     if let Some(o) = &refine {
-        println!("fitting codes to min({}, {}) vertices per frame", o.points, seq.n_vertices());
+        outln!("fitting codes to min({}, {}) vertices per frame", o.points, seq.n_vertices());
     }
     let t = std::time::Instant::now();
     let e = model::encode_frames(m.as_ref(), &seq, &a.path, refine.as_ref())?;
-    println!(
+    outln!(
         "encoded {} frames in {:.1} ms ({})",
         seq.n_frames(),
         t.elapsed().as_secs_f64() * 1e3,
         m.encoder_description()
     );
     if refine.is_some() && !e.refined {
-        println!("a {} model has no refined encoding: least-squares weights", m.kind().name());
+        outln!("a {} model has no refined encoding: least-squares weights", m.kind().name());
     }
     std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
     for ((name, erms), rec) in seq.names.iter().zip(&e.frame_erms).zip(&e.reconstructions) {
-        println!("{name}: Erms {erms:.4}");
+        outln!("{name}: Erms {erms:.4}");
         mesh::write_obj(&a.out.join(format!("{name}.obj")), &TriMesh::new(rec.clone(), seq.faces.clone()))?;
     }
     let flat: Vec<f64> = e.weights.iter().flatten().copied().collect();
     artifact::write_weights_csv(&a.out.join("weights.csv"), &seq.names, &flat, m.n_components())?;
-    println!(
+    outln!(
         "total Erms {:.4} over {} frames [alignment: {}]; reconstructions and weights.csv in {}",
         e.total_erms,
         seq.n_frames(),
@@ -159,7 +159,7 @@ pub fn synthesize(a: SynthesizeArgs) -> Result<()> {
     };
     let p = model::synthesize(m.as_ref(), &dials)?;
     mesh::write_mesh(&a.out, &TriMesh::new(p, m.rest().faces))?;
-    println!("wrote {}", a.out.display());
+    outln!("wrote {}", a.out.display());
     Ok(())
 }
 
@@ -173,7 +173,7 @@ pub fn components(a: ComponentsArgs) -> Result<()> {
         &meshdeco::view::overview::OverviewOptions { cell: a.cell, per_row: a.per_row },
     )
     .with_context(|| format!("--cell {} --per-row {}", a.cell, a.per_row))?;
-    println!("wrote {} components (ranked, components.csv, overview.png) to {}", m.n_components(), a.out.display());
+    outln!("wrote {} components (ranked, components.csv, overview.png) to {}", m.n_components(), a.out.display());
     Ok(())
 }
 
@@ -193,6 +193,6 @@ pub fn interpolate(a: InterpolateArgs) -> Result<()> {
     for (i, p) in meshes.into_iter().enumerate() {
         mesh::write_obj(&a.out.join(format!("interp_{i:03}.obj")), &TriMesh::new(p, rest.faces.clone()))?;
     }
-    println!("wrote {} meshes to {}", a.steps, a.out.display());
+    outln!("wrote {} meshes to {}", a.steps, a.out.display());
     Ok(())
 }

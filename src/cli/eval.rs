@@ -47,7 +47,7 @@ pub fn run(a: EvalArgs) -> Result<()> {
     let opts = EvalOptions { replot: a.replot, stop: Some(stop) };
     let o = meshdeco::eval::run(&cfg, &out, &opts, &mut sweep, &mut inner)
         .with_context(|| format!("evaluating {} into {}", a.config.display(), out.display()))?;
-    println!(
+    outln!(
         "{} cells: {} trained, {} reused; {} control-point rows; {:.1} s",
         o.results.len(),
         o.trained,
@@ -56,7 +56,7 @@ pub fn run(a: EvalArgs) -> Result<()> {
         t0.elapsed().as_secs_f64()
     );
     for r in &o.results {
-        println!(
+        outln!(
             "{:>10} {:>16} {:>18} K={:<3} test Erms {:>9.4} ({}) STED {:.4}{}",
             r.dataset,
             r.method,
@@ -69,7 +69,7 @@ pub fn run(a: EvalArgs) -> Result<()> {
         );
     }
     for f in &o.files {
-        println!("wrote {}", f.display());
+        outln!("wrote {}", f.display());
     }
     for f in &o.failed {
         eprintln!("failed: {}/{}/K{}: {}", f.dataset, f.method, f.k, f.error);

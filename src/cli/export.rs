@@ -26,7 +26,7 @@ pub struct ExportArgs {
     /// frame), so the training sequence replays in any glTF viewer.
     #[arg(long)]
     pub animation: bool,
-    /// Frames per second of --animation (> 0).
+    /// Frames per second of --animation (0.01 to 1000).
     #[arg(long, default_value_t = 30.0)]
     pub fps: f64,
     /// Add vertex colours (COLOR_0): each vertex in the colour of the component that dominates
@@ -61,8 +61,8 @@ pub fn run(a: ExportArgs) -> Result<()> {
     if ext != "glb" && ext != "usda" {
         bail!("--out {}: name the file .glb (binary glTF 2.0) or .usda (USD text)", a.out.display());
     }
-    if !(a.fps.is_finite() && a.fps > 0.0) {
-        bail!("--fps {}: must be a positive number", a.fps);
+    if let Some(e) = meshdeco::export::gltf::fps_error(a.fps) {
+        bail!(e);
     }
     let model = load_model(&a.model).with_context(|| format!("loading model {}", a.model.display()))?;
     let opts = ExportOptions {
@@ -79,7 +79,7 @@ pub fn run(a: ExportArgs) -> Result<()> {
     } else {
         export_glb(model.as_ref(), &a.out, &opts)?
     };
-    println!(
+    outln!(
         "wrote {} ({} bytes): {} morph targets{}",
         a.out.display(),
         r.bytes,
@@ -90,7 +90,7 @@ pub fn run(a: ExportArgs) -> Result<()> {
             String::new()
         }
     );
-    println!("up axis: data {} is the file's +Y", r.up_axis);
+    outln!("up axis: data {} is the file's +Y", r.up_axis);
     let train_erms = train_erms(&a.model);
     match r.additivity_erms {
         Some(e) => {
@@ -104,7 +104,7 @@ pub fn run(a: ExportArgs) -> Result<()> {
             } else {
                 "dial-1 targets".to_string()
             };
-            println!(
+            outln!(
                 "additivity error: Erms {e:.4} (the unit of train/test Erms) of the blended targets against the model's own decoding of its {} training frames ({how})",
                 model.train_frames().len()
             );
@@ -117,7 +117,7 @@ pub fn run(a: ExportArgs) -> Result<()> {
                 );
             }
         }
-        None => println!("additivity error: not measured (the model stores no training weights)"),
+        None => outln!("additivity error: not measured (the model stores no training weights)"),
     }
     Ok(())
 }

@@ -56,9 +56,9 @@ pub fn features(a: FeaturesArgs) -> Result<()> {
         let frames = acap.encode_sequence(&seq.frames, consistency)?;
         write_acap_text(&a.out, &frames)?;
         for (f, name) in frames.iter().zip(&seq.names) {
-            println!("{name}: consistency energy BFS {:.6}, final {:.6}", f.energy_bfs, f.energy);
+            outln!("{name}: consistency energy BFS {:.6}, final {:.6}", f.energy_bfs, f.energy);
         }
-        println!(
+        outln!(
             "wrote {} and {} ({} shapes × {} vertices)",
             a.out.join("LOGRNEW.txt").display(),
             a.out.join("S.txt").display(),
@@ -80,7 +80,7 @@ pub fn features(a: FeaturesArgs) -> Result<()> {
     }
     let path = a.out.join("features.txt");
     meshdeco::artifact::write_atomic(&path, text.as_bytes())?;
-    println!("wrote {} ({} shapes × {} elements × {})", path.display(), x.n_frames, x.n_elements, x.width);
+    outln!("wrote {} ({} shapes × {} elements × {})", path.display(), x.n_frames, x.n_elements, x.width);
     Ok(())
 }
 
@@ -94,6 +94,6 @@ pub fn roundtrip_cmd(a: RoundtripArgs) -> Result<()> {
     };
     let rep = Representation::new(k, &rest, options)?;
     let report = roundtrip(&rep, &seq)?;
-    print!("{report}");
+    out!("{report}");
     Ok(())
 }

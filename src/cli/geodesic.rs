@@ -47,7 +47,7 @@ pub fn run(a: GeodesicArgs) -> Result<()> {
     let colors = mesh::colormap(&d);
     mesh::write_ply(&a.out, &m, Some(&colors), Some(("distance", &d)))?;
     let max = d.iter().cloned().fold(0.0, f64::max);
-    println!(
+    outln!(
         "{}: {n} vertices, sources {:?}, max distance {max:.6} (data units), wrote {}",
         a.mesh,
         a.source,

@@ -22,9 +22,9 @@ pub fn run(a: InspectArgs) -> Result<()> {
         mesh::inspect_path(&a.path)?
     };
     if a.json {
-        println!("{}", serde_json::to_string_pretty(&report)?);
+        outln!("{}", serde_json::to_string_pretty(&report)?);
     } else {
-        print!("{report}");
+        out!("{report}");
     }
     Ok(())
 }

@@ -4,6 +4,9 @@
 use anyhow::Result;
 use clap::{Parser, Subcommand};
 
+#[macro_use]
+pub mod out;
+
 mod apply;
 mod eval;
 mod export;

@@ -96,11 +96,11 @@ pub fn run(a: PoseArgs) -> Result<()> {
                 names: vec![p.display().to_string()],
             };
             check_connectivity(model.as_ref(), &seq, &p.display().to_string())?;
-            println!("start: encoding of {}", p.display());
+            outln!("start: encoding of {}", p.display());
             Some(m.positions)
         }
         None => {
-            println!("start: {}", model.start_description());
+            outln!("start: {}", model.start_description());
             None
         }
     };
@@ -121,7 +121,7 @@ pub fn run(a: PoseArgs) -> Result<()> {
     if res.positions.iter().flatten().any(|x| !x.is_finite()) {
         bail!("posing {} produced non-finite coordinates; nothing written", a.model.display());
     }
-    println!("{} model, {} constraint(s), solved in {:.1} ms", model.kind().name(), vertices.len(), 1e3 * secs);
+    outln!("{} model, {} constraint(s), solved in {:.1} ms", model.kind().name(), vertices.len(), 1e3 * secs);
     let (lo, hi) = rest.bounding_box();
     let diag = mesh::dist(lo, hi);
     for (&v, t) in vertices.iter().zip(&targets) {
@@ -138,7 +138,7 @@ pub fn run(a: PoseArgs) -> Result<()> {
         if let Some((name, set)) = model.locality_set(v) {
             line += &format!(", in {name}: {:.3}", displacement_share(&res.start, &res.positions, &set));
         }
-        println!("{line}");
+        outln!("{line}");
     }
     let is_ply = a.out.extension().and_then(|e| e.to_str()).is_some_and(|e| e.eq_ignore_ascii_case("ply"));
     if is_ply {
@@ -154,7 +154,7 @@ pub fn run(a: PoseArgs) -> Result<()> {
     } else {
         mesh::write_mesh(&a.out, &TriMesh::new(res.positions, rest.faces.clone()))?;
     }
-    println!("wrote {}", a.out.display());
+    outln!("wrote {}", a.out.display());
     Ok(())
 }
 
@@ -219,7 +219,7 @@ pub fn drag_bench(a: DragBenchArgs) -> Result<()> {
     };
     let cfg = DragBenchConfig { drags: a.drags, pins, seed: a.seed, options };
     let (rows, summary) = drag_bench(model.as_ref(), &seq, &cfg)?;
-    println!(
+    outln!(
         "{} model {}, {} test frames of {}; pose options γ {} β {} iterations {} prior {}",
         model.kind().name(),
         a.model.display(),
@@ -230,13 +230,13 @@ pub fn drag_bench(a: DragBenchArgs) -> Result<()> {
         options.max_iterations,
         options.prior.name()
     );
-    println!(
+    outln!(
         "| pins | drags | landing % of drag | max motion ÷ drag | moved > ½ drag | test frame's own | posed Erms | neutral Erms | improved | pose ms |"
     );
-    println!("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
+    outln!("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
     for s in &summary {
         let m = &s.medians;
-        println!(
+        outln!(
             "| {} | {} | {:.3} | {:.2} | {:.1} % | {:.1} % | {:.3} | {:.3} | {:.0} % | {:.1} |",
             s.pins,
             s.drags,
@@ -253,7 +253,7 @@ pub fn drag_bench(a: DragBenchArgs) -> Result<()> {
     if let Some(p) = &a.json {
         let v = serde_json::json!({ "summary": summary, "drags": rows });
         meshdeco::artifact::write_atomic(p, serde_json::to_string_pretty(&v)?.as_bytes())?;
-        println!("every drag in {}", p.display());
+        outln!("every drag in {}", p.display());
     }
     Ok(())
 }

@@ -26,7 +26,7 @@ pub struct RenderArgs {
 pub fn run(a: RenderArgs) -> Result<()> {
     let m = mesh::load_mesh(&a.mesh)?;
     let view = match a.view.as_str() {
-        "auto" => render::View::auto(&m.positions),
+        "auto" => render::View::auto(&m),
         v => render::View::parse(v).with_context(|| format!("--view: `{v}` is not one of auto, front, side, top"))?,
     };
     let (w, h) = a
@@ -46,7 +46,7 @@ pub fn run(a: RenderArgs) -> Result<()> {
         bail!("{}: output must be a .png file", a.out.display());
     }
     meshdeco::artifact::write_atomic(&a.out, &png)?;
-    println!(
+    outln!(
         "wrote {} ({w}×{h}, {} view, {})",
         a.out.display(),
         a.view,

@@ -46,12 +46,12 @@ pub fn run(a: TrainArgs) -> Result<()> {
     let o = train(&cfg, &out, &options, &mut bars)
         .with_context(|| format!("training {} ({})", cfg.name, a.config.display()))?;
     print_summary(&cfg.name, &o.metrics);
-    println!("artefacts in {}", o.out_dir.display());
+    outln!("artefacts in {}", o.out_dir.display());
     Ok(())
 }
 
 fn print_summary(name: &str, m: &Metrics) {
-    println!(
+    outln!(
         "{} ({}, {}, K = {}): train Erms {:.4}{} [alignment: {}], fit {:.3} s, representation {:.3} s, {} iterations{}",
         name,
         m.method,

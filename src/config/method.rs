@@ -746,12 +746,27 @@ impl MethodConfig {
         if let Some(rest) = message.strip_prefix("unknown field `")
             && let Some((field, expected)) = rest.split_once('`')
         {
-            let accepted = expected.trim_start_matches(',').trim().replace("expected one of ", "");
+            let expected = expected.lines().next().unwrap_or_default().trim_start_matches(',').trim();
+            let accepted = expected.replace("expected one of ", "").replace("expected ", "");
+            let Some(value) = table.get(field) else {
+                // Not a key of `[method]` itself: a key of one of its tables (`admm = { … }`).
+                let path = nested_key_path(table, field).unwrap_or_else(|| field.to_string());
+                let parent = path.rsplit_once('.').map_or("method", |(p, _)| p);
+                return Error::config(
+                    format!("method.{path}"),
+                    format!("is not a key of method.{parent} (it accepts: {accepted})"),
+                );
+            };
+            // A key of another kind parses there, or fails there for its value, not its name.
+            let unknown_there = format!("unknown field `{field}`");
             let known_elsewhere = MethodKind::ALL.into_iter().any(|k| {
                 let mut t = toml::Table::new();
                 t.insert("kind".into(), k.name().into());
-                t.insert(field.to_string(), table[field].clone());
-                toml::Value::Table(t).try_into::<MethodConfig>().is_ok()
+                t.insert(field.to_string(), value.clone());
+                match toml::Value::Table(t).try_into::<MethodConfig>() {
+                    Ok(_) => true,
+                    Err(e) => !e.to_string().trim().starts_with(&unknown_there),
+                }
             });
             let what = if known_elsewhere { "does not apply to" } else { "is not a key of" };
             return Error::config(
@@ -777,4 +792,14 @@ impl MethodConfig {
     pub fn to_table(&self) -> Result<toml::Table> {
         toml::Table::try_from(self).map_err(|e| Error::Invalid(format!("serialising the method config: {e}")))
     }
+}
+
+/// The dotted path (`admm.iters`) of the first key named `field` inside a table value of `table`
+/// (depth first, in key order), `None` when no nested table holds it.
+fn nested_key_path(table: &toml::Table, field: &str) -> Option<String> {
+    table.iter().find_map(|(key, value)| match value {
+        toml::Value::Table(t) if t.contains_key(field) => Some(format!("{key}.{field}")),
+        toml::Value::Table(t) => nested_key_path(t, field).map(|p| format!("{key}.{p}")),
+        _ => None,
+    })
 }

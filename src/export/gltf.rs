@@ -89,6 +89,23 @@ impl Default for ExportOptions {
 /// Default `fit_regularisation` (README "Export": the SCAPE autoencoder's measurements).
 pub const FIT_REGULARISATION: f64 = 0.1;
 
+/// The frame rates of an animation accepted (`--fps`), inclusive: from one frame per 100 s to
+/// 1000 frames per second. Within it every key time `i / fps` is finite and, stored as `f32`,
+/// strictly increasing for any realistic number of frames (glTF's validator requires both).
+pub const FPS_RANGE: std::ops::RangeInclusive<f64> = 0.01..=1000.0;
+
+/// The error for an `--fps` outside [`FPS_RANGE`] (or not a number), naming the flag and value;
+/// `None` when it is in range.
+pub fn fps_error(fps: f64) -> Option<String> {
+    (!FPS_RANGE.contains(&fps)).then(|| {
+        format!(
+            "--fps {fps:?}: must be a number of frames per second from {} to {}",
+            FPS_RANGE.start(),
+            FPS_RANGE.end()
+        )
+    })
+}
+
 /// The data axis that becomes glTF's up (+Y).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum UpAxis {
@@ -124,8 +141,9 @@ pub enum TargetFit {
 }
 
 /// The rotation (rows: data → glTF) taking the chosen up axis to +Y and the view axis (smallest
-/// extent among the others) to +Z, with its description (e.g. `+x`).
-pub fn orientation(positions: &[Vec3], up: UpAxis) -> (crate::math::mat3::Mat3, String) {
+/// extent among the others) to +Z, signed so that the shape's front faces +Z (glTF's front,
+/// [`crate::mesh::render::front_is_negative`]), with its description (e.g. `+x`).
+pub fn orientation(positions: &[Vec3], faces: &[[usize; 3]], up: UpAxis) -> (crate::math::mat3::Mat3, String) {
     let (lo, hi) = crate::mesh::bounding_box(positions);
     let e: Vec<f64> = (0..3).map(|k| hi[k] - lo[k]).collect();
     let (axis, neg) = match up {
@@ -135,7 +153,7 @@ pub fn orientation(positions: &[Vec3], up: UpAxis) -> (crate::math::mat3::Mat3, 
     let view = [2, 0, 1].into_iter().filter(|&k| k != axis).min_by(|&a, &b| e[a].total_cmp(&e[b])).unwrap_or(2);
     let unit = |k: usize, sign: f64| -> Vec3 { std::array::from_fn(|j| if j == k { sign } else { 0.0 }) };
     let y = unit(axis, if neg { -1.0 } else { 1.0 });
-    let z = unit(view, 1.0);
+    let z = unit(view, if crate::mesh::render::front_is_negative(positions, faces, view) { -1.0 } else { 1.0 });
     let x = crate::math::vec3::cross(y, z);
     let name = format!("{}{}", if neg { "-" } else { "+" }, ["x", "y", "z"][axis]);
     ([x, y, z], name)
@@ -535,8 +553,10 @@ impl Prepared {
 /// Builds the blendshapes of `model` as `options` ask (fitted or baked targets, rotation to
 /// Y-up, normals) and checks that everything is finite.
 pub fn prepare(model: &dyn Model, options: &ExportOptions) -> Result<Prepared> {
-    if (options.animation || options.bake) && !(options.fps.is_finite() && options.fps > 0.0) {
-        return Err(Error::Invalid(format!("--fps ({}) must be a positive number", options.fps)));
+    if (options.animation || options.bake)
+        && let Some(e) = fps_error(options.fps)
+    {
+        return Err(Error::Invalid(e));
     }
     if !(options.fit_regularisation.is_finite() && options.fit_regularisation > 0.0) {
         return Err(Error::Invalid(format!(
@@ -578,7 +598,7 @@ pub fn prepare(model: &dyn Model, options: &ExportOptions) -> Result<Prepared> {
         }
     };
     // Orientation: rotate the base and the targets so that the chosen axis is +Y.
-    let (rotation, up_axis) = orientation(&shapes.base, options.up);
+    let (rotation, up_axis) = orientation(&shapes.base, &rest.faces, options.up);
     shapes.base = rotate(&rotation, &shapes.base);
     for d in &mut shapes.deltas {
         *d = rotate(&rotation, d);
@@ -686,6 +706,14 @@ pub fn export_glb(model: &dyn Model, path: &Path, options: &ExportOptions) -> Re
 
     if !keys.is_empty() {
         let times: Vec<f32> = (0..keys.len()).map(|i| (i as f64 / options.fps) as f32).collect();
+        if let Some(i) = times.windows(2).position(|w| !(w[1] > w[0] && w[1].is_finite())) {
+            return Err(Error::Invalid(format!(
+                "--fps {:?}: the key times of frames {i} and {} are not increasing in f32 ({} frames)",
+                options.fps,
+                i + 1,
+                keys.len()
+            )));
+        }
         let values: Vec<f32> = keys.iter().flatten().map(|&x| x as f32).collect();
         let input = b.floats(&times, Type::Scalar, None, true, "frame times");
         let output = b.floats(&values, Type::Scalar, None, false, "frame weights");

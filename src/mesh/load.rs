@@ -77,13 +77,7 @@ pub fn read_mesh(path: &Path) -> Result<LoadedMesh> {
     })?;
     // Never open a FIFO or a device (reading /dev/zero never ends; a FIFO blocks).
     let meta = std::fs::metadata(path).map_err(|e| Error::io(path, e))?;
-    if !meta.is_file() {
-        return Err(Error::Invalid(format!(
-            "{}: not a regular file ({})",
-            path.display(),
-            super::sequence::file_kind(&meta)
-        )));
-    }
+    super::sequence::require_regular(path, &meta)?;
     let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
     crate::timing::count("mesh bytes read", bytes.len() as u64);
     parse_mesh(&bytes, format, path)

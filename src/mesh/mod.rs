@@ -3,6 +3,7 @@
 //! Conventions: positions are `f64` in the data's own units; faces are triangles given as
 //! 0-based vertex indices, counter-clockwise when seen from outside (the file's order is kept).
 
+pub mod arrays;
 pub mod inspect;
 pub mod load;
 pub mod normals;

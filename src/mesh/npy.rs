@@ -35,13 +35,13 @@ pub fn load_npy_with_faces(
     n_vertices: usize,
     faces: Vec<[usize; 3]>,
 ) -> Result<MeshSequence> {
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
     let is_npz = path.extension().and_then(|e| e.to_str()).is_some_and(|e| e.eq_ignore_ascii_case("npz"));
-    let (npy, what) = if is_npz {
+    let frames = if is_npz {
         let name = array.ok_or_else(|| {
             Error::config("data.array", format!("{}: name the array of the .npz to read", path.display()))
         })?;
-        (npz_entry(path, &bytes, name)?, format!("{} (array `{name}`)", path.display()))
+        let bytes = read_regular(path)?;
+        npz_frames(path, &bytes, name, n_vertices)?
     } else {
         if let Some(a) = array {
             return Err(Error::config(
@@ -49,76 +49,318 @@ pub fn load_npy_with_faces(
                 format!("`{a}` is given, but {} is a .npy with a single array", path.display()),
             ));
         }
-        (bytes, path.display().to_string())
+        let (file, len) = open_regular(path)?;
+        let what = path.display().to_string();
+        read_frames(&mut std::io::BufReader::new(file), len, &what, n_vertices)?
     };
-    let frames = parse_frames(&npy, &what, n_vertices)?;
     let stem = path.file_stem().and_then(|s| s.to_str()).unwrap_or("frame").to_string();
     let width = frames.len().to_string().len();
     let names = (1..=frames.len()).map(|i| format!("{stem}_{i:0width$}")).collect();
     Ok(MeshSequence { faces, frames, names })
 }
 
-/// The bytes of `<name>.npy` inside the `.npz` archive `bytes`.
-fn npz_entry(path: &Path, bytes: &[u8], name: &str) -> Result<Vec<u8>> {
+/// Opens `path` for reading if it is a regular file (after symbolic links), with its length.
+/// A FIFO would block and a device (`/dev/zero`) never end: both are refused before opening,
+/// with the message the mesh readers give ("not a regular file (a FIFO)").
+fn open_regular(path: &Path) -> Result<(std::fs::File, u64)> {
+    let meta = std::fs::metadata(path).map_err(|e| Error::io(path, e))?;
+    super::sequence::require_regular(path, &meta)?;
+    let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+    // The file opened may not be the one looked at (a rename in between): check it again.
+    let meta = file.metadata().map_err(|e| Error::io(path, e))?;
+    super::sequence::require_regular(path, &meta)?;
+    Ok((file, meta.len()))
+}
+
+/// The bytes of the regular file `path` (see [`open_regular`]), at most its length when opened.
+fn read_regular(path: &Path) -> Result<Vec<u8>> {
+    let (file, len) = open_regular(path)?;
+    let mut bytes = Vec::new();
+    file.take(len).read_to_end(&mut bytes).map_err(|e| Error::io(path, e))?;
+    Ok(bytes)
+}
+
+/// The frames of the array `<name>.npy` inside the `.npz` archive `bytes` (the file `path`).
+/// The member is inflated only as far as its `.npy` header implies (and never past the size the
+/// archive declares for it), so an inflate bomb costs no more memory than an honest array.
+fn npz_frames(path: &Path, bytes: &[u8], name: &str, n_vertices: usize) -> Result<Vec<Vec<Vec3>>> {
     let bad = |m: String| Error::parse(path, None, m);
     let mut zip =
         zip::ZipArchive::new(Cursor::new(bytes)).map_err(|e| bad(format!("not a .npz (zip) archive: {e}")))?;
     let names: Vec<String> = zip.file_names().filter_map(|f| f.strip_suffix(".npy")).map(str::to_string).collect();
-    let mut entry = zip.by_name(&format!("{name}.npy")).map_err(|_| {
-        Error::config("data.array", format!("{}: no array `{name}` (it holds: {})", path.display(), names.join(", ")))
-    })?;
-    // The declared size must fit the archive before anything is allocated for it.
-    if entry.size() > 64 * (bytes.len() as u64).max(1 << 20) {
-        return Err(bad(format!("array `{name}` claims {} bytes, implausible for this archive", entry.size())));
+    let entry = match zip.by_name(&format!("{name}.npy")) {
+        Ok(entry) => entry,
+        Err(zip::result::ZipError::FileNotFound) => {
+            return Err(Error::config(
+                "data.array",
+                format!("{}: no array `{name}` (it holds: {})", path.display(), names.join(", ")),
+            ));
+        }
+        Err(e) => return Err(bad(format!("array `{name}`: {e}"))),
+    };
+    let declared = entry.size();
+    // The declared size must fit the archive before anything is read for it.
+    if declared > 64 * (bytes.len() as u64).max(1 << 20) {
+        return Err(bad(format!("array `{name}` claims {declared} bytes, implausible for this archive")));
     }
-    let mut out = Vec::with_capacity(entry.size() as usize);
-    entry.read_to_end(&mut out).map_err(|e| bad(format!("array `{name}`: {e}")))?;
-    Ok(out)
+    let what = format!("{} (array `{name}`)", path.display());
+    read_frames(&mut entry.take(declared), declared, &what, n_vertices)
 }
 
-/// Parses an F × N × 3 `.npy` image into frames, checking the shape against `n_vertices`.
-fn parse_frames(bytes: &[u8], what: &str, n_vertices: usize) -> Result<Vec<Vec<Vec3>>> {
+/// NumPy's bound on the length of a `.npy` header (`max_header_size` of `numpy.lib.format`,
+/// 10 000 bytes): a longer one is refused before anything is allocated for it.
+pub const MAX_HEADER_LEN: usize = 10_000;
+
+/// What a `.npy` header says: the element type, the order and the shape.
+#[derive(Debug, Clone, PartialEq)]
+struct NpyHeader {
+    /// Bytes per value: 4 (`float32`) or 8 (`float64`).
+    item: usize,
+    /// Little-endian values.
+    little: bool,
+    /// Fortran (column-major) order.
+    fortran: bool,
+    shape: Vec<u64>,
+    /// Bytes before the data: magic string, version, length field and header text.
+    len: u64,
+}
+
+/// Reads the magic string, the version, the header length and the header text of a `.npy`
+/// from `r`, which holds `available` bytes in all. Every length is checked against NumPy's
+/// bound and against `available` before anything is allocated for it.
+fn read_header(r: &mut dyn Read, available: u64) -> std::result::Result<NpyHeader, String> {
+    let short = |e: std::io::Error| format!("not a NumPy .npy array (too short for its header: {e})");
+    let mut pre = [0u8; 8];
+    r.read_exact(&mut pre).map_err(short)?;
+    if &pre[..6] != b"\x93NUMPY" {
+        return Err("not a NumPy .npy array (no \\x93NUMPY magic string)".into());
+    }
+    let (major, minor) = (pre[6], pre[7]);
+    let (header_len, pre_len) = match major {
+        1 => {
+            let mut b = [0u8; 2];
+            r.read_exact(&mut b).map_err(short)?;
+            (u64::from(u16::from_le_bytes(b)), 10u64)
+        }
+        2 | 3 => {
+            let mut b = [0u8; 4];
+            r.read_exact(&mut b).map_err(short)?;
+            (u64::from(u32::from_le_bytes(b)), 12u64)
+        }
+        _ => return Err(format!("NumPy format version {major}.{minor} is not 1.0, 2.0 or 3.0")),
+    };
+    if header_len > MAX_HEADER_LEN as u64 {
+        return Err(format!("header of {header_len} bytes is longer than NumPy's limit of {MAX_HEADER_LEN}"));
+    }
+    if pre_len + header_len > available {
+        return Err(format!("header of {header_len} bytes runs past the end ({available} bytes in all)"));
+    }
+    let mut text = vec![0u8; header_len as usize];
+    r.read_exact(&mut text).map_err(short)?;
+    let text = std::str::from_utf8(&text).map_err(|_| "the header is not UTF-8 text".to_string())?;
+    let mut h = parse_header_text(text.trim_end())?;
+    h.len = pre_len + header_len;
+    Ok(h)
+}
+
+/// Parses the header text, a Python dict literal such as
+/// `{'descr': '<f8', 'fortran_order': False, 'shape': (2, 5, 3), }`: exactly these three keys,
+/// a float32 or float64 `descr`, and a shape of non-negative integers.
+fn parse_header_text(text: &str) -> std::result::Result<NpyHeader, String> {
+    let mut p = Lit { s: text.as_bytes(), i: 0 };
+    let (mut descr, mut fortran, mut shape) = (None, None, None);
+    p.expect(b'{')?;
+    loop {
+        p.skip_space();
+        if p.eat(b'}') {
+            break;
+        }
+        let key = p.string()?;
+        p.expect(b':')?;
+        p.skip_space();
+        match key.as_str() {
+            "descr" => descr = Some(p.descr()?),
+            "fortran_order" => fortran = Some(p.boolean()?),
+            "shape" => shape = Some(p.shape()?),
+            other => return Err(format!("header key `{other}` is not one of descr, fortran_order, shape")),
+        }
+        p.skip_space();
+        if !p.eat(b',') {
+            p.expect(b'}')?;
+            break;
+        }
+    }
+    p.skip_space();
+    if p.i != p.s.len() {
+        return Err(format!("header: unexpected text after the dict at byte {}", p.i));
+    }
+    let ((item, little), fortran, shape) = match (descr, fortran, shape) {
+        (Some(d), Some(f), Some(s)) => (d, f, s),
+        _ => return Err("header: descr, fortran_order and shape are all required".into()),
+    };
+    Ok(NpyHeader { item, little, fortran, shape, len: 0 })
+}
+
+/// A cursor over the header text (see [`parse_header_text`]).
+struct Lit<'a> {
+    s: &'a [u8],
+    i: usize,
+}
+
+impl Lit<'_> {
+    fn skip_space(&mut self) {
+        while self.i < self.s.len() && self.s[self.i].is_ascii_whitespace() {
+            self.i += 1;
+        }
+    }
+    fn eat(&mut self, c: u8) -> bool {
+        self.skip_space();
+        let hit = self.s.get(self.i) == Some(&c);
+        if hit {
+            self.i += 1;
+        }
+        hit
+    }
+    fn expect(&mut self, c: u8) -> std::result::Result<(), String> {
+        if self.eat(c) { Ok(()) } else { Err(format!("header: expected `{}` at byte {}", c as char, self.i)) }
+    }
+    /// A quoted string without escapes (`'…'` or `"…"`).
+    fn string(&mut self) -> std::result::Result<String, String> {
+        self.skip_space();
+        let Some(&q) = self.s.get(self.i).filter(|&&q| q == b'\'' || q == b'"') else {
+            return Err(format!("header: expected a quoted string at byte {}", self.i));
+        };
+        let start = self.i + 1;
+        let Some(len) = self.s[start..].iter().position(|&c| c == q || c == b'\\') else {
+            return Err(format!("header: unterminated string at byte {}", self.i));
+        };
+        if self.s[start + len] == b'\\' {
+            return Err(format!("header: escapes in strings are not supported (byte {})", start + len));
+        }
+        self.i = start + len + 1;
+        Ok(String::from_utf8_lossy(&self.s[start..start + len]).into_owned())
+    }
+    /// `'<f8'`, `'>f4'`, …: (bytes per value, little-endian).
+    fn descr(&mut self) -> std::result::Result<(usize, bool), String> {
+        if !matches!(self.s.get(self.i), Some(b'\'' | b'"')) {
+            return Err("dtype is not float32 or float64 (a structured descr)".into());
+        }
+        let d = self.string()?;
+        let (order, kind) = match d.as_bytes().first() {
+            Some(b'<' | b'>' | b'=' | b'|') => (d.as_bytes()[0], &d[1..]),
+            _ => (b'=', d.as_str()),
+        };
+        let item = match kind {
+            "f4" => 4,
+            "f8" => 8,
+            _ => return Err(format!("dtype {d} is not float32 or float64")),
+        };
+        let little = match order {
+            b'<' => true,
+            b'>' => false,
+            _ => cfg!(target_endian = "little"),
+        };
+        Ok((item, little))
+    }
+    fn boolean(&mut self) -> std::result::Result<bool, String> {
+        for (word, value) in [(&b"True"[..], true), (&b"False"[..], false)] {
+            if self.s[self.i..].starts_with(word) {
+                self.i += word.len();
+                return Ok(value);
+            }
+        }
+        Err(format!("header: fortran_order is not True or False (byte {})", self.i))
+    }
+    /// `(a, b, c)` or `[a, b, c]` of non-negative integers (a trailing comma and Python 2's `L`
+    /// suffix allowed); at most 32 dimensions, as in NumPy.
+    fn shape(&mut self) -> std::result::Result<Vec<u64>, String> {
+        let close = if self.eat(b'(') {
+            b')'
+        } else if self.eat(b'[') {
+            b']'
+        } else {
+            return Err(format!("header: shape is not a tuple (byte {})", self.i));
+        };
+        let mut dims = Vec::new();
+        loop {
+            if self.eat(close) {
+                return Ok(dims);
+            }
+            self.skip_space();
+            let start = self.i;
+            while self.i < self.s.len() && self.s[self.i].is_ascii_digit() {
+                self.i += 1;
+            }
+            let digits = std::str::from_utf8(&self.s[start..self.i]).unwrap_or_default();
+            let dim = digits
+                .parse::<u64>()
+                .map_err(|_| format!("header: shape entry at byte {start} is not a non-negative integer below 2^64"))?;
+            if self.s.get(self.i) == Some(&b'L') {
+                self.i += 1;
+            }
+            dims.push(dim);
+            if dims.len() > 32 {
+                return Err("header: shape has more than 32 dimensions".into());
+            }
+            if !self.eat(b',') {
+                self.expect(close)?;
+                return Ok(dims);
+            }
+        }
+    }
+}
+
+/// Reads a whole `.npy` image (header and F × N × 3 data) from `r`, which holds `available`
+/// bytes, checking the shape against `n_vertices`. Exactly the bytes the header implies are read.
+fn read_frames(r: &mut dyn Read, available: u64, what: &str, n_vertices: usize) -> Result<Vec<Vec<Vec3>>> {
     let bad = |m: String| Error::Invalid(format!("{what}: {m}"));
-    let npy = npyz::NpyFile::new(bytes).map_err(|e| bad(format!("not a NumPy .npy array: {e}")))?;
-    let shape: Vec<u64> = npy.shape().to_vec();
+    let h = read_header(r, available).map_err(bad)?;
+    let shape = &h.shape;
     if shape.len() != 3 || shape[2] != 3 {
         return Err(bad(format!("shape {shape:?}, expected (frames, {n_vertices}, 3)")));
     }
-    let (f, n) = (shape[0] as usize, shape[1] as usize);
-    if n != n_vertices {
+    let (f, n) = (shape[0], shape[1]);
+    if n != n_vertices as u64 {
         return Err(bad(format!(
             "shape {shape:?}: {n} vertices per frame, the template mesh has {n_vertices} (expected ({f}, {n_vertices}, 3))"
         )));
     }
+    if n == 0 {
+        return Err(bad(format!("shape {shape:?}: no vertex per frame")));
+    }
     if f == 0 {
         return Err(bad("the array holds no frame".into()));
     }
-    let item = match npy.dtype().num_bytes() {
-        Some(b @ (4 | 8)) => b as u64,
-        _ => return Err(bad(format!("dtype {} is not float32 or float64", npy.dtype().descr()))),
+    let present = available - h.len;
+    let needed = f.checked_mul(n).and_then(|x| x.checked_mul(3)).and_then(|x| x.checked_mul(h.item as u64));
+    let needed = match needed {
+        Some(b) if b <= present => b as usize,
+        Some(b) => {
+            return Err(bad(format!("shape {shape:?} needs {b} bytes of data, {present} follow the header")));
+        }
+        None => {
+            return Err(bad(format!(
+                "shape {shape:?} needs more than 2^64 bytes of data, {present} follow the header"
+            )));
+        }
     };
-    let needed = shape.iter().product::<u64>().saturating_mul(item);
-    if needed > bytes.len() as u64 {
-        return Err(bad(format!("shape {shape:?} needs {needed} bytes of data, the file has {} in all", bytes.len())));
+    let mut data = Vec::new();
+    r.take(needed as u64).read_to_end(&mut data).map_err(|e| bad(format!("reading the values: {e}")))?;
+    if data.len() != needed {
+        return Err(bad(format!("{} bytes of data read, shape {shape:?} needs {needed}", data.len())));
     }
-    let fortran = npy.order() == npyz::Order::Fortran;
-    let values: Vec<f64> = match npy.try_data::<f64>() {
-        Ok(r) => r.collect::<std::io::Result<Vec<f64>>>().map_err(|e| bad(format!("reading the values: {e}")))?,
-        Err(npy) => match npy.try_data::<f32>() {
-            Ok(r) => r
-                .collect::<std::io::Result<Vec<f32>>>()
-                .map_err(|e| bad(format!("reading the values: {e}")))?
-                .into_iter()
-                .map(f64::from)
-                .collect(),
-            Err(npy) => return Err(bad(format!("dtype {} is not float32 or float64", npy.dtype().descr()))),
-        },
+    let value = |i: usize| -> f64 {
+        let b = &data[i * h.item..(i + 1) * h.item];
+        match (h.item, h.little) {
+            (8, true) => f64::from_le_bytes(b.try_into().unwrap_or_default()),
+            (8, false) => f64::from_be_bytes(b.try_into().unwrap_or_default()),
+            (_, true) => f64::from(f32::from_le_bytes(b.try_into().unwrap_or_default())),
+            (_, false) => f64::from(f32::from_be_bytes(b.try_into().unwrap_or_default())),
+        }
     };
-    if values.len() != f * n * 3 {
-        return Err(bad(format!("{} values read, shape {shape:?} needs {}", values.len(), f * n * 3)));
-    }
+    let (f, n) = (f as usize, n as usize);
     let at = |fi: usize, v: usize, c: usize| {
-        if fortran { values[fi + f * (v + n * c)] } else { values[(fi * n + v) * 3 + c] }
+        if h.fortran { value(fi + f * (v + n * c)) } else { value((fi * n + v) * 3 + c) }
     };
     let mut frames = Vec::with_capacity(f);
     for fi in 0..f {
@@ -135,9 +377,15 @@ fn parse_frames(bytes: &[u8], what: &str, n_vertices: usize) -> Result<Vec<Vec<V
     Ok(frames)
 }
 
+/// Parses an F × N × 3 `.npy` image held in memory (see [`read_frames`]).
+#[cfg(test)]
+fn parse_frames(bytes: &[u8], what: &str, n_vertices: usize) -> Result<Vec<Vec<Vec3>>> {
+    read_frames(&mut Cursor::new(bytes), bytes.len() as u64, what, n_vertices)
+}
+
 /// The header of a `.npy` (format 1.0) of `descr` (e.g. `<f8`), order and shape, padded so the
-/// data starts at a multiple of 64 bytes.
-fn npy_header(descr: &str, fortran: bool, shape: &[usize]) -> Vec<u8> {
+/// data starts at a multiple of 64 bytes (the data follows it as is).
+pub fn npy_header(descr: &str, fortran: bool, shape: &[usize]) -> Vec<u8> {
     let dims: Vec<String> = shape.iter().map(|d| d.to_string()).collect();
     let mut header = format!(
         "{{'descr': '{descr}', 'fortran_order': {}, 'shape': ({},), }}",

@@ -21,9 +21,10 @@ pub enum View {
     Side,
     /// Camera on +y looking down; screen right = +x, up = −z.
     Top,
-    /// Camera on the + side of axis `view`, the + side of axis `up` pointing up, screen right =
-    /// e_up × e_view ([`View::auto`] chooses the axes from the shape, see [`auto_axes`]).
-    Axes { up: usize, view: usize },
+    /// Camera on the + side of axis `view` (the − side when `negative`), the + side of axis `up`
+    /// pointing up, screen right = e_up × (camera direction) ([`View::auto`] chooses the axes
+    /// from the shape, see [`auto_axes`] and [`front_is_negative`]).
+    Axes { up: usize, view: usize, negative: bool },
 }
 
 impl View {
@@ -37,10 +38,11 @@ impl View {
         }
     }
 
-    /// The automatic view of a shape ([`auto_axes`]).
-    pub fn auto(positions: &[Vec3]) -> View {
-        let (up, view) = auto_axes(positions);
-        View::Axes { up, view }
+    /// The automatic view of a shape: axes by [`auto_axes`], the camera on the side of the view
+    /// axis that sees the front ([`front_is_negative`]).
+    pub fn auto(mesh: &TriMesh) -> View {
+        let (up, view) = auto_axes(&mesh.positions);
+        View::Axes { up, view, negative: front_is_negative(&mesh.positions, &mesh.faces, view) }
     }
 
     /// (screen x, screen y, depth towards the camera) of a point.
@@ -49,13 +51,15 @@ impl View {
             View::Front => [p[0], p[1], p[2]],
             View::Side => [-p[2], p[1], p[0]],
             View::Top => [p[0], -p[2], p[1]],
-            View::Axes { up, view } => {
+            View::Axes { up, view, negative } => {
                 let (u, v) = (up.min(2), view.min(2));
                 // right = e_up × e_view: the remaining axis with the sign of the permutation.
                 let r = 3 - u - v;
                 let sign = if (u + 1) % 3 == v { 1.0 } else { -1.0 };
-                // e_u × e_v = +e_r when (u, v, r) is cyclic, i.e. v = u + 1 (mod 3).
-                [sign * p[r], p[u], p[v]]
+                // e_u × e_v = +e_r when (u, v, r) is cyclic, i.e. v = u + 1 (mod 3). From the −
+                // side, right and depth both flip (a half turn about the up axis).
+                let f = if negative { -1.0 } else { 1.0 };
+                [f * sign * p[r], p[u], f * p[v]]
             }
         }
     }
@@ -84,6 +88,26 @@ pub fn auto_axes(positions: &[Vec3]) -> (usize, usize) {
         }
     }
     (up, view)
+}
+
+/// Which side of the view axis `view` (0 = x, 1 = y, 2 = z) shows a shape's front: the side
+/// most vertex normals face. `true` when more vertices face the − side (ties: the + side).
+///
+/// For an open shape (a face mask) nearly every normal faces the front. For a closed one the
+/// area-weighted normals cancel exactly, but the vertex count does not: detail (a face, hands,
+/// toes) is finer on the front. SCAPE's frame 1: 10 % more vertices face −y than +y, so it is
+/// seen from −y (from +y it showed its back).
+pub fn front_is_negative(positions: &[Vec3], faces: &[[usize; 3]], view: usize) -> bool {
+    let v = view.min(2);
+    let mut balance = 0i64;
+    for n in vertex_normals(positions, faces, NormalWeighting::Area) {
+        if n[v] > 1e-9 {
+            balance += 1;
+        } else if n[v] < -1e-9 {
+            balance -= 1;
+        }
+    }
+    balance < 0
 }
 
 /// Picture settings.
@@ -284,8 +308,11 @@ mod tests {
 
     #[test]
     fn axes_views_match_the_named_ones_and_auto_stands_a_long_shape_up() {
-        assert_eq!(View::Axes { up: 1, view: 2 }.project([1.0, 2.0, 3.0]), View::Front.project([1.0, 2.0, 3.0]));
-        assert_eq!(View::Axes { up: 1, view: 0 }.project([1.0, 2.0, 3.0]), View::Side.project([1.0, 2.0, 3.0]));
+        let axes = |up, view, negative| View::Axes { up, view, negative };
+        assert_eq!(axes(1, 2, false).project([1.0, 2.0, 3.0]), View::Front.project([1.0, 2.0, 3.0]));
+        assert_eq!(axes(1, 0, false).project([1.0, 2.0, 3.0]), View::Side.project([1.0, 2.0, 3.0]));
+        // From the − side: a half turn about the up axis (right and depth flip, up stays).
+        assert_eq!(axes(1, 2, true).project([1.0, 2.0, 3.0]), [-1.0, 2.0, -3.0]);
         // A shape lying along z (the synthetic tube: long in z, round in x and y) stands up, seen
         // from +x; a flat shape facing z (a face) keeps y up and z towards the camera.
         let tube = crate::synthetic::tube_mesh();
@@ -293,7 +320,7 @@ mod tests {
         let face: Vec<Vec3> = vec![[0.0, 0.0, 0.0], [0.8, 1.0, 0.1], [-0.8, -1.0, 0.3]];
         assert_eq!(auto_axes(&face), (1, 2));
         // Rendered automatically, the tube's picture is taller than wide.
-        let opts = RenderOptions { width: 100, height: 100, view: View::auto(&tube.positions), ..Default::default() };
+        let opts = RenderOptions { width: 100, height: 100, view: View::auto(&tube), ..Default::default() };
         let img = render(&tube, None, &opts).unwrap();
         let (mut xs, mut ys) = (Vec::new(), Vec::new());
         for y in 0..100 {
@@ -307,5 +334,24 @@ mod tests {
         let w = xs.iter().max().unwrap() - xs.iter().min().unwrap();
         let h = ys.iter().max().unwrap() - ys.iter().min().unwrap();
         assert!(h > 3 * w, "auto view of the tube: {w}×{h} pixels of ink");
+    }
+
+    #[test]
+    fn the_camera_sees_the_side_most_normals_face() {
+        // A cap (open, a face mask): facing +z it is seen from +z; turned over, from −z.
+        let mut cap = crate::mesh::primitives::grid(8, 8, 1.0);
+        for p in &mut cap.positions {
+            p[2] = -((p[0] - 0.5).powi(2) + (p[1] - 0.5).powi(2));
+        }
+        let faces_up =
+            vertex_normals(&cap.positions, &cap.faces, NormalWeighting::Area).iter().filter(|n| n[2] > 0.0).count();
+        assert!(faces_up > cap.positions.len() / 2, "the test cap faces +z");
+        assert!(!front_is_negative(&cap.positions, &cap.faces, 2));
+        let flipped: Vec<[usize; 3]> = cap.faces.iter().map(|f| [f[0], f[2], f[1]]).collect();
+        assert!(front_is_negative(&cap.positions, &flipped, 2));
+        assert_eq!(
+            View::auto(&TriMesh { positions: cap.positions.clone(), faces: flipped }),
+            View::Axes { up: 1, view: 2, negative: true }
+        );
     }
 }

@@ -117,6 +117,15 @@ pub fn sequence_from_meshes(files: &[PathBuf], meshes: Vec<TriMesh>) -> Result<M
     Ok(MeshSequence { faces, frames, names })
 }
 
+/// `Ok` when `meta` (of `path`) is a regular file; otherwise the readers' one error, e.g.
+/// "x.npy: not a regular file (a FIFO)" (a FIFO would block, `/dev/zero` never end).
+pub fn require_regular(path: &Path, meta: &std::fs::Metadata) -> Result<()> {
+    if meta.is_file() {
+        return Ok(());
+    }
+    Err(Error::Invalid(format!("{}: not a regular file ({})", path.display(), file_kind(meta))))
+}
+
 /// What a non-regular file is, in words (FIFO, device, socket, …).
 pub fn file_kind(meta: &std::fs::Metadata) -> &'static str {
     use std::os::unix::fs::FileTypeExt;

@@ -1,11 +1,13 @@
 //! Mesh writers (OBJ, ASCII PLY with per-vertex colours and a scalar, OFF) and a colour map for
 //! heat maps.
 //!
-//! Every writer is atomic ([`crate::artifact::write_atomic_with`]): it writes `<path>.tmp` in the
-//! same directory, flushes it to disk and renames it over `path`, so a reader never sees a
-//! half-written file. Nothing non-finite is written: a non-finite coordinate or scalar, a face index out of range or a colour/scalar array
-//! of the wrong length is an error and leaves `path` untouched. Coordinates are written in Rust's
-//! shortest round-trip form, so reading a written file gives back the exact `f64` values.
+//! Every writer is atomic ([`crate::artifact::write_atomic_with`]): it writes a temporary file
+//! unique to the process ([`crate::artifact::temp_path`]) in the same directory, flushes it to
+//! disk and renames it over `path`, so a reader never sees a half-written file. Nothing
+//! non-finite is written: a non-finite coordinate or scalar, a face index out of range or a
+//! colour/scalar array of the wrong length is an error and leaves `path` untouched. Coordinates
+//! are written in Rust's shortest round-trip form, so reading a written file gives back the exact
+//! `f64` values.
 
 use std::io::Write;
 use std::path::Path;

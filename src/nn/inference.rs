@@ -495,9 +495,47 @@ impl Autoencoder {
         }
         meta.config.validate()?;
         Self::check_mesh(&meta_path, meta.n_vertices, meta.neighbor_fingerprint, &neighbors)?;
+        // K sizes the components [K, 9N] the network is built with: bounded before allocating.
+        let n = neighbors.n_vertices();
+        if meta.config.components > n {
+            return Err(Error::parse(
+                &meta_path,
+                None,
+                format!(
+                    "`config.components` is {}; a model of {n} vertices has at most {n} (one centre vertex each)",
+                    meta.config.components
+                ),
+            ));
+        }
         let path = dir.join(MODEL_FILE);
         let bytes = std::fs::read(&path).map_err(|e| Error::io(&path, e))?;
-        Self::from_record_bytes(&path, meta.config, bytes, neighbors)
+        let model = Self::from_record_bytes(&path, meta.config, bytes, neighbors)?;
+        model.check_magnitudes(&path)?;
+        Ok(model)
+    }
+
+    /// Errors (naming `path` and the parameter) when a parameter's magnitude exceeds
+    /// [`crate::artifact::MAX_MODEL_VALUE`]: damage, not training.
+    fn check_magnitudes(&self, path: &Path) -> Result<()> {
+        let max = crate::artifact::MAX_MODEL_VALUE;
+        let w = &self.weights;
+        let mut arrays: Vec<(String, &[f32])> = vec![("components".into(), &w.c)];
+        for (l, lw) in w.layers.iter().enumerate() {
+            arrays.push((format!("layers.{l}.weight_point"), lw.wp.as_flattened()));
+            arrays.push((format!("layers.{l}.weight_neighbor"), lw.wn.as_flattened()));
+            arrays.push((format!("layers.{l}.bias"), &lw.b));
+            arrays.push((format!("layers.{l}.decoder_bias"), &lw.bd));
+        }
+        for (name, v) in arrays {
+            if let Some(x) = v.iter().find(|x| !x.is_finite() || f64::from(x.abs()) > max) {
+                return Err(Error::parse(
+                    path,
+                    None,
+                    format!("parameter `{name}` holds {x:e}, beyond the ±{max:e} a model stores"),
+                ));
+            }
+        }
+        Ok(())
     }
 
     /// The model stored in a training checkpoint.

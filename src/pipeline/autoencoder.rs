@@ -101,6 +101,43 @@ pub struct AeArtifact {
     pub train_codes: Vec<Vec<f64>>,
 }
 
+/// The checks of an autoencoder's `model.json` header that need no network: K within the
+/// vertices (before anything is sized by it), the reference a training frame, every centre
+/// vertex on the mesh, the scalings sane. Errors name `json` and the key.
+fn check_header(header: &AeHeader, json: &Path, n: usize) -> Result<()> {
+    let bad = |m: String| Error::parse(json, None, m);
+    if header.components == 0 || header.components > n {
+        return Err(bad(format!(
+            "`components` is {}; an autoencoder on {n} vertices has 1 to {n} (one centre vertex each)",
+            header.components
+        )));
+    }
+    let f = header.train_frames.len();
+    if header.reference >= f {
+        return Err(bad(format!("`reference` is {}, not one of the {f} training frames", header.reference)));
+    }
+    if let Some((i, c)) = header.analysis.iter().enumerate().find(|(_, c)| c.center >= n || c.support_size > n) {
+        return Err(bad(format!(
+            "`analysis[{i}]` has centre vertex {} and support {}; the mesh has {n} vertices",
+            c.center, c.support_size
+        )));
+    }
+    header.unit_box.validate().map_err(|m| bad(format!("`unit_box`: {m}")))?;
+    let sc = &header.scaling;
+    if sc.width != 9 || sc.min.len() != 9 || sc.max.len() != 9 {
+        return Err(bad(format!(
+            "`scaling` has width {} with {} minima and {} maxima; the network reads 9 numbers per vertex",
+            sc.width,
+            sc.min.len(),
+            sc.max.len()
+        )));
+    }
+    if let Some(i) = (0..9).find(|&i| sc.min[i].is_nan() || sc.max[i].is_nan() || sc.min[i] > sc.max[i]) {
+        return Err(bad(format!("`scaling`: dimension {i} has minimum {} above its maximum {}", sc.min[i], sc.max[i])));
+    }
+    Ok(())
+}
+
 impl AeArtifact {
     /// Loads an artefact directory written by [`train`].
     pub fn load(dir: &Path) -> Result<Self> {
@@ -110,6 +147,22 @@ impl AeArtifact {
         let options =
             RepresentationOptions { acap_consistency: consistency_of(&header.consistency), ..Default::default() };
         let representation = Representation::new(RepresentationKind::Acap, &rest, options)?;
+        check_header(&header, &dir.join("model.json"), rest.n_vertices())?;
+        // The network's K must be the header's, checked before the network is built with it.
+        let meta = dir.join(crate::nn::inference::META_FILE);
+        let meta_k =
+            artifact::read_json::<serde_json::Value>(&meta)?.pointer("/config/components").and_then(|v| v.as_u64());
+        if meta_k != Some(header.components as u64) {
+            return Err(Error::parse(
+                &meta,
+                None,
+                format!(
+                    "`config.components` is {}, but model.json's `components` is {}: the files belong to different models",
+                    meta_k.map_or("missing".to_string(), |k| k.to_string()),
+                    header.components
+                ),
+            ));
+        }
         let neighbors = NeighborIndex::new(representation.element_adjacency())?;
         let model = Autoencoder::load(&dir, neighbors)?;
         let k = header.components + 3 * translated_pieces(&representation).len();
@@ -122,6 +175,14 @@ impl AeArtifact {
         }
         let f = header.train_frames.len();
         let codes = arrays.get_shaped("train_codes", &[f, k])?;
+        if let Some(c) = header.analysis.iter().find(|c| c.dim >= k || c.rank >= k) {
+            return Err(Error::Invalid(format!(
+                "{}: `analysis` has dimension {} of rank {}; the model has {k} dimensions",
+                dir.join("model.json").display(),
+                c.dim,
+                c.rank
+            )));
+        }
         let train_codes = codes.chunks_exact(k.max(1)).map(<[f64]>::to_vec).collect();
         Ok(AeArtifact { header, rest, representation, model, train_codes })
     }
@@ -522,8 +583,10 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
     let ae_cfg = m.network_config();
     let out = ctx.out;
     let checkpoint = out.join(CHECKPOINT_FILE);
-    if ctx.resume && !checkpoint.exists() {
-        return Err(Error::Invalid(format!("--resume: no checkpoint at {}", checkpoint.display())));
+    if let Some(from) = ctx.resume
+        && !from.is_file()
+    {
+        return Err(Error::Invalid(format!("--resume: no checkpoint at {}", from.display())));
     }
     ctx.progress.stage("acap features", 0);
     let t_rep = Instant::now();
@@ -569,8 +632,8 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
     };
 
     std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
-    let mut trainer = if ctx.resume {
-        Trainer::resume(&checkpoint, ae_cfg.clone(), &data, &neighbors, &distances)?
+    let mut trainer = if let Some(from) = ctx.resume {
+        Trainer::resume(from, ae_cfg.clone(), &data, &neighbors, &distances)?
     } else {
         Trainer::new(ae_cfg.clone(), &data, &neighbors, &distances)?
     };
@@ -584,8 +647,8 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
     let mut log = std::fs::OpenOptions::new()
         .create(true)
         .write(true)
-        .append(ctx.resume)
-        .truncate(!ctx.resume)
+        .append(ctx.resume.is_some())
+        .truncate(ctx.resume.is_none())
         .open(&log_path)
         .map_err(|e| Error::io(&log_path, e))?;
     let progress = &mut *ctx.progress;
@@ -622,6 +685,14 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
         return Err(Error::io(&log_path, e));
     }
     progress.finish_stage();
+    // A resumed run with no steps left writes no checkpoint: the one it resumed from stays
+    // the artefact's.
+    if let Some(from) = ctx.resume
+        && from != checkpoint
+        && !checkpoint.exists()
+    {
+        std::fs::copy(from, &checkpoint).map_err(|e| Error::io(from, e))?;
+    }
     if summary.stopped {
         return Err(Error::Invalid(format!(
             "stopped at iteration {} of {}; checkpoint written to {} (continue with --resume)",

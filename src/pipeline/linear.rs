@@ -88,6 +88,15 @@ impl LinearArtifact {
         let w = representation.width();
         let k = header.components;
         let f = header.train_frames.len();
+        let json = artifact::model_dir(dir).join("model.json");
+        if k == 0 || k > e * w {
+            return Err(Error::parse(
+                &json,
+                None,
+                format!("`components` is {k}; a model on {e} elements of {w} numbers has 1 to {}", e * w),
+            ));
+        }
+        header.unit_box.validate().map_err(|m| Error::parse(&json, None, format!("`unit_box`: {m}")))?;
         let model = LinearModel {
             n_elements: e,
             width: w,
@@ -162,13 +171,38 @@ pub fn rest_from_arrays(a: &ArrayStore) -> Result<TriMesh> {
             "model rest mesh arrays have shapes {ps:?} and {fs:?}, expected N×3 and T×3"
         )));
     }
+    if ps[0] < 3 || fs[0] == 0 {
+        return Err(Error::Invalid(format!(
+            "model rest mesh has {} vertices and {} faces; a mesh needs at least 3 and 1",
+            ps[0], fs[0]
+        )));
+    }
     let positions: Vec<Vec3> = p.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
-    let faces: Vec<[usize; 3]> = f.chunks_exact(3).map(|c| [c[0] as usize, c[1] as usize, c[2] as usize]).collect();
+    let faces = index_array("faces", f, ps[0])?;
+    let faces: Vec<[usize; 3]> = faces.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
     let rest = TriMesh::new(positions, faces);
     if let Some((i, face)) = rest.first_bad_index() {
         return Err(Error::Invalid(format!("model rest mesh face {i} {face:?} refers to a missing vertex")));
     }
     Ok(rest)
+}
+
+/// The indices stored (as f64) in model array `name`: each must be a whole number in
+/// `0..bound`, else the error names the array, the element and the value.
+pub fn index_array(name: &str, values: &[f64], bound: usize) -> Result<Vec<usize>> {
+    values
+        .iter()
+        .enumerate()
+        .map(|(i, &x)| {
+            if x.fract() == 0.0 && x >= 0.0 && x < bound as f64 {
+                Ok(x as usize)
+            } else {
+                Err(Error::Invalid(format!(
+                    "model.bin: array `{name}`: element {i} is {x}, not an index in 0..{bound}"
+                )))
+            }
+        })
+        .collect()
 }
 
 /// The representation of the training frames: the representation bound to the rest mesh, the

@@ -97,15 +97,34 @@ impl RegionArtifact {
         let (header, arrays): (RegionHeader, ArrayStore) = artifact::load_model(dir)?;
         let rest = rest_from_arrays(&arrays)?;
         let n = rest.n_vertices();
-        let labels: Vec<usize> = arrays.get_shaped("labels", &[n])?.iter().map(|&l| l as usize).collect();
-        let mut regions = Vec::with_capacity(header.components.len());
+        let json = artifact::model_dir(dir).join("model.json");
+        let bad = |m: String| Error::parse(&json, None, m);
+        // Bounds before anything is sized by them: one region per vertex at most, per region
+        // at most 3 × its vertices components (checked with its vertices below).
+        let regions_n = header.components.len();
+        if regions_n == 0 || regions_n > n {
+            return Err(bad(format!("`components` lists {regions_n} regions; a mesh of {n} vertices has 1 to {n}")));
+        }
+        header.unit_box.validate().map_err(|m| bad(format!("`unit_box`: {m}")))?;
+        for (key, v) in [("beta", header.beta), ("gamma", header.gamma), ("lambda", header.lambda), ("r", header.r)] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(bad(format!("`{key}` is {v}, not a number ≥ 0")));
+            }
+        }
+        let labels = super::linear::index_array("labels", arrays.get_shaped("labels", &[n])?, regions_n)?;
+        let mut regions = Vec::with_capacity(regions_n);
         for (i, &p) in header.components.iter().enumerate() {
             let (shape, v) = arrays.get(&format!("region{i}_vertices"))?;
             let ni = shape.first().copied().unwrap_or(0);
-            let vertices: Vec<usize> = v.iter().map(|&x| x as usize).collect();
-            if let Some(&bad) = vertices.iter().find(|&&x| x >= n) {
-                return Err(Error::Invalid(format!("{}: region {i} vertex {bad} out of range ({n})", dir.display())));
+            if shape.len() != 1 || ni == 0 || ni > n {
+                return Err(bad(format!(
+                    "region {i}: `region{i}_vertices` has shape {shape:?}; expected 1 to {n} vertices"
+                )));
             }
+            if p == 0 || p > 3 * ni {
+                return Err(bad(format!("`components[{i}]` is {p}; region {i} of {ni} vertices has 1 to {}", 3 * ni)));
+            }
+            let vertices = super::linear::index_array(&format!("region{i}_vertices"), v, n)?;
             regions.push(RegionBasis {
                 vertices,
                 mean: arrays.get_shaped(&format!("region{i}_mean"), &[3 * ni])?.to_vec(),

@@ -22,8 +22,9 @@ use crate::preprocess::Prepared;
 pub struct FitContext<'a> {
     /// The artefact directory.
     pub out: &'a Path,
-    /// Continue from `out`'s checkpoint (autoencoder).
-    pub resume: bool,
+    /// With `--resume`: the checkpoint to continue from (autoencoder; an interrupted run's, or
+    /// the finished run's in the artefact directory — read in place, never copied).
+    pub resume: Option<&'a Path>,
     /// Set (e.g. by Ctrl-C) to stop early after writing a checkpoint (autoencoder).
     pub stop: Option<Arc<AtomicBool>>,
     pub progress: &'a mut dyn Progress,
@@ -55,7 +56,7 @@ pub struct Fitted {
 
 /// Fits the configured method on prepared data.
 pub fn fit(prep: &Prepared, method: &MethodConfig, ctx: &mut FitContext<'_>) -> Result<Fitted> {
-    if ctx.resume && !method.can_resume() {
+    if ctx.resume.is_some() && !method.can_resume() {
         return Err(Error::Invalid(format!(
             "--resume applies to methods that train in steps (the autoencoder); {} trains in one go",
             method.kind().name()
@@ -157,16 +158,26 @@ fn warn_zero_components(model: &dyn Model) {
 }
 
 /// Loads the trained model in `dir` (an artefact directory or its `model.json`), by the
-/// `method` field of its header, after verifying every file against `manifest.json`.
+/// `method` field of its header, after verifying every file against `manifest.json`
+/// ([`artifact::open_for_reading`]: which also finishes a commit an interrupted training left
+/// half done, and says when a training is writing the directory right now).
 pub fn load_model(dir: &Path) -> Result<Box<dyn Model>> {
-    crate::timing::timed("load model", || load_verified(dir))
+    crate::timing::timed("load model", || {
+        let adir = artifact::model_dir(dir);
+        load_verified(&adir).map_err(|e| artifact::being_written(&adir, e))
+    })
 }
+
+/// Files the autoencoder's loader reads besides [`artifact::MODEL_FILES`].
+const AUTOENCODER_FILES: &[&str] = &[crate::nn::inference::META_FILE, crate::nn::inference::MODEL_FILE];
 
 fn load_verified(dir: &Path) -> Result<Box<dyn Model>> {
     // Every file of the artefact is checked against the manifest (length, checksum) before
-    // anything is read from it: a damaged or edited file is named, never half-used.
-    artifact::verify_manifest(&artifact::model_dir(dir))?;
-    let json = artifact::model_dir(dir).join("model.json");
+    // anything is read from it: a damaged or edited file is named, never half-used. The
+    // loaders then check structure and values themselves (the manifest may have been
+    // re-recorded after an edit).
+    let manifest = artifact::open_for_reading(dir)?;
+    let json = dir.join("model.json");
     let v: serde_json::Value = artifact::read_json(&json)?;
     let method = v.get("method").and_then(|m| m.as_str()).unwrap_or("");
     let kind = MethodKind::parse(method).ok_or_else(|| {
@@ -175,6 +186,9 @@ fn load_verified(dir: &Path) -> Result<Box<dyn Model>> {
     Ok(match kind {
         MethodKind::Pca | MethodKind::Splocs => Box::new(LinearArtifact::load(dir)?),
         MethodKind::RegionPca => Box::new(RegionArtifact::load(dir)?),
-        MethodKind::Autoencoder => Box::new(AeArtifact::load(dir)?),
+        MethodKind::Autoencoder => {
+            manifest.require(dir, AUTOENCODER_FILES)?;
+            Box::new(AeArtifact::load(dir)?)
+        }
     })
 }

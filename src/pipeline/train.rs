@@ -72,7 +72,7 @@ pub fn train_prepared(
     // only when complete, so a failed run leaves `out` as it was (see `artifact::Staging`).
     let staging = artifact::Staging::begin(out, options.resume)?;
     let scope = crate::timing::scope();
-    let mut outcome = fit_measure_write(cfg, prep, staging.dir(), options, progress)?;
+    let mut outcome = fit_measure_write(cfg, prep, staging.dir(), staging.resume_from(), options, progress)?;
     drop(scope);
     crate::timing::timed("write", || staging.commit())?;
     outcome.out_dir = out.to_path_buf();
@@ -83,10 +83,11 @@ fn fit_measure_write(
     cfg: &Config,
     prep: &Prepared,
     out: &Path,
+    resume: Option<&Path>,
     options: &TrainOptions,
     progress: &mut dyn Progress,
 ) -> Result<TrainOutcome> {
-    let mut ctx = FitContext { out, resume: options.resume, stop: options.stop.clone(), progress };
+    let mut ctx = FitContext { out, resume, stop: options.stop.clone(), progress };
     let t = std::time::Instant::now();
     let fitted = crate::pipeline::fit(prep, &cfg.method, &mut ctx)?;
     let progress = ctx.progress;

@@ -1,10 +1,19 @@
 //! A minimal HTTP/1.1 server on `std::net`: one thread per connection, keep-alive, bounded
 //! request heads and bodies, `Content-Length` bodies only (no chunked uploads). Enough for a
 //! local viewer and for scripts; nothing here touches the file system.
+//!
+//! Every resource a client can hold is bounded ([`Limits`]): the number of connections (more are
+//! answered 503 at once), the time a request may take to arrive whole from its first byte and a
+//! response to be written (not only the time between two reads, so a client sending one byte
+//! every few seconds is cut off: 408), the idle time of a keep-alive connection, and the bytes of
+//! request bodies held at once over all connections (each body's `Content-Length` is reserved
+//! before it is read; a request that does not fit is answered 503).
 
 use std::io::{BufRead, BufReader, Read, Write};
-use std::net::TcpStream;
-use std::time::Duration;
+use std::net::{TcpListener, TcpStream};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::time::{Duration, Instant};
 
 /// Longest request head (request line and headers) accepted.
 pub const MAX_HEAD: usize = 16 * 1024;
@@ -12,6 +21,39 @@ pub const MAX_HEAD: usize = 16 * 1024;
 pub const MAX_BODY: usize = 4 * 1024 * 1024;
 /// An idle keep-alive connection is closed after this long.
 pub const IDLE: Duration = Duration::from_secs(120);
+/// Time one request may take to arrive whole, from its first byte (and one response to be
+/// written).
+pub const REQUEST_TIME: Duration = Duration::from_secs(30);
+/// Most connections served at once.
+pub const MAX_CONNECTIONS: usize = 64;
+/// Most bytes of request bodies held at once, over all connections.
+pub const MAX_BODY_BYTES_IN_FLIGHT: usize = 4 * MAX_BODY;
+
+/// The bounds of a server ([`serve`]); [`Limits::default`] is what `meshdeco view` uses.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Limits {
+    /// How long a keep-alive connection may wait for the first byte of its next request.
+    pub idle: Duration,
+    /// How long a request may take to arrive whole (head and body) from its first byte, and a
+    /// response to be written.
+    pub request: Duration,
+    /// Most connections served at once; one more is answered 503 and closed.
+    pub max_connections: usize,
+    /// Most bytes of request bodies reserved at once over all connections; a request whose
+    /// `Content-Length` does not fit is answered 503.
+    pub max_body_bytes_in_flight: usize,
+}
+
+impl Default for Limits {
+    fn default() -> Self {
+        Limits {
+            idle: IDLE,
+            request: REQUEST_TIME,
+            max_connections: MAX_CONNECTIONS,
+            max_body_bytes_in_flight: MAX_BODY_BYTES_IN_FLIGHT,
+        }
+    }
+}
 
 /// One parsed request.
 #[derive(Debug, Clone)]
@@ -62,10 +104,12 @@ fn reason(status: u16) -> &'static str {
         400 => "Bad Request",
         404 => "Not Found",
         405 => "Method Not Allowed",
+        408 => "Request Timeout",
         411 => "Length Required",
         413 => "Payload Too Large",
         431 => "Request Header Fields Too Large",
         500 => "Internal Server Error",
+        503 => "Service Unavailable",
         _ => "Status",
     }
 }
@@ -77,7 +121,79 @@ enum ReadError {
     Closed,
 }
 
-fn read_request(r: &mut BufReader<TcpStream>) -> Result<(Request, bool), ReadError> {
+/// The connection's stream for reading, with a deadline for all reads together (each read
+/// waits at most until then).
+struct DeadlineReader {
+    stream: TcpStream,
+    deadline: Instant,
+}
+
+impl Read for DeadlineReader {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        let left = self.deadline.saturating_duration_since(Instant::now());
+        if left.is_zero() {
+            return Err(std::io::Error::new(std::io::ErrorKind::TimedOut, "deadline passed"));
+        }
+        self.stream.set_read_timeout(Some(left))?;
+        self.stream.read(buf)
+    }
+}
+
+/// Whether a read error is the deadline (or a read timeout) rather than a closed connection.
+fn timed_out(e: &std::io::Error) -> bool {
+    matches!(e.kind(), std::io::ErrorKind::TimedOut | std::io::ErrorKind::WouldBlock)
+}
+
+/// The server's shared counters: connections open, body bytes reserved.
+#[derive(Debug, Default)]
+struct Load {
+    connections: AtomicUsize,
+    body_bytes: AtomicUsize,
+}
+
+/// Body bytes reserved in [`Load::body_bytes`], given back when dropped (after the request was
+/// answered).
+struct BodyReservation {
+    load: Arc<Load>,
+    bytes: usize,
+}
+
+impl BodyReservation {
+    /// Reserves `bytes`, or `None` when that would pass `limit`.
+    fn take(load: &Arc<Load>, bytes: usize, limit: usize) -> Option<BodyReservation> {
+        load.body_bytes
+            .fetch_update(Ordering::SeqCst, Ordering::SeqCst, |held| held.checked_add(bytes).filter(|&t| t <= limit))
+            .ok()
+            .map(|_| BodyReservation { load: Arc::clone(load), bytes })
+    }
+}
+
+impl Drop for BodyReservation {
+    fn drop(&mut self) {
+        self.load.body_bytes.fetch_sub(self.bytes, Ordering::SeqCst);
+    }
+}
+
+/// A slot in [`Load::connections`], given back when dropped.
+struct ConnectionSlot(Arc<Load>);
+
+impl Drop for ConnectionSlot {
+    fn drop(&mut self) {
+        self.0.connections.fetch_sub(1, Ordering::SeqCst);
+    }
+}
+
+fn read_request(
+    r: &mut BufReader<DeadlineReader>,
+    limits: &Limits,
+    load: &Arc<Load>,
+) -> Result<(Request, bool, Option<BodyReservation>), ReadError> {
+    let late = || {
+        ReadError::Respond(Response::error(
+            408,
+            format!("the request did not arrive whole within {} s", limits.request.as_secs_f64()),
+        ))
+    };
     let mut head = Vec::new();
     loop {
         let before = head.len();
@@ -85,6 +201,7 @@ fn read_request(r: &mut BufReader<TcpStream>) -> Result<(Request, bool), ReadErr
         match n {
             Ok(0) => return Err(ReadError::Closed),
             Ok(_) => {}
+            Err(e) if timed_out(&e) => return Err(late()),
             Err(_) => return Err(ReadError::Closed),
         }
         if head.len() > MAX_HEAD {
@@ -114,15 +231,24 @@ fn read_request(r: &mut BufReader<TcpStream>) -> Result<(Request, bool), ReadErr
         let Some((name, value)) = l.split_once(':') else { continue };
         let value = value.trim();
         match name.trim().to_ascii_lowercase().as_str() {
-            "content-length" => match value.parse::<usize>() {
-                Ok(n) => length = Some(n),
-                Err(_) => {
+            "content-length" => {
+                if length.is_some() {
                     return Err(ReadError::Respond(Response::error(
                         400,
-                        format!("Content-Length `{value}` is not a number"),
+                        "duplicate Content-Length header: send exactly one",
                     )));
                 }
-            },
+                // Digits only (`+5`, `5 5` and `0x5` are refused, as RFC 9110 says).
+                match value.parse::<usize>() {
+                    Ok(n) if !value.is_empty() && value.bytes().all(|b| b.is_ascii_digit()) => length = Some(n),
+                    _ => {
+                        return Err(ReadError::Respond(Response::error(
+                            400,
+                            format!("Content-Length `{value}` is not a number"),
+                        )));
+                    }
+                }
+            }
             "transfer-encoding" => {
                 return Err(ReadError::Respond(Response::error(
                     411,
@@ -148,22 +274,62 @@ fn read_request(r: &mut BufReader<TcpStream>) -> Result<(Request, bool), ReadErr
             format!("request body of {length} bytes is larger than the limit of {MAX_BODY}"),
         )));
     }
+    let reservation = if length > 0 {
+        let Some(r) = BodyReservation::take(load, length, limits.max_body_bytes_in_flight) else {
+            return Err(ReadError::Respond(
+                Response::error(
+                    503,
+                    format!(
+                        "busy: other request bodies are being received (at most {} bytes at once); try again",
+                        limits.max_body_bytes_in_flight
+                    ),
+                )
+                .with_header("Retry-After", "1".into()),
+            ));
+        };
+        Some(r)
+    } else {
+        None
+    };
     if expect_continue && length > 0 {
         // curl asks before sending larger bodies; answer at once instead of letting it wait.
-        let _ = r.get_mut().write_all(b"HTTP/1.1 100 Continue\r\n\r\n");
+        let conn = r.get_mut();
+        let _ = write_all_by(&mut conn.stream, b"HTTP/1.1 100 Continue\r\n\r\n", conn.deadline);
     }
-    let mut body = vec![0u8; length];
-    if r.read_exact(&mut body).is_err() {
-        return Err(ReadError::Closed);
+    // Read as the bytes come (the reservation bounds the total held over all connections).
+    let mut body = Vec::with_capacity(length);
+    match r.by_ref().take(length as u64).read_to_end(&mut body) {
+        Ok(n) if n == length => {}
+        Ok(_) => return Err(ReadError::Closed),
+        Err(e) if timed_out(&e) => return Err(late()),
+        Err(_) => return Err(ReadError::Closed),
     }
     let (path, query) = match target.split_once('?') {
         Some((p, q)) => (p.to_string(), q.to_string()),
         None => (target.to_string(), String::new()),
     };
-    Ok((Request { method: method.to_string(), path, query, body }, keep_alive))
+    Ok((Request { method: method.to_string(), path, query, body }, keep_alive, reservation))
 }
 
-fn write_response(w: &mut TcpStream, resp: &Response, keep_alive: bool) -> std::io::Result<()> {
+/// Writes all of `bytes` before `deadline` (each write waits at most until then).
+fn write_all_by(w: &mut TcpStream, mut bytes: &[u8], deadline: Instant) -> std::io::Result<()> {
+    while !bytes.is_empty() {
+        let left = deadline.saturating_duration_since(Instant::now());
+        if left.is_zero() {
+            return Err(std::io::Error::new(std::io::ErrorKind::TimedOut, "response not taken in time"));
+        }
+        w.set_write_timeout(Some(left))?;
+        match w.write(&bytes[..bytes.len().min(64 * 1024)]) {
+            Ok(0) => return Err(std::io::ErrorKind::WriteZero.into()),
+            Ok(n) => bytes = &bytes[n..],
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+            Err(e) => return Err(e),
+        }
+    }
+    Ok(())
+}
+
+fn write_response(w: &mut TcpStream, resp: &Response, keep_alive: bool, deadline: Instant) -> std::io::Result<()> {
     let mut head = format!(
         "HTTP/1.1 {} {}\r\nContent-Type: {}\r\nContent-Length: {}\r\nCache-Control: no-store\r\nX-Content-Type-Options: nosniff\r\nConnection: {}\r\n",
         resp.status,
@@ -176,30 +342,73 @@ fn write_response(w: &mut TcpStream, resp: &Response, keep_alive: bool) -> std::
         head.push_str(&format!("{k}: {v}\r\n"));
     }
     head.push_str("\r\n");
-    w.write_all(head.as_bytes())?;
-    w.write_all(&resp.body)?;
-    w.flush()
+    write_all_by(w, head.as_bytes(), deadline)?;
+    write_all_by(w, &resp.body, deadline)
 }
 
-/// Serves one connection until it closes: reads requests, answers each with `handle`.
-pub fn serve_connection(stream: TcpStream, handle: &dyn Fn(&Request) -> Response) {
-    let _ = stream.set_read_timeout(Some(IDLE));
+/// Serves one connection within `limits` (`load`: the server's shared counters).
+fn serve_limited(stream: TcpStream, handle: &dyn Fn(&Request) -> Response, limits: &Limits, load: &Arc<Load>) {
     let _ = stream.set_nodelay(true);
     let Ok(mut writer) = stream.try_clone() else { return };
-    let mut reader = BufReader::new(stream);
+    let mut reader = BufReader::new(DeadlineReader { stream, deadline: Instant::now() + limits.idle });
     loop {
-        match read_request(&mut reader) {
-            Ok((req, keep_alive)) => {
+        // Idle: wait for the first byte of the next request (nothing to answer if none comes).
+        reader.get_mut().deadline = Instant::now() + limits.idle;
+        match reader.fill_buf() {
+            Ok([]) | Err(_) => return,
+            Ok(_) => {}
+        }
+        // From its first byte the request has `limits.request` to arrive whole.
+        reader.get_mut().deadline = Instant::now() + limits.request;
+        match read_request(&mut reader, limits, load) {
+            Ok((req, keep_alive, reservation)) => {
                 let resp = handle(&req);
-                if write_response(&mut writer, &resp, keep_alive).is_err() || !keep_alive {
+                drop(req);
+                drop(reservation);
+                let deadline = Instant::now() + limits.request;
+                if write_response(&mut writer, &resp, keep_alive, deadline).is_err() || !keep_alive {
                     return;
                 }
             }
             Err(ReadError::Respond(resp)) => {
-                let _ = write_response(&mut writer, &resp, false);
+                let _ = write_response(&mut writer, &resp, false, Instant::now() + limits.request);
                 return;
             }
             Err(ReadError::Closed) => return,
         }
     }
+}
+
+/// Accepts connections on `listener` until the process ends, each served on its own thread
+/// within `limits` and answered with `handle`. A connection beyond `limits.max_connections` is
+/// answered 503 and closed at once (no thread is started for it).
+pub fn serve<H>(listener: TcpListener, limits: Limits, handle: H) -> std::io::Result<()>
+where
+    H: Fn(&Request) -> Response + Send + Sync + 'static,
+{
+    let handle = Arc::new(handle);
+    let load = Arc::new(Load::default());
+    for stream in listener.incoming() {
+        let Ok(mut stream) = stream else { continue };
+        let open = load.connections.fetch_add(1, Ordering::SeqCst);
+        let slot = ConnectionSlot(Arc::clone(&load));
+        if open >= limits.max_connections {
+            drop(slot);
+            let resp = Response::error(
+                503,
+                format!("busy: {} connections are open, the most this server serves at once; try again", open),
+            )
+            .with_header("Retry-After", "1".into());
+            let _ = write_response(&mut stream, &resp, false, Instant::now() + Duration::from_millis(200));
+            let _ = stream.shutdown(std::net::Shutdown::Write);
+            continue;
+        }
+        let handle = Arc::clone(&handle);
+        let load = Arc::clone(&load);
+        let _ = std::thread::Builder::new().name("meshdeco-http".into()).spawn(move || {
+            let _slot = slot;
+            serve_limited(stream, &*handle, &limits, &load);
+        });
+    }
+    Ok(())
 }

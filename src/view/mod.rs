@@ -12,9 +12,10 @@
 //!   (the `meshdeco synthesize --weights` values), then N×3 `f32` positions (data units).
 //! - **Safety.** Only the model directory and the `--data` frames named on the command line are
 //!   read, both at start; no request names a file, and nothing is written (downloads are
-//!   response bodies). Bodies are bounded ([`http::MAX_BODY`]); bad input gets a 400 with a
-//!   message naming the field and value, and the server keeps serving. A panic inside a model
-//!   call is caught and answered with a 500.
+//!   response bodies). Bodies are bounded ([`http::MAX_BODY`]), and so are connections, the
+//!   time a request may take and the body bytes held at once ([`http::Limits`]); bad input
+//!   gets a 400 with a message naming the field and value, and the server keeps serving. A
+//!   panic inside a model call is caught and answered with a 500.
 //! - **Assets.** The page (`web/index.html`, `web/app.js`: hand-written WebGL2, no library) is
 //!   embedded with `include_str!`; nothing is fetched at run time.
 
@@ -139,17 +140,12 @@ impl Viewer {
         &self.shared.summary
     }
 
-    /// Answers connections until the process ends (one thread per connection).
+    /// Answers connections until the process ends (one thread per connection, within
+    /// [`http::Limits::default`]: connections, request time, body bytes held).
     pub fn serve(self) -> Result<()> {
-        for stream in self.listener.incoming() {
-            let Ok(stream) = stream else { continue };
-            let shared = Arc::clone(&self.shared);
-            let jobs = self.jobs.clone();
-            let _ = std::thread::Builder::new()
-                .name("meshdeco-http".into())
-                .spawn(move || http::serve_connection(stream, &|req| route(req, &shared, &jobs)));
-        }
-        Ok(())
+        let Viewer { listener, shared, jobs } = self;
+        http::serve(listener, http::Limits::default(), move |req| route(req, &shared, &jobs))
+            .map_err(|e| Error::Invalid(format!("serving: {e}")))
     }
 }
 
@@ -286,6 +282,7 @@ fn describe(s: &Session, model_path: &Path) -> Result<Shared> {
     let d0 = m.dials(&w0)?;
     let (lo, hi) = rest.bounding_box();
     let (up, view) = crate::mesh::render::auto_axes(&rest.positions);
+    let view_sign = if crate::mesh::render::front_is_negative(&rest.positions, &rest.faces, view) { -1 } else { 1 };
     let mut ranked = components.clone();
     ranked.sort_by_key(|c| c.rank);
     let comps: Vec<Value> = ranked
@@ -316,6 +313,7 @@ fn describe(s: &Session, model_path: &Path) -> Result<Shared> {
         "bbox": { "min": lo, "max": hi },
         "up_axis": up,
         "view_axis": view,
+        "view_sign": view_sign,
         "segmentation_groups": groups,
         "frames": frames,
         "pose_defaults": PoseOptions::default().to_json(),

@@ -85,7 +85,7 @@ pub fn overview(model: &dyn Model, opts: &OverviewOptions) -> Result<(usize, usi
             hi[j] = hi[j].max(b[j]);
         }
     }
-    let view = View::auto(&rest.positions);
+    let view = View::auto(&rest);
     let cell = opts.cell;
     let ropts = RenderOptions { width: cell, height: cell, view, bounds: Some((lo, hi)), ..Default::default() };
     let block_w = 3 * cell + GAP;

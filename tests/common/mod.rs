@@ -34,14 +34,22 @@ pub fn shared_or_skip(rel: &str) -> Option<PathBuf> {
         panic!("CI is set but the external reference {} is missing (needed by {test})", p.display());
     }
     eprintln!("SKIPPED {test}: {} is absent", p.display());
+    record_skip(&p.display().to_string());
+    None
+}
+
+/// Records a local skip of the running test in [`skip_log`] (`missing`: what was absent — a
+/// path, a program), so that `.ci/run` and `scripts/skipped` count it. Callers fail instead when
+/// `CI` is set.
+pub fn record_skip(missing: &str) {
+    let test = std::thread::current().name().unwrap_or("?").to_string();
     let log = skip_log();
     if let Some(dir) = log.parent() {
         let _ = std::fs::create_dir_all(dir);
     }
     if let Ok(mut f) = std::fs::OpenOptions::new().create(true).append(true).open(&log) {
-        let _ = writeln!(f, "{}\t{test}\t{}", env!("CARGO_CRATE_NAME"), p.display());
+        let _ = writeln!(f, "{}\t{test}\t{missing}", env!("CARGO_CRATE_NAME"));
     }
-    None
 }
 
 /// Erms (data units × 1000, `metrics::erms`) of one constant shape standing in for every frame:
@@ -186,6 +194,7 @@ pub fn npm_package(dir: &str, package: &str, spec: &str) -> Option<PathBuf> {
     if node.as_ref().map_or(true, |o| !o.status.success()) {
         assert!(std::env::var_os("CI").is_none(), "CI: node is missing (.ci/run installs nodejs)");
         eprintln!("SKIP {package}: `node` not found");
+        record_skip("node (Node.js)");
         return None;
     }
     let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(dir);
@@ -201,6 +210,7 @@ pub fn npm_package(dir: &str, package: &str, spec: &str) -> Option<PathBuf> {
             other => {
                 assert!(std::env::var_os("CI").is_none(), "CI: npm install {spec} failed: {other:?}");
                 eprintln!("SKIP {package}: npm install failed: {other:?}");
+                record_skip(&format!("npm package {spec}"));
                 return None;
             }
         }

@@ -80,7 +80,7 @@ function frameCamera() {
   cam.center = [0, 1, 2].map((k) => 0.5 * (lo[k] + hi[k]));
   cam.radius = Math.max(1e-9, 0.5 * Math.hypot(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]));
   cam.dist = 1.08 * cam.radius / Math.sin(cam.fovy / 2);
-  cam.up = axisVec(d.up_axis); cam.front = axisVec(d.view_axis); cam.yaw = 0; cam.pitch = 0;
+  cam.up = axisVec(d.up_axis); cam.front = scl(axisVec(d.view_axis), d.view_sign || 1); cam.yaw = 0; cam.pitch = 0;
 }
 function eye() {
   const r = cross(cam.up, cam.front), cp = Math.cos(cam.pitch);
