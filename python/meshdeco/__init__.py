@@ -27,7 +27,7 @@ from typing import Any, Callable, Mapping, NamedTuple, Optional, Sequence, Union
 
 import numpy as np
 
-from . import _native
+from . import _errors, _native
 from ._errors import (
     ArgumentError,
     ArgumentTypeError,
@@ -46,15 +46,7 @@ PathLike = Union[str, "os.PathLike[str]"]
 ProgressCallback = Callable[[str, int, int, str], None]
 
 __all__ = [
-    "Error",
-    "FileNotFound",
-    "FileError",
-    "ParseError",
-    "ConfigError",
-    "InvalidInput",
-    "ArgumentError",
-    "ArgumentTypeError",
-    "NumericalError",
+    *_errors.__all__,
     "Model",
     "Pose",
     "load_mesh",

@@ -41,8 +41,8 @@ impl View {
     /// The automatic view of a shape: axes by [`auto_axes`], the camera on the side of the view
     /// axis that sees the front ([`front_is_negative`]).
     pub fn auto(mesh: &TriMesh) -> View {
-        let (up, view) = auto_axes(&mesh.positions);
-        View::Axes { up, view, negative: front_is_negative(&mesh.positions, &mesh.faces, view) }
+        let (up, view, negative) = auto_frame(mesh);
+        View::Axes { up, view, negative }
     }
 
     /// (screen x, screen y, depth towards the camera) of a point.
@@ -88,6 +88,13 @@ pub fn auto_axes(positions: &[Vec3]) -> (usize, usize) {
         }
     }
     (up, view)
+}
+
+/// The automatic framing of [`View::auto`] as numbers: `(up axis, view axis, camera on the −
+/// side)` ([`auto_axes`], [`front_is_negative`]); the viewer's page frames its camera with them.
+pub fn auto_frame(mesh: &TriMesh) -> (usize, usize, bool) {
+    let (up, view) = auto_axes(&mesh.positions);
+    (up, view, front_is_negative(&mesh.positions, &mesh.faces, view))
 }
 
 /// Which side of the view axis `view` (0 = x, 1 = y, 2 = z) shows a shape's front: the side

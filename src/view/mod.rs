@@ -281,8 +281,8 @@ fn describe(s: &Session, model_path: &Path) -> Result<Shared> {
     let w0 = m.start_weights(None)?;
     let d0 = m.dials(&w0)?;
     let (lo, hi) = rest.bounding_box();
-    let (up, view) = crate::mesh::render::auto_axes(&rest.positions);
-    let view_sign = if crate::mesh::render::front_is_negative(&rest.positions, &rest.faces, view) { -1 } else { 1 };
+    let (up, view, negative) = crate::mesh::render::auto_frame(&rest);
+    let view_sign = if negative { -1 } else { 1 };
     let mut ranked = components.clone();
     ranked.sort_by_key(|c| c.rank);
     let comps: Vec<Value> = ranked
