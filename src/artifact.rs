@@ -547,7 +547,7 @@ pub fn verify_manifest(dir: &Path) -> Result<Manifest> {
             continue;
         }
         let file = dir.join(name);
-        if name.contains(['/', '\\']) || name.starts_with('.') {
+        if name.is_empty() || name.contains(['/', '\\']) || name.starts_with('.') {
             return Err(Error::parse(&path, None, format!("lists `{name}`, which is not a file of the artefact")));
         }
         let meta = std::fs::metadata(&file).map_err(|e| Error::io(&file, e))?;

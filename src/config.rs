@@ -274,12 +274,9 @@ impl Config {
             return Err(Error::config("data.path", "must not be empty"));
         }
         if let Some(n) = d.path.strip_prefix(crate::synthetic::PREFIX)
-            && !crate::synthetic::NAMES.contains(&n)
+            && let Err(e) = crate::synthetic::check_name(n)
         {
-            return Err(Error::config(
-                "data.path",
-                format!("unknown synthetic dataset `{n}`; available: {}", crate::synthetic::NAMES.join(", ")),
-            ));
+            return Err(Error::config("data.path", e));
         }
         let train = match &d.train {
             Some(s) => FrameSelection::parse("data.train", s)?,

@@ -9,6 +9,8 @@
 //! |---|---|---|---|
 //! | `tube` | closed capped tube, length 1 along +z, radius 0.1, 24 × 61 rings + 2 caps (1 466 vertices) | 60 | bend at joint A (z = 0.3, about x), bend at joint B (z = 0.7, about y), bulge around z = 0.5 on the +x side |
 //! | `bumps` | closed capped tube as above | 40 | three localized radial bumps (z = 0.2, 0.5, 0.8, on different sides) with independent amplitudes |
+//! | `pieces` | two separate tubes (2 932 vertices) | 40 | the first bends at joint A; the second carries the three bumps and slides along x by up to ±0.1 |
+//! | `pieces:N` (1 ≤ N ≤ 200) | the tube plus N separate small closed parts (elongated octahedra, 0.08 long, 6 vertices each): 1 466 + 6N vertices, N + 1 pieces | 60 | the tube bends at joints A and B and bulges; even-numbered parts sit on the tube and follow its bends rigidly while each also swivels about its own axis (up to ±60°); odd-numbered parts float beside it, each swivelling and drifting (up to ±0.2) on its own; the whole scene turns a quarter turn about z and walks 2 units along +x (frame 1 is the rest) |
 //!
 //! Units: the tube is 1 unit long. Amplitudes: bends up to ±50°, bulge and bumps up to 0.06
 //! units radial push (60 % of the radius) at their centres, falling smoothly to zero at 0.12
@@ -21,8 +23,11 @@ use crate::rng::Rng;
 /// Prefix that selects a synthetic dataset in a data path.
 pub const PREFIX: &str = "synthetic:";
 
-/// Names of the built-in datasets.
-pub const NAMES: &[&str] = &["tube", "bumps", "pieces"];
+/// Names of the built-in datasets (`pieces:N` takes a count of small parts, see the module docs).
+pub const NAMES: &[&str] = &["tube", "bumps", "pieces", "pieces:N"];
+
+/// Largest part count of `pieces:N`.
+pub const MAX_PARTS: usize = 200;
 
 /// Offset along x of the second tube of the `pieces` dataset.
 const PIECES_OFFSET: f64 = 0.5;
@@ -45,17 +50,48 @@ pub fn is_synthetic(path: &str) -> bool {
     path.starts_with(PREFIX)
 }
 
+/// The datasets a name selects (checked by [`check_name`]).
+enum Dataset {
+    Tube,
+    Bumps,
+    Pieces,
+    ManyPieces(usize),
+}
+
+/// Parses a dataset name (without the `synthetic:` prefix); the error says what is accepted.
+fn parse_name(name: &str) -> std::result::Result<Dataset, String> {
+    match name {
+        "tube" => Ok(Dataset::Tube),
+        "bumps" => Ok(Dataset::Bumps),
+        "pieces" => Ok(Dataset::Pieces),
+        _ => {
+            let available = || NAMES.iter().map(|n| format!("synthetic:{n}")).collect::<Vec<_>>().join(", ");
+            let Some(count) = name.strip_prefix("pieces:") else {
+                return Err(format!("unknown synthetic dataset `{name}`; available: {}", available()));
+            };
+            match count.parse::<usize>() {
+                Ok(n) if (1..=MAX_PARTS).contains(&n) => Ok(Dataset::ManyPieces(n)),
+                _ => Err(format!(
+                    "`{name}`: the part count of synthetic:pieces:N must be a whole number from 1 to {MAX_PARTS}, got `{count}`"
+                )),
+            }
+        }
+    }
+}
+
+/// Checks a dataset name (without the `synthetic:` prefix) without generating it.
+pub fn check_name(name: &str) -> std::result::Result<(), String> {
+    parse_name(name).map(|_| ())
+}
+
 /// Generates the dataset named by `path` (`synthetic:<name>`, or just `<name>`).
 pub fn load(path: &str) -> Result<MeshSequence> {
     let name = path.strip_prefix(PREFIX).unwrap_or(path);
-    match name {
-        "tube" => Ok(tube_sequence()),
-        "bumps" => Ok(bumps_sequence()),
-        "pieces" => Ok(pieces_sequence()),
-        _ => Err(Error::Invalid(format!(
-            "unknown synthetic dataset `{name}` (in `{path}`); available: {}",
-            NAMES.iter().map(|n| format!("synthetic:{n}")).collect::<Vec<_>>().join(", ")
-        ))),
+    match parse_name(name).map_err(|e| Error::Invalid(format!("{e} (in `{path}`)")))? {
+        Dataset::Tube => Ok(tube_sequence()),
+        Dataset::Bumps => Ok(bumps_sequence()),
+        Dataset::Pieces => Ok(pieces_sequence()),
+        Dataset::ManyPieces(n) => Ok(many_pieces_sequence(n)),
     }
 }
 
@@ -73,6 +109,16 @@ pub fn planted_regions(path: &str) -> Result<Vec<PlantedRegion>> {
             .map(|(i, _)| i)
             .collect(),
     };
+    if let Ok(Dataset::ManyPieces(parts)) = parse_name(name) {
+        // The tube, then each part.
+        let n = rest.n_vertices();
+        let mut regions = vec![PlantedRegion { name: "tube".into(), vertices: (0..n).collect() }];
+        regions.extend((0..parts).map(|i| PlantedRegion {
+            name: format!("part-{i}"),
+            vertices: (n + PART_VERTICES * i..n + PART_VERTICES * (i + 1)).collect(),
+        }));
+        return Ok(regions);
+    }
     if name == "pieces" {
         // The two pieces: the bending tube and the sliding, bumped one.
         let n = rest.n_vertices();
@@ -253,6 +299,138 @@ fn pieces_sequence() -> MeshSequence {
     named("pieces", faces, frames)
 }
 
+/// Vertices of one small part of `pieces:N`.
+const PART_VERTICES: usize = 6;
+
+/// One small part of `pieces:N`: an elongated octahedron (half-lengths 0.04 along its own axis,
+/// 0.015 across) centred at the origin, axis along x. Faces counter-clockwise seen from outside.
+fn part_mesh() -> (Vec<Vec3>, Vec<[usize; 3]>) {
+    let positions = vec![
+        [0.04, 0.0, 0.0],
+        [-0.04, 0.0, 0.0],
+        [0.0, 0.015, 0.0],
+        [0.0, -0.015, 0.0],
+        [0.0, 0.0, 0.015],
+        [0.0, 0.0, -0.015],
+    ];
+    let faces = vec![[0, 2, 4], [2, 1, 4], [1, 3, 4], [3, 0, 4], [2, 0, 5], [1, 2, 5], [3, 1, 5], [0, 3, 5]];
+    (positions, faces)
+}
+
+/// A random unit vector.
+fn unit_vector(rng: &mut Rng) -> Vec3 {
+    loop {
+        let v = [symmetric(rng), symmetric(rng), symmetric(rng)];
+        let n = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+        if n > 0.1 && n <= 1.0 {
+            return v.map(|x| x / n);
+        }
+    }
+}
+
+/// Rotation of `p` about the axis through `centre` along unit `axis` by `angle`.
+fn rotate_about_point(p: Vec3, centre: Vec3, axis: Vec3, angle: f64) -> Vec3 {
+    let shifted = [p[0] - centre[0], p[1] - centre[1], p[2]];
+    let r = rotate_about(shifted, centre[2], axis, angle);
+    [r[0] + centre[0], r[1] + centre[1], r[2]]
+}
+
+/// The tube plus `parts` small parts (module docs): every part is rigid in every frame; the
+/// attached ones (even index) ride the tube's bends as rigid bodies (the bend of the tube at the
+/// part's centre height), the free ones (odd index) drift on their own; everything turns and walks.
+fn many_pieces_sequence(parts: usize) -> MeshSequence {
+    const FRAMES: usize = 60;
+    let rest = tube_mesh();
+    let (part, part_faces) = part_mesh();
+    let mut rng = Rng { state: 0x6d61_6e79 ^ parts as u64 };
+    struct Part {
+        centre: Vec3,
+        orient_axis: Vec3,
+        orient_angle: f64,
+        swivel_axis: Vec3,
+        swivel: (f64, f64, f64),
+        drift: Vec3,
+        attached: bool,
+    }
+    let parts: Vec<Part> = (0..parts)
+        .map(|i| {
+            let attached = i % 2 == 0;
+            let z = 0.05 + 0.9 * rng.uniform();
+            let phi = 2.0 * std::f64::consts::PI * rng.uniform();
+            let r = if attached { RADIUS + 0.02 } else { RADIUS + 0.12 + 0.1 * rng.uniform() };
+            Part {
+                centre: [r * phi.cos(), r * phi.sin(), z],
+                orient_axis: unit_vector(&mut rng),
+                orient_angle: std::f64::consts::PI * rng.uniform(),
+                swivel_axis: unit_vector(&mut rng),
+                // amplitude (rad), angular rate per frame, phase
+                swivel: (
+                    60f64.to_radians() * (0.3 + 0.7 * rng.uniform()),
+                    0.1 + 0.4 * rng.uniform(),
+                    6.3 * rng.uniform(),
+                ),
+                drift: if attached {
+                    [0.0; 3]
+                } else {
+                    [0.1 * symmetric(&mut rng), 0.1 * symmetric(&mut rng), 0.1 * symmetric(&mut rng)]
+                },
+                attached,
+            }
+        })
+        .collect();
+    let n_tube = rest.n_vertices();
+    let mut faces = rest.faces.clone();
+    for i in 0..parts.len() {
+        faces.extend(part_faces.iter().map(|f| f.map(|v| v + n_tube + PART_VERTICES * i)));
+    }
+    // Rest placement of each part's vertices.
+    let rest_part = |p: &Part| -> Vec<Vec3> {
+        part.iter()
+            .map(|&q| {
+                let o = rotate_about(q, 0.0, p.orient_axis, p.orient_angle);
+                [o[0] + p.centre[0], o[1] + p.centre[1], o[2] + p.centre[2]]
+            })
+            .collect()
+    };
+    let max_bend = 50f64.to_radians();
+    let mut frames = Vec::with_capacity(FRAMES);
+    for f in 0..FRAMES {
+        let (bends, bulge) = if f == 0 {
+            ((0.0, 0.0), 0.0)
+        } else {
+            ((max_bend * symmetric(&mut rng), max_bend * symmetric(&mut rng)), 0.06 * rng.uniform())
+        };
+        let mut frame = if f == 0 { rest.positions.clone() } else { deform(&rest, bends, &[(0.5, 0.0, bulge)]) };
+        for p in &parts {
+            let (amp, rate, phase) = p.swivel;
+            // Both zero at frame 1 (the rest).
+            let wobble = (rate * f as f64 + phase).sin() - phase.sin();
+            let angle = amp * wobble;
+            for q in rest_part(p) {
+                let mut x = rotate_about_point(q, p.centre, p.swivel_axis, angle);
+                if p.attached {
+                    // Rigidly with the tube: the bends at the part's centre height.
+                    x = rotate_about(x, JOINT_B, [0.0, 1.0, 0.0], bends.1 * joint_blend(p.centre[2], JOINT_B));
+                    x = rotate_about(x, JOINT_A, [1.0, 0.0, 0.0], bends.0 * joint_blend(p.centre[2], JOINT_A));
+                } else {
+                    x = [0, 1, 2].map(|k| x[k] + p.drift[k] * wobble);
+                }
+                frame.push(x);
+            }
+        }
+        // The walk across the scene: a quarter turn about the tube's axis (z) and 2 units along x.
+        let s = f as f64 / (FRAMES - 1) as f64;
+        let heading = std::f64::consts::FRAC_PI_2 * s;
+        for x in &mut frame {
+            *x = rotate_about(*x, 0.0, [0.0, 0.0, 1.0], heading);
+            x[0] += 2.0 * s;
+            x[1] += 0.05 * (4.0 * std::f64::consts::PI * s).sin();
+        }
+        frames.push(frame);
+    }
+    named("pieces", faces, frames)
+}
+
 fn named(prefix: &str, faces: Vec<[usize; 3]>, frames: Vec<Vec<Vec3>>) -> MeshSequence {
     let names = (0..frames.len()).map(|i| format!("{prefix}{:03}", i + 1)).collect();
     MeshSequence { faces, frames, names }
@@ -287,7 +465,8 @@ mod tests {
 
     #[test]
     fn datasets_are_deterministic_and_finite() {
-        for name in NAMES {
+        for name in NAMES.iter().map(|n| n.replace(":N", ":40")) {
+            let name = name.as_str();
             let a = load(&format!("synthetic:{name}")).unwrap();
             let b = load(name).unwrap();
             assert_eq!(a, b);
@@ -296,6 +475,47 @@ mod tests {
             assert_eq!(a.frames[0][..rest.len()], rest[..], "frame 1 starts with the rest tube");
         }
         assert!(load("synthetic:nope").unwrap_err().to_string().contains("synthetic:tube"));
+        for bad in ["pieces:0", "pieces:201", "pieces:x", "pieces:"] {
+            let e = load(&format!("synthetic:{bad}")).unwrap_err().to_string();
+            assert!(e.contains("from 1 to 200") && e.contains(bad), "{e}");
+        }
+    }
+
+    /// `pieces:N` has N + 1 pieces, every part keeps its shape (rigid) in every frame while it
+    /// turns, the tube bends, and the whole scene walks 2 units along x.
+    #[test]
+    fn many_pieces_are_rigid_parts_beside_a_bending_tube() {
+        let seq = load("synthetic:pieces:40").unwrap();
+        let n_tube = tube_mesh().n_vertices();
+        assert_eq!(seq.n_vertices(), n_tube + 40 * PART_VERTICES);
+        let t = Topology::new(seq.n_vertices(), &seq.faces);
+        assert_eq!(t.components().1, 41);
+        assert_eq!(t.n_boundary_edges(), 0);
+        assert_eq!(planted_regions("synthetic:pieces:40").unwrap().len(), 41);
+        let first = &seq.frames[0];
+        let mut max_turn: f64 = 0.0;
+        for f in &seq.frames {
+            for i in 0..40 {
+                let v0 = n_tube + PART_VERTICES * i;
+                for a in v0..v0 + PART_VERTICES {
+                    for b in a + 1..v0 + PART_VERTICES {
+                        let (l0, l1) = (crate::mesh::dist(first[a], first[b]), crate::mesh::dist(f[a], f[b]));
+                        assert!((l0 - l1).abs() < 1e-12, "part {i} is not rigid");
+                    }
+                }
+                // How far the part's axis turned from its rest direction.
+                let d0 = [0, 1, 2].map(|k| first[v0][k] - first[v0 + 1][k]);
+                let d1 = [0, 1, 2].map(|k| f[v0][k] - f[v0 + 1][k]);
+                let cos = (0..3).map(|k| d0[k] * d1[k]).sum::<f64>() / 0.08 / 0.08;
+                max_turn = max_turn.max(cos.clamp(-1.0, 1.0).acos());
+            }
+        }
+        assert!(max_turn > 0.5, "parts turn (largest {max_turn} rad)");
+        // The walk: the centroid moves about 2 units along x (the quarter turn and the bends move
+        // it a little more).
+        let cx = |x: &[Vec3]| x.iter().map(|p| p[0]).sum::<f64>() / x.len() as f64;
+        let walked = cx(seq.frames.last().unwrap()) - cx(first);
+        assert!((walked - 2.0).abs() < 0.25, "walked {walked}");
     }
 
     #[test]

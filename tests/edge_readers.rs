@@ -92,3 +92,39 @@ fn binary_ply_ushort_values_above_32767_stay_positive() {
         assert_eq!(m.faces, vec![[0, 1, 2]]);
     }
 }
+
+/// Manifest entries that name something other than a top-level file of the artefact directory —
+/// a path out of it (`../x`, `..\x`), an absolute path, a subdirectory's file, a hidden file, `..`
+/// or the empty name — are refused with the entry named, even when the file they point at exists
+/// and has exactly the recorded length and checksum. Bug caught: a reader that joins the entry to
+/// the directory without checking it would verify (and trust) a file outside the artefact.
+#[test]
+fn manifest_entries_that_leave_the_directory_are_refused() {
+    use meshdeco::artifact::{MANIFEST_FILE, ManifestEntry, compute_manifest, crc32_hex, verify_manifest};
+    let root = common::fresh_dir("edge-manifest", "names");
+    let dir = root.join("model");
+    std::fs::create_dir_all(dir.join("sub")).unwrap();
+    std::fs::write(dir.join("model.json"), b"{}").unwrap();
+    std::fs::write(dir.join("model.bin"), b"0123456789abcdef").unwrap();
+    let outside = root.join("outside.txt");
+    let content = b"a file beside the artefact, not in it";
+    std::fs::write(&outside, content).unwrap();
+    std::fs::write(dir.join("sub/inner.txt"), content).unwrap();
+    std::fs::write(dir.join(".hidden"), content).unwrap();
+    let base = compute_manifest(&dir).unwrap();
+    std::fs::write(dir.join(MANIFEST_FILE), serde_json::to_string(&base).unwrap()).unwrap();
+    verify_manifest(&dir).expect("the untouched manifest verifies");
+    let entry = ManifestEntry { bytes: content.len() as u64, crc32: crc32_hex(content) };
+    let absolute = outside.to_str().unwrap().to_string();
+    for name in ["../outside.txt", "..\\outside.txt", absolute.as_str(), "sub/inner.txt", ".hidden", "..", ""] {
+        let mut m = base.clone();
+        m.files.insert(name.to_string(), entry.clone());
+        std::fs::write(dir.join(MANIFEST_FILE), serde_json::to_string(&m).unwrap()).unwrap();
+        let e = verify_manifest(&dir).expect_err(&format!("entry `{name}` must be refused")).to_string();
+        assert!(e.contains(MANIFEST_FILE), "entry `{name}`: the error names the manifest: {e}");
+        if !name.is_empty() {
+            assert!(e.contains(name), "entry `{name}`: the error names the entry: {e}");
+        }
+    }
+    let _ = std::fs::remove_dir_all(&root);
+}

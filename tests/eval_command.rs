@@ -19,6 +19,7 @@ name = "tiny"
 [[dataset]]
 name = "tube"
 path = "synthetic:tube"
+align = "none"
 train = "every:3"
 test = "rest"
 ordered = true

@@ -6,6 +6,7 @@
 //! name = "scape"                       # report title
 //! [[dataset]]                          # one or more; every key of train's [data] section, plus:
 //! name = "scape"                       #   file-name-safe, unique (cells/<dataset>/…)
+//!                                      #   (align defaults to "rigid" here, as the papers align)
 //! ordered = false                      #   true: frames are a time sequence (temporal STED)
 //! path = "../shared/data/scape"
 //! train = "1-36"
@@ -209,6 +210,11 @@ impl EvalConfig {
                             ));
                         }
                     };
+                    // The papers align frames rigidly before decomposing them (SPLOCS, paper 000
+                    // § 3: "rigid alignment through global translation and rotation is performed
+                    // before assembling the animation matrix"): an evaluation does so unless the
+                    // dataset says `align = "none"` (issue 32).
+                    t.entry("align").or_insert_with(|| "rigid".into());
                     let mut probe = toml::Table::new();
                     probe.insert("kind".into(), MethodKind::Pca.name().into());
                     let c = Config::from_toml(&train_config_text("probe", &t, &probe))
@@ -422,6 +428,12 @@ counts = [10, 5]
         let cells = c.cells().unwrap();
         let ks: Vec<(usize, usize)> = cells.iter().map(|c| (c.method, c.k)).collect();
         assert_eq!(ks, vec![(0, 2), (0, 4), (0, 6), (1, 4)]);
+        // Frames are aligned rigidly unless the dataset says otherwise (as the papers align).
+        assert_eq!(c.datasets[0].data.align, crate::config::Align::Rigid);
+        assert!(cells.iter().all(|cell| cell.config.data.align == crate::config::Align::Rigid));
+        let own = EvalConfig::from_toml(&GOOD.replace("ordered = true", "ordered = true\nalign = \"none\"")).unwrap();
+        assert_eq!(own.datasets[0].data.align, crate::config::Align::None);
+        assert!(own.cells().unwrap().iter().all(|cell| cell.config.data.align == crate::config::Align::None));
         assert_eq!(cells[3].config.kind(), MethodKind::Autoencoder);
         let MethodConfig::Autoencoder(m) = &cells[3].config.method else { panic!("kind") };
         assert_eq!(m.iterations, 10);

@@ -8,3 +8,4 @@ pub mod intrinsic_delaunay;
 pub mod mass_matrix;
 pub mod rigid_align;
 pub mod sparse_cholesky;
+pub mod touching_pieces;

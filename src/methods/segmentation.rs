@@ -15,7 +15,8 @@
 //! - Automatic k: k = 2, 3, … until a cluster is *not compact*, keeping k − 1 (at most
 //!   `max_regions`); or a fixed `regions` count. A cluster is compact when every one of its
 //!   vertices belongs to a triangle whose three vertices are all in the cluster, and those
-//!   triangles form one connected set (triangles sharing a vertex count as connected). If
+//!   triangles form one connected set (triangles sharing a vertex count as connected; on a mesh
+//!   in several pieces, one set per piece the cluster touches). If
 //!   already k = 2 is not compact the whole mesh is one region. Before the test, single-vertex
 //!   spurs along cluster borders are handed to the neighbouring cluster (see `remove_spurs`).
 //!
@@ -604,10 +605,35 @@ pub fn all_compact(labels: &[usize], m: usize, faces: &[[usize; 3]]) -> bool {
 }
 
 /// True when the vertices labelled `c` are all covered by triangles lying wholly inside the
-/// cluster and those triangles form one vertex-connected set. An empty cluster is not compact.
+/// cluster and those triangles form one vertex-connected set on each connected piece of the mesh
+/// they touch. An empty cluster is not compact. (On a mesh in several pieces no surface path joins
+/// two pieces, so a region may hold one patch on each: a head and the eye in it, two parts that
+/// move together. With one set over the whole mesh, a mesh of 41 pieces had no compact 2-region
+/// split and region PCA fell back to one region, issue 32.)
 pub fn is_compact(labels: &[usize], c: usize, faces: &[[usize; 3]]) -> bool {
     let (pieces, uncovered) = cluster_pieces(labels, c, faces);
-    uncovered == 0 && pieces.len() == 1
+    if uncovered != 0 || pieces.is_empty() {
+        return false;
+    }
+    if pieces.len() == 1 {
+        return true;
+    }
+    let n = labels.len();
+    let (mut mesh, mut inside) = (DisjointSet::new(n), DisjointSet::new(n));
+    for f in faces {
+        mesh.union(f[0], f[1]);
+        mesh.union(f[0], f[2]);
+        if f.iter().all(|&v| labels[v] == c) {
+            inside.union(f[0], f[1]);
+            inside.union(f[0], f[2]);
+        }
+    }
+    // Each mesh piece may hold at most one of the cluster's sets.
+    let mut set_of_piece = std::collections::HashMap::new();
+    (0..n).filter(|&v| labels[v] == c).all(|v| {
+        let set = inside.find(v);
+        *set_of_piece.entry(mesh.find(v)).or_insert(set) == set
+    })
 }
 
 /// The compactness test's view of cluster `c`: the vertex counts of the vertex-connected pieces
@@ -783,6 +809,29 @@ mod tests {
         let before = big.clone();
         merge_fragments(&mut big, &g.faces, &topo, 0.3);
         assert_eq!(big, before);
+    }
+
+    #[test]
+    fn compactness_on_a_mesh_in_pieces_is_per_piece() {
+        // Two separate triangles (two mesh pieces): one cluster over both is compact (one patch
+        // on each piece); on a strip of two triangles sharing only vertex 2 plus a separate
+        // triangle, a cluster with two patches on the strip's piece is not.
+        let faces = [[0, 1, 2], [3, 4, 5]];
+        assert!(is_compact(&[0; 6], 0, &faces));
+        let faces = [[0, 1, 2], [2, 3, 4], [5, 6, 7], [8, 9, 10]];
+        // Cluster 0: triangles 0 and 2 (on different pieces) — compact.
+        let labels = [0, 0, 0, 1, 1, 0, 0, 0, 1, 1, 1];
+        assert!(is_compact(&labels, 0, &faces));
+        // Cluster 0: vertices 0, 1 and 3, 4 of the strip cannot be covered without vertex 2 —
+        // uncovered, not compact; the separate triangle 3 does not make it compact.
+        let labels = [0, 0, 1, 0, 0, 1, 1, 1, 0, 0, 0];
+        assert!(!is_compact(&labels, 0, &faces));
+        // Two patches on one piece: a strip of six triangles labelled 0 / 1 / 0 along it.
+        let strip = [[0, 1, 2], [1, 2, 3], [2, 3, 4], [3, 4, 5], [4, 5, 6], [5, 6, 7]];
+        let labels = [0, 0, 0, 1, 1, 0, 0, 0];
+        assert!(!is_compact(&labels, 0, &strip));
+        // The same two patches on two pieces (the middle triangles removed): compact.
+        assert!(is_compact(&labels, 0, &[strip[0], strip[5]]));
     }
 
     #[test]

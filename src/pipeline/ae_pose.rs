@@ -298,6 +298,7 @@ impl<'a> AePoser<'a> {
         let mut start_cost = f64::NAN;
         let mut cost = f64::NAN;
         let mut iterations = 0;
+        let mut data = None;
         let started = std::time::Instant::now();
         for it in 0..self.config.max_iterations {
             if it > 0 && self.config.time_limit.is_some_and(|l| started.elapsed() >= l) {
@@ -335,22 +336,29 @@ impl<'a> AePoser<'a> {
             let mut accepted = None;
             for _ in 0..12 {
                 let zn: Vec<f64> = z.iter().zip(&delta).map(|(a, d)| a + step * d).collect();
-                let cn = data_cost(&self.eval(&zn)?) + reg(&zn);
+                let dn = data_cost(&self.eval(&zn)?);
+                let cn = dn + reg(&zn);
                 if cn < cost {
-                    accepted = Some((zn, cn));
+                    accepted = Some((zn, cn, dn));
                     break;
                 }
                 step *= 0.5;
             }
-            let Some((zn, cn)) = accepted else { break };
+            let Some((zn, cn, dn)) = accepted else { break };
             let decrease = (cost - cn) / cost.max(f64::MIN_POSITIVE);
             z = zn;
             cost = cn;
+            data = Some(dn);
             if decrease < self.config.tolerance {
                 break;
             }
         }
-        let final_cost = data_cost(&self.eval(&z)?);
+        // The data cost of the last accepted code (the start's when no step was taken).
+        let final_cost = match data {
+            Some(d) => d,
+            None if start_cost.is_finite() => start_cost,
+            None => data_cost(&self.eval(&z)?),
+        };
         let positions = self.artifact.decode_codes(std::slice::from_ref(&z))?.remove(0);
         Ok((z, positions, AePoseReport { iterations, start_cost, final_cost }))
     }
