@@ -117,7 +117,11 @@ fn view_api_serves_decode_pose_heat_frames_and_export() {
     let (_, _, b4) = v.post("/api/decode", &json!({ "dials": posed.dials }));
     assert!(max_diff(&parse_shape(&b4).positions, &posed.positions) < 1e-5);
 
-    // Heat maps equal the model's per-vertex magnitudes.
+    // Heat maps equal the model's per-vertex magnitudes, and (measured independently of the
+    // function that computes them) how far each vertex moves when that dial goes from 0 to 1 —
+    // through the served decode (issue 33: the heat map was only compared with itself).
+    let (_, _, zero) = v.post("/api/decode", &json!({ "dials": {} }));
+    let zero = parse_shape(&zero).positions;
     for c in m.components().unwrap() {
         let (s, _, heat) = v.request("GET", &format!("/api/heat/{}", c.index), b"");
         assert_eq!(s, 200);
@@ -125,6 +129,16 @@ fn view_api_serves_decode_pose_heat_frames_and_export() {
         assert_eq!(heat.len(), rest.n_vertices());
         let worst = heat.iter().zip(&c.magnitudes).map(|(a, b)| (a - b).abs() / b.abs().max(1e-3)).fold(0.0, f64::max);
         assert!(worst < 1e-5, "heat map of component {} differs by {worst}", c.index);
+        let (_, _, one) = v.post("/api/decode", &json!({ "dials": { c.index.to_string(): 1.0 } }));
+        let one = parse_shape(&one).positions;
+        let peak = heat.iter().cloned().fold(0.0, f64::max);
+        let worst =
+            heat.iter().zip(one.iter().zip(&zero)).map(|(h, (a, b))| (h - dist(*a, *b)).abs()).fold(0.0, f64::max);
+        assert!(
+            worst <= 1e-5 * peak.max(1e-9),
+            "component {}: heat map vs motion at dial 1 differ by {worst} (peak {peak})",
+            c.index
+        );
     }
     let (s, _, seg) = v.request("GET", "/api/segmentation", b"");
     assert_eq!(s, 200);
@@ -145,6 +159,11 @@ fn view_api_serves_decode_pose_heat_frames_and_export() {
     for i in 0..n {
         assert!((err[i] - dist(truth[i], f.positions[i])).abs() < 1e-5);
     }
+    // The header's Erms from its definition, on the served frame and reconstruction (a PCA on
+    // displacements: no alignment): 1000 · sqrt(mean squared coordinate error).
+    let by_hand = 1000.0
+        * (truth.iter().zip(&f.positions).map(|(a, b)| dist(*a, *b).powi(2)).sum::<f64>() / (3 * n) as f64).sqrt();
+    assert!((by_hand - erms).abs() <= 1e-5 * erms.max(1e-9), "Erms {erms} vs {by_hand} from its definition");
     let own = meshdeco::model::encode_frames(m.as_ref(), &seq.select(&[5]), "t", None).unwrap();
     assert!((own.total_erms - erms).abs() <= 1e-9 * erms.max(1.0), "Erms {erms} vs encode's {}", own.total_erms);
     // The frame index's bounds: the last of the 60 frames is served, one past it is a 400.
