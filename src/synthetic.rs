@@ -384,14 +384,17 @@ fn many_pieces_sequence(parts: usize) -> MeshSequence {
         faces.extend(part_faces.iter().map(|f| f.map(|v| v + n_tube + PART_VERTICES * i)));
     }
     // Rest placement of each part's vertices.
-    let rest_part = |p: &Part| -> Vec<Vec3> {
-        part.iter()
-            .map(|&q| {
-                let o = rotate_about(q, 0.0, p.orient_axis, p.orient_angle);
-                [o[0] + p.centre[0], o[1] + p.centre[1], o[2] + p.centre[2]]
-            })
-            .collect()
-    };
+    let rest_parts: Vec<Vec<Vec3>> = parts
+        .iter()
+        .map(|p| {
+            part.iter()
+                .map(|&q| {
+                    let o = rotate_about(q, 0.0, p.orient_axis, p.orient_angle);
+                    [o[0] + p.centre[0], o[1] + p.centre[1], o[2] + p.centre[2]]
+                })
+                .collect()
+        })
+        .collect();
     let max_bend = 50f64.to_radians();
     let mut frames = Vec::with_capacity(FRAMES);
     for f in 0..FRAMES {
@@ -401,12 +404,12 @@ fn many_pieces_sequence(parts: usize) -> MeshSequence {
             ((max_bend * symmetric(&mut rng), max_bend * symmetric(&mut rng)), 0.06 * rng.uniform())
         };
         let mut frame = if f == 0 { rest.positions.clone() } else { deform(&rest, bends, &[(0.5, 0.0, bulge)]) };
-        for p in &parts {
+        for (p, rest_part) in parts.iter().zip(&rest_parts) {
             let (amp, rate, phase) = p.swivel;
             // Both zero at frame 1 (the rest).
             let wobble = (rate * f as f64 + phase).sin() - phase.sin();
             let angle = amp * wobble;
-            for q in rest_part(p) {
+            for &q in rest_part {
                 let mut x = rotate_about_point(q, p.centre, p.swivel_axis, angle);
                 if p.attached {
                     // Rigidly with the tube: the bends at the part's centre height.

@@ -14,6 +14,7 @@ mod common;
 use meshdeco::config::Config;
 use meshdeco::metrics::erms::Alignment;
 use meshdeco::model::{RefineOptions, encode_frames};
+use meshdeco::pipeline::train::frames_in_data_units;
 use meshdeco::pipeline::{Silent, TrainOptions, train};
 
 const DATA: &str = "[data]\npath = \"synthetic:pieces:40\"\ntrain = \"every:2\"\ntest = \"rest\"\n";
@@ -28,34 +29,22 @@ fn fit(name: &str, align: &str, method: &str) -> (f64, f64, Option<f64>, Option<
         Config::from_toml(&format!("name = \"{name}\"\n{DATA}align = \"{align}\"\n[method]\n{method}\n")).unwrap();
     let out = train(&cfg, &base.join("model"), &TrainOptions::default(), &mut Silent).unwrap();
     let prepared = meshdeco::preprocess::prepare(&cfg.data).unwrap();
-    let train_seq = prepared.train_sequence();
-    let frames: Vec<Vec<[f64; 3]>> = (0..train_seq.frames.len())
-        .map(|f| train_seq.frames[f].iter().map(|p| prepared.unit_box.invert(*p)).collect())
-        .collect();
+    let frames = frames_in_data_units(&prepared, &prepared.train);
     let rest: Vec<[f64; 3]> = prepared.rest.positions.iter().map(|p| prepared.unit_box.invert(*p)).collect();
     let rest_erms = common::constant_shape_erms(&frames, &rest, Alignment::Centroid);
     let train_erms = out.metrics.train_erms;
     let data_frames =
-        meshdeco::mesh::MeshSequence { faces: train_seq.faces.clone(), frames, names: train_seq.names.clone() };
-    let fitted = out
-        .model
-        .refine(
-            &data_frames,
-            &out.model.encode(&data_frames).unwrap(),
-            &RefineOptions { points: usize::MAX, gamma: 0.0 },
-            &mut |_| {},
-        )
-        .unwrap()
-        .map(|_| {
-            encode_frames(
-                out.model.as_ref(),
-                &data_frames,
-                "train",
-                Some(&RefineOptions { points: usize::MAX, gamma: 0.0 }),
-            )
-            .unwrap()
-            .total_erms
-        });
+        meshdeco::mesh::MeshSequence { faces: prepared.rest.faces.clone(), frames, names: prepared.train_names() };
+    // The model's own encoding, refined where it has a refinement (the autoencoder's codes fitted
+    // through its decoder to every vertex).
+    let encoded = encode_frames(
+        out.model.as_ref(),
+        &data_frames,
+        "train",
+        Some(&RefineOptions { points: usize::MAX, gamma: 0.0 }),
+    )
+    .unwrap();
+    let fitted = encoded.refined.then_some(encoded.total_erms);
     let regions = std::fs::read_to_string(base.join("model/model.json"))
         .ok()
         .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())

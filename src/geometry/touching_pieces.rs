@@ -10,13 +10,15 @@
 use std::collections::HashMap;
 
 use crate::math::disjoint_set::DisjointSet;
-use crate::mesh::{Topology, TriMesh, dist};
+#[cfg(doc)]
+use crate::mesh::Topology;
+use crate::mesh::{TriMesh, dist};
 
 /// The cluster of touching pieces of every vertex: `(cluster per vertex, number of clusters)`;
-/// `usize::MAX` for vertices referenced by no face. Pieces are `topology`'s connected
-/// components; `gap` ≥ 0 in data units.
-pub fn touching_clusters(mesh: &TriMesh, topology: &Topology, gap: f64) -> (Vec<usize>, usize) {
-    let (piece, n_pieces) = topology.components();
+/// `usize::MAX` for vertices referenced by no face. `piece` and `n_pieces` are the mesh's
+/// connected components as [`Topology::components`] gives them (a piece per vertex, `usize::MAX`
+/// for none); `gap` ≥ 0 in data units.
+pub fn touching_clusters(mesh: &TriMesh, piece: &[usize], n_pieces: usize, gap: f64) -> (Vec<usize>, usize) {
     let mut sets = DisjointSet::new(n_pieces);
     if n_pieces > 1 && gap.is_finite() && gap > 0.0 {
         let cell = |p: [f64; 3]| p.map(|x| (x / gap).floor() as i64);
@@ -68,6 +70,7 @@ pub fn touching_clusters(mesh: &TriMesh, topology: &Topology, gap: f64) -> (Vec<
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::mesh::Topology;
 
     /// Three unit-spaced tetrahedra: the first two 0.05 apart, the third 2 units away.
     fn three() -> TriMesh {
@@ -84,14 +87,15 @@ mod tests {
     #[test]
     fn pieces_within_the_gap_form_one_cluster() {
         let m = three();
-        let t = Topology::new(m.n_vertices(), &m.faces);
-        let (c, n) = touching_clusters(&m, &t, 0.1);
+        let (piece, pieces) = Topology::new(m.n_vertices(), &m.faces).components();
+        let clusters = |gap| touching_clusters(&m, &piece, pieces, gap);
+        let (c, n) = clusters(0.1);
         assert_eq!(n, 2);
         assert!(c[..8].iter().all(|&x| x == c[0]) && c[8..].iter().all(|&x| x == c[8]) && c[0] != c[8]);
         // A smaller gap separates all three; a gap of 0 never joins.
-        assert_eq!(touching_clusters(&m, &t, 0.04).1, 3);
-        assert_eq!(touching_clusters(&m, &t, 0.0).1, 3);
+        assert_eq!(clusters(0.04).1, 3);
+        assert_eq!(clusters(0.0).1, 3);
         // Transitive: with gap 3 the far one touches the middle one (1.95 apart), so all join.
-        assert_eq!(touching_clusters(&m, &t, 3.0).1, 1);
+        assert_eq!(clusters(3.0).1, 1);
     }
 }

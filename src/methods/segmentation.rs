@@ -611,35 +611,31 @@ pub fn all_compact(labels: &[usize], m: usize, faces: &[[usize; 3]]) -> bool {
 /// move together. With one set over the whole mesh, a mesh of 41 pieces had no compact 2-region
 /// split and region PCA fell back to one region, issue 32.)
 pub fn is_compact(labels: &[usize], c: usize, faces: &[[usize; 3]]) -> bool {
-    let (pieces, uncovered) = cluster_pieces(labels, c, faces);
-    if uncovered != 0 || pieces.is_empty() {
+    let (mut inside, covered) = cluster_sets(labels, c, faces);
+    let members: Vec<usize> = (0..labels.len()).filter(|&v| labels[v] == c).collect();
+    if members.is_empty() || members.iter().any(|&v| !covered[v]) {
         return false;
     }
-    if pieces.len() == 1 {
+    let first = inside.find(members[0]);
+    if members.iter().all(|&v| inside.find(v) == first) {
         return true;
     }
-    let n = labels.len();
-    let (mut mesh, mut inside) = (DisjointSet::new(n), DisjointSet::new(n));
+    // Several sets: each piece of the mesh may hold at most one of them.
+    let mut mesh = DisjointSet::new(labels.len());
     for f in faces {
         mesh.union(f[0], f[1]);
         mesh.union(f[0], f[2]);
-        if f.iter().all(|&v| labels[v] == c) {
-            inside.union(f[0], f[1]);
-            inside.union(f[0], f[2]);
-        }
     }
-    // Each mesh piece may hold at most one of the cluster's sets.
     let mut set_of_piece = std::collections::HashMap::new();
-    (0..n).filter(|&v| labels[v] == c).all(|v| {
+    members.iter().all(|&v| {
         let set = inside.find(v);
         *set_of_piece.entry(mesh.find(v)).or_insert(set) == set
     })
 }
 
-/// The compactness test's view of cluster `c`: the vertex counts of the vertex-connected pieces
-/// formed by the triangles lying wholly inside the cluster (largest first), and the number of
-/// the cluster's vertices in no such triangle.
-pub fn cluster_pieces(labels: &[usize], c: usize, faces: &[[usize; 3]]) -> (Vec<usize>, usize) {
+/// The vertex-connected sets formed by the triangles lying wholly inside cluster `c` (a disjoint
+/// set over all vertices) and which vertices such a triangle covers.
+fn cluster_sets(labels: &[usize], c: usize, faces: &[[usize; 3]]) -> (DisjointSet, Vec<bool>) {
     let n = labels.len();
     let mut sets = DisjointSet::new(n);
     let mut covered = vec![false; n];
@@ -652,9 +648,17 @@ pub fn cluster_pieces(labels: &[usize], c: usize, faces: &[[usize; 3]]) -> (Vec<
             sets.union(f[0], f[2]);
         }
     }
+    (sets, covered)
+}
+
+/// The compactness test's view of cluster `c`: the vertex counts of the vertex-connected pieces
+/// formed by the triangles lying wholly inside the cluster (largest first), and the number of
+/// the cluster's vertices in no such triangle.
+pub fn cluster_pieces(labels: &[usize], c: usize, faces: &[[usize; 3]]) -> (Vec<usize>, usize) {
+    let (mut sets, covered) = cluster_sets(labels, c, faces);
     let mut sizes = std::collections::HashMap::new();
     let mut uncovered = 0;
-    for v in 0..n {
+    for v in 0..labels.len() {
         if labels[v] != c {
             continue;
         }

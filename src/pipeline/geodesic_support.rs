@@ -42,12 +42,11 @@ pub const TOUCH_GAP_EDGES: f64 = 2.0;
 
 /// The rest positions and touching clusters of `rest`, when it has touching pieces.
 fn bridges(rest: &TriMesh) -> Option<(Vec<Vec3>, Vec<usize>)> {
-    let topology = Topology::new(rest.n_vertices(), &rest.faces);
-    let pieces = topology.components().1;
+    let (piece, pieces) = Topology::new(rest.n_vertices(), &rest.faces).components();
     if pieces < 2 {
         return None;
     }
-    let (cluster, clusters) = touching_clusters(rest, &topology, TOUCH_GAP_EDGES * rest.mean_edge_length());
+    let (cluster, clusters) = touching_clusters(rest, &piece, pieces, TOUCH_GAP_EDGES * rest.mean_edge_length());
     (clusters < pieces).then(|| (rest.positions.clone(), cluster))
 }
 

@@ -152,11 +152,8 @@ impl LinearArtifact {
             return self.model.encoder()?.encode_rows(&x.data);
         }
         let mut weighted = self.model.clone();
-        let n_cols = weighted.n_cols();
-        let rows = weighted.components.chunks_exact_mut(n_cols).chain(std::iter::once(&mut weighted.offset[..]));
-        for row in rows.chain(x.data.chunks_exact_mut(n_cols)) {
-            columns.iter().for_each(|&(c, w)| row[c] *= w);
-        }
+        scale_model(&mut weighted, &columns, false);
+        scale_rows(&mut x.data, weighted.n_cols(), &columns, false);
         weighted.encoder()?.encode_rows(&x.data)
     }
 
@@ -319,25 +316,7 @@ fn piece_translation_columns(representation: &Representation) -> Vec<(usize, f64
     let Some((placement, element_piece)) = representation.pieces() else {
         return Vec::new();
     };
-    let rest = &representation.rest().positions;
-    let n = placement.n_pieces();
-    let (mut centroid, mut count) = (vec![[0.0f64; 3]; n], vec![0usize; n]);
-    for (x, &p) in rest.iter().zip(placement.piece_of_vertex()) {
-        if p != usize::MAX {
-            (0..3).for_each(|k| centroid[p][k] += x[k]);
-            count[p] += 1;
-        }
-    }
-    for (c, &m) in centroid.iter_mut().zip(&count) {
-        *c = c.map(|v| v / m.max(1) as f64);
-    }
-    let mut spread = vec![0.0f64; n];
-    for (x, &p) in rest.iter().zip(placement.piece_of_vertex()) {
-        if p != usize::MAX {
-            spread[p] += (0..3).map(|k| (x[k] - centroid[p][k]).powi(2)).sum::<f64>();
-        }
-    }
-    let rho: Vec<f64> = spread.iter().zip(&count).map(|(s, &m)| (s / m.max(1) as f64).sqrt()).collect();
+    let rho = placement.rms_radii(&representation.rest().positions);
     let weight: Vec<f64> = rho
         .iter()
         .map(|&r| {
@@ -360,15 +339,30 @@ fn piece_translation_columns(representation: &Representation) -> Vec<(usize, f64
         .collect()
 }
 
+/// Multiplies (`invert`: divides) the (column, weight) entries of every row of the row-major
+/// `rows` (rows of `n_cols` numbers).
+fn scale_rows(rows: &mut [f64], n_cols: usize, columns: &[(usize, f64)], invert: bool) {
+    for row in rows.chunks_exact_mut(n_cols) {
+        for &(c, w) in columns {
+            if invert { row[c] /= w } else { row[c] *= w }
+        }
+    }
+}
+
+/// [`scale_rows`] on a linear model's components and offset (its weights are unchanged).
+fn scale_model(model: &mut LinearModel, columns: &[(usize, f64)], invert: bool) {
+    let n_cols = model.n_cols();
+    scale_rows(&mut model.components, n_cols, columns, invert);
+    scale_rows(&mut model.offset, n_cols, columns, invert);
+}
+
 /// Fits SPLOCS (`kind = "splocs"`) on the configured representation.
 pub fn fit_splocs(m: &SplocsMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> Result<Fitted> {
     ctx.progress.stage("representation", 0);
     let (representation, mut x, rest_row, representation_seconds) =
         training_features(m.representation, m.consistency, prep, true)?;
     let translation_columns = piece_translation_columns(&representation);
-    for row in x.data.chunks_exact_mut(x.n_elements * x.width) {
-        translation_columns.iter().for_each(|&(c, w)| row[c] *= w);
-    }
+    scale_rows(&mut x.data, x.n_elements * x.width, &translation_columns, false);
     let data = DataMatrix::from_features(&x)?;
     let sc = m.solver_config()?;
     sc.validate().map_err(method_key)?;
@@ -390,12 +384,7 @@ pub fn fit_splocs(m: &SplocsMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -
     ctx.progress.finish_stage();
     let mut model = fit.model;
     // Back to the representation's units (the weights W are unchanged).
-    let n_cols = model.n_cols();
-    for row in model.components.chunks_exact_mut(n_cols).chain(std::iter::once(&mut model.offset[..])) {
-        if row.len() == n_cols {
-            translation_columns.iter().for_each(|&(c, w)| row[c] /= w);
-        }
-    }
+    scale_model(&mut model, &translation_columns, true);
     if let Some(r) = rest_row {
         model.offset = r;
     }

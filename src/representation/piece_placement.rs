@@ -114,6 +114,19 @@ impl PiecePlacement {
         self.unit * ((p == r) as u8 as f64 - self.counts[r] as f64 / total as f64)
     }
 
+    /// The RMS distance of each piece's vertices in `positions` (N, data units) from their
+    /// centroid: a piece's size (P values ≥ 0).
+    pub fn rms_radii(&self, positions: &[Vec3]) -> Vec<f64> {
+        let (centroids, _) = self.centroids(positions);
+        let mut sums = vec![0.0; self.n_pieces()];
+        for (p, x) in self.piece_of_vertex.iter().zip(positions) {
+            if *p != usize::MAX {
+                sums[*p] += (0..3).map(|k| (x[k] - centroids[*p][k]).powi(2)).sum::<f64>();
+            }
+        }
+        sums.iter().zip(&self.counts).map(|(s, &n)| (s / n as f64).sqrt()).collect()
+    }
+
     /// Per-piece centroids `c_p(x)` and the centroid `c(x)` of all face-referenced vertices.
     fn centroids(&self, positions: &[Vec3]) -> (Vec<Vec3>, Vec3) {
         let mut sums = vec![[0.0; 3]; self.n_pieces()];

@@ -4,8 +4,8 @@
 
 const $ = (id) => document.getElementById(id);
 // Writes an element's text / shows or hides it only when that changes (no needless relayout).
-function setText(id, text) { const e = $(id); if (e.textContent !== text) e.textContent = text; }
-function setShown(id, shown) { const e = $(id), v = shown ? '' : 'none'; if (e.style.display !== v) e.style.display = v; }
+function setText(e, text) { if (e.textContent !== text) e.textContent = text; }
+function setShown(e, shown) { const v = shown ? '' : 'none'; if (e.style.display !== v) e.style.display = v; }
 const canvas = $('gl');
 const gl = canvas.getContext('webgl2', { antialias: false });
 
@@ -248,8 +248,8 @@ function colours() {
   S.colorbar = bar;
   // The panel is touched only where it changes: a drag recolours every frame, and each change
   // of the page's layout costs a repaint beside the canvas.
-  setText('cbar-hi', bar ? `${bar.hi.toPrecision(3)}` : ''); setText('range-unit', bar ? bar.unit : '');
-  setShown('cbar-row', !!bar); setShown('range-row', !!bar);
+  setText($('cbar-hi'), bar ? `${bar.hi.toPrecision(3)}` : ''); setText($('range-unit'), bar ? bar.unit : '');
+  setShown($('cbar-row'), !!bar); setShown($('range-row'), !!bar);
   gl.bindBuffer(gl.ARRAY_BUFFER, G.bCol); gl.bufferData(gl.ARRAY_BUFFER, C, gl.DYNAMIC_DRAW);
   S.overlayNote = note;
 }
@@ -296,7 +296,7 @@ function draw(sync) {
   }
   gl.bindVertexArray(null);
   if (sync) { const px = new Uint8Array(4); gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, px); } // wait for the GPU
-  setText('hud', `${S.desc.kind} · ${S.n} vertices · ${S.overlayNote || ''}`);
+  setText($('hud'), `${S.desc.kind} · ${S.n} vertices · ${S.overlayNote || ''}`);
 }
 let drawQueued = false;
 function redraw() { if (!drawQueued) { drawQueued = true; requestAnimationFrame(() => { drawQueued = false; draw(false); }); } }
@@ -383,18 +383,18 @@ function buildComponents() {
 }
 // A dial beyond its slider's range (a pose or a loaded weights file can go there) widens the
 // slider to show it and marks the value: beyond the training range.
-// Each property is written only when it changes (a pose updates every dial on every drag event).
+// Each property is written only when it differs from the element's (a pose updates every dial
+// on every drag event).
 function syncSliders() {
   for (const [i, s] of sliders) {
     const d = S.dials[i], c = s.range, lo = Math.min(c[0], d), hi = Math.max(c[1], d);
-    if (s.lo !== lo) { s.lo = lo; s.sl.min = lo; }
-    if (s.hi !== hi) { s.hi = hi; s.sl.max = hi; }
-    if (+s.sl.value !== d) s.sl.value = d; // the user may have moved it since: compare with the element
-    const text = d.toFixed(3);
-    if (s.text !== text) { s.text = text; s.val.textContent = text; }
+    if (+s.sl.min !== lo) s.sl.min = lo;
+    if (+s.sl.max !== hi) s.sl.max = hi;
+    if (+s.sl.value !== d) s.sl.value = d;
+    setText(s.val, d.toFixed(3));
     const out = d < c[0] || d > c[1];
-    if (s.out !== out) {
-      s.out = out; s.val.classList.toggle('over', out);
+    if (s.val.classList.contains('over') !== out) {
+      s.val.classList.toggle('over', out);
       s.val.title = out ? `beyond the training range [${c[0].toFixed(2)}, ${c[1].toFixed(2)}]` : '';
     }
   }
