@@ -11,6 +11,7 @@
 //! align = "none"                  # none | rigid
 //! unit_box = false                # scale into the unit box (SPLOCS's convention); outputs keep data units
 //! # template = "t.obj"           # with a NumPy path (F×N×3 .npy, or .npz + array = "name"): the faces
+//! # cache = "auto"              # training features cached: auto (large ones, in ~/.cache/meshdeco), off, or a folder
 //! [method]
 //! kind = "autoencoder"            # autoencoder | splocs | pca | region-pca
 //! components = 50
@@ -58,6 +59,7 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
+pub use crate::representation::feature_cache::CachePolicy;
 
 mod method;
 pub use method::{
@@ -187,6 +189,8 @@ pub struct DataConfig {
     pub array: Option<String>,
     /// Mesh file whose faces a NumPy `path` uses.
     pub template: Option<PathBuf>,
+    /// Where the training features are cached (`data.cache`: auto, off or a folder).
+    pub cache: CachePolicy,
 }
 
 /// Raw TOML of the whole file; `deny_unknown_fields` makes typos errors.
@@ -222,6 +226,7 @@ struct RawData {
     unit_box: Option<bool>,
     array: Option<String>,
     template: Option<PathBuf>,
+    cache: Option<String>,
 }
 
 /// A validated experiment configuration.
@@ -305,6 +310,11 @@ impl Config {
             unit_box: d.unit_box.unwrap_or(false),
             array: d.array,
             template: d.template,
+            cache: match d.cache.as_deref().map(str::trim) {
+                None => CachePolicy::Auto,
+                Some("") => return Err(Error::config("data.cache", "is empty: expected auto, off or a folder")),
+                Some(c) => CachePolicy::parse(c),
+            },
         };
         data.numpy_template()?;
 
@@ -491,6 +501,7 @@ impl DataConfig {
         if let Some(p) = &self.template {
             t.insert("template".into(), p.display().to_string().into());
         }
+        t.insert("cache".into(), self.cache.to_config_string().into());
         t
     }
 }

@@ -15,6 +15,7 @@ use crate::config::{Align, DataConfig, RestShape};
 use crate::error::{Error, Result};
 use crate::geometry::rigid_align::kabsch;
 use crate::mesh::{self, MeshSequence, TriMesh, Vec3};
+use crate::representation::feature_cache::CachePolicy;
 
 /// An affine scaling into the unit box: x' = (x − offset)·scale.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -77,6 +78,8 @@ pub struct Prepared {
     pub test: Vec<usize>,
     /// Scaling applied (identity unless `unit_box = true`).
     pub unit_box: UnitBox,
+    /// Where the methods cache the training frames' features (`data.cache`).
+    pub cache: CachePolicy,
 }
 
 impl Prepared {
@@ -162,7 +165,7 @@ pub fn prepare_sequence(mut seq: MeshSequence, cfg: &DataConfig) -> Result<Prepa
             *p = unit_box.apply(*p);
         }
     }
-    Ok(Prepared { sequence: seq, rest, train, test, unit_box })
+    Ok(Prepared { sequence: seq, rest, train, test, unit_box, cache: cfg.cache.clone() })
 }
 
 /// The rest shape's positions: the first training frame, the mean of the training frames, or a
@@ -231,6 +234,7 @@ mod tests {
             unit_box: false,
             array: None,
             template: None,
+            cache: CachePolicy::Off,
         }
     }
 

@@ -434,6 +434,107 @@ fn many_pieces_sequence(parts: usize) -> MeshSequence {
     named("pieces", faces, frames)
 }
 
+/// Many frames made from a few (issue 28's large-data benchmarks): frame `f` blends three
+/// source frames with random convex weights and adds a smooth random displacement (three plane
+/// waves, amplitude up to 1 % of the source's bounding-box diagonal, wavelengths 0.5–2 × the
+/// diagonal). Frame `f` depends only on `(seed, f)`, so frames can be made in any order and in
+/// parallel, and the same arguments always give the same frames. Units: the source's.
+#[derive(Debug, Clone)]
+pub struct Blend {
+    frames: Vec<Vec<Vec3>>,
+    diagonal: f64,
+    seed: u64,
+}
+
+impl Blend {
+    /// Share of the bounding-box diagonal the perturbation reaches at most.
+    pub const PERTURBATION: f64 = 0.01;
+
+    /// A generator over `source`'s frames (at least one, all of one vertex count).
+    pub fn new(source: &MeshSequence, seed: u64) -> Result<Self> {
+        let n = source.n_vertices();
+        if source.n_frames() == 0 || n == 0 {
+            return Err(Error::Invalid("blend: the source has no frames".into()));
+        }
+        let (lo, hi) = crate::mesh::bounding_box(&source.frames[0]);
+        let diagonal = crate::mesh::dist(lo, hi);
+        if !(diagonal.is_finite() && diagonal > 0.0) {
+            return Err(Error::Invalid(format!(
+                "blend: the source's first frame has bounding-box diagonal {diagonal}"
+            )));
+        }
+        Ok(Blend { frames: source.frames.clone(), diagonal, seed })
+    }
+
+    /// Vertex count N of every frame.
+    pub fn n_vertices(&self) -> usize {
+        self.frames[0].len()
+    }
+
+    /// Frame `f` (N positions).
+    pub fn frame(&self, f: usize) -> Vec<Vec3> {
+        let mut rng =
+            Rng::new(self.seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ (f as u64).wrapping_mul(0xD6E8_FEB8_6659_FD93));
+        let picks: Vec<usize> = (0..3).map(|_| rng.below(self.frames.len())).collect();
+        let raw: Vec<f64> = (0..3).map(|_| -(1.0 - rng.uniform()).ln()).collect(); // Dirichlet(1,1,1)
+        let total: f64 = raw.iter().sum();
+        let waves: Vec<(Vec3, Vec3, f64)> = (0..3)
+            .map(|_| {
+                let dir = unit_vector(&mut rng);
+                let push = unit_vector(&mut rng);
+                let wavelength = self.diagonal * (0.5 + 1.5 * rng.uniform());
+                let k = dir.map(|d| d * std::f64::consts::TAU / wavelength);
+                let amp = Self::PERTURBATION * self.diagonal * rng.uniform() / 3.0;
+                (k, push.map(|p| p * amp), rng.uniform() * std::f64::consts::TAU)
+            })
+            .collect();
+        (0..self.n_vertices())
+            .map(|i| {
+                let mut p = [0.0; 3];
+                for (j, &src) in picks.iter().enumerate() {
+                    let q = self.frames[src][i];
+                    for c in 0..3 {
+                        p[c] += raw[j] / total * q[c];
+                    }
+                }
+                let base = self.frames[0][i];
+                for (k, push, phase) in &waves {
+                    let s = (k[0] * base[0] + k[1] * base[1] + k[2] * base[2] + phase).sin();
+                    for c in 0..3 {
+                        p[c] += s * push[c];
+                    }
+                }
+                p
+            })
+            .collect()
+    }
+}
+
+/// Largest frame count [`write_blend_npy`] writes.
+pub const MAX_BLEND_FRAMES: usize = 10_000_000;
+
+/// Writes `n_frames` frames of [`Blend`] over `source` to `out` as an F × N × 3 float32 `.npy`,
+/// made in parallel 256 frames at a time (memory: one such chunk), atomically.
+/// `on_progress(frames_done)` is called after each chunk.
+pub fn write_blend_npy(
+    source: &MeshSequence,
+    n_frames: usize,
+    seed: u64,
+    out: &std::path::Path,
+    on_progress: &mut dyn FnMut(usize),
+) -> Result<()> {
+    use rayon::prelude::*;
+    if !(1..=MAX_BLEND_FRAMES).contains(&n_frames) {
+        return Err(Error::Invalid(format!("--frames {n_frames}: must be in 1 ..= {MAX_BLEND_FRAMES}")));
+    }
+    let blend = Blend::new(source, seed)?;
+    crate::mesh::npy::write_npy_f32_chunked(out, n_frames, blend.n_vertices(), 256, |start, len| {
+        let frames: Vec<Vec<Vec3>> = (start..start + len).into_par_iter().map(|f| blend.frame(f)).collect();
+        on_progress(start + len);
+        Ok(frames)
+    })
+}
+
 fn named(prefix: &str, faces: Vec<[usize; 3]>, frames: Vec<Vec<Vec3>>) -> MeshSequence {
     let names = (0..frames.len()).map(|i| format!("{prefix}{:03}", i + 1)).collect();
     MeshSequence { faces, frames, names }
@@ -564,5 +665,30 @@ mod tests {
                 assert!((l0 - l1).abs() < 1e-9 * l0.max(1.0), "rigid parts must stay rigid");
             }
         }
+    }
+    #[test]
+    fn blend_is_deterministic_convex_and_near_the_source() {
+        let src = load("synthetic:tube").unwrap();
+        let b = Blend::new(&src, 7).unwrap();
+        let a = b.frame(123);
+        assert_eq!(a, Blend::new(&src, 7).unwrap().frame(123), "same (seed, frame), same frame");
+        assert_ne!(a, b.frame(124));
+        assert_ne!(a, Blend::new(&src, 8).unwrap().frame(123));
+        // Within the source's per-vertex hull, widened by the perturbation's bound.
+        let (lo, hi) = crate::mesh::bounding_box(&src.frames[0]);
+        let bound = Blend::PERTURBATION * crate::mesh::dist(lo, hi) + 1e-12;
+        for (i, p) in a.iter().enumerate() {
+            for c in 0..3 {
+                let min = src.frames.iter().map(|f| f[i][c]).fold(f64::INFINITY, f64::min);
+                let max = src.frames.iter().map(|f| f[i][c]).fold(f64::NEG_INFINITY, f64::max);
+                assert!(
+                    p[c] >= min - bound && p[c] <= max + bound,
+                    "vertex {i} axis {c}: {} not in [{min}, {max}]",
+                    p[c]
+                );
+            }
+        }
+        let empty = MeshSequence { faces: vec![], frames: vec![], names: vec![] };
+        assert!(Blend::new(&empty, 0).is_err());
     }
 }

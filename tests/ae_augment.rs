@@ -59,7 +59,7 @@ fn explain(y: &[f32], data: &TrainingData) -> Option<(usize, usize, Vec<f32>)> {
             if a == b {
                 continue;
             }
-            let (xa, xb) = (data.shape(a), data.shape(b));
+            let (xa, xb) = (data.shape(a).unwrap(), data.shape(b).unwrap());
             let ts: Option<Vec<f32>> = (0..n)
                 .map(|i| blend_parameter(&y[i * 9..i * 9 + 9], &xa[i * 9..i * 9 + 9], &xb[i * 9..i * 9 + 9]))
                 .collect();
@@ -100,7 +100,7 @@ fn synthetic_shapes_are_valid_blends_of_two_training_shapes() {
         let (mut wholes, mut locals) = (0usize, 0usize);
         for draw in 0..40 {
             let mut y = vec![f32::NAN; n * 9];
-            aug.draw(&|s| data.shape(s), data.n_shapes(), &mut rng, |row, v| y[row] = v);
+            aug.draw(&|s| data.shape(s), data.n_shapes(), &mut rng, |row, v| y[row] = v).unwrap();
             assert!(y.iter().all(|v| v.is_finite() && v.abs() <= 0.95 + 1e-6), "{mix:?} draw {draw}: out of range");
             let (a, b, ts) =
                 explain(&y, &data).unwrap_or_else(|| panic!("{mix:?} draw {draw}: not a blend of two shapes"));
@@ -183,7 +183,7 @@ fn val_error(t: &Trainer, nb: &NeighborIndex, val: &TrainingData) -> f64 {
     let w = Weights::from_module(t.module()).unwrap();
     let b = val.n_shapes();
     let mut ws = Workspace::new(nb.n_vertices(), t.config().components, t.config().layers, padded_width(b));
-    feature_error(&mut ws, &w, nb, &val.batch_vcb_width(&(0..b).collect::<Vec<_>>(), padded_width(b)), b)
+    feature_error(&mut ws, &w, nb, &val.batch_vcb_width(&(0..b).collect::<Vec<_>>(), padded_width(b)).unwrap(), b)
 }
 
 #[test]
@@ -194,7 +194,7 @@ fn validation_keeps_the_step_with_the_lowest_validation_error() {
     let (fit, val, held) = all.split_validation(3).unwrap();
     assert_eq!(held, vec![2, 6, 10], "evenly spaced held-out shapes");
     assert_eq!((fit.n_shapes(), val.n_shapes()), (9, 3));
-    assert_eq!(val.shape(1), all.shape(6));
+    assert_eq!(val.shape(1).unwrap(), all.shape(6).unwrap());
     assert!(all.split_validation(12).is_err() && all.split_validation(0).is_err());
     // A large constant step makes the validation error go up and down.
     let cfg = AutoencoderConfig {
@@ -297,7 +297,7 @@ fn least_squares_encoder_gradients_match_finite_differences() {
     w.least_squares = true;
     let (n, k, b) = (nb.n_vertices(), cfg.components, data.n_shapes());
     let bp = padded_width(b);
-    let x = data.batch_vcb_width(&(0..b).collect::<Vec<_>>(), bp);
+    let x = data.batch_vcb_width(&(0..b).collect::<Vec<_>>(), bp).unwrap();
     let mut maps = SupportMaps::new(k, n);
     maps.update(&w.c, &cfg, &dist).unwrap();
     let mut ws = Workspace::new(n, k, 1, bp);
@@ -376,7 +376,7 @@ fn denoising_compares_with_the_clean_shapes_and_its_gradients_match_finite_diffe
     let w = Weights::from_module(t.module()).unwrap();
     let (n, k, b) = (nb.n_vertices(), cfg.components, data.n_shapes());
     let bp = padded_width(b);
-    let clean = data.batch_vcb_width(&(0..b).collect::<Vec<_>>(), bp);
+    let clean = data.batch_vcb_width(&(0..b).collect::<Vec<_>>(), bp).unwrap();
     let mut rng = Rng::new(9);
     let mut noisy = clean.clone();
     for row in noisy.chunks_exact_mut(bp) {

@@ -75,7 +75,7 @@ fn gradient_check(layers: usize) {
     let mut maps = SupportMaps::new(cfg.components, n);
     maps.update(&w.c, &cfg, &dist).unwrap();
     let idx: Vec<usize> = (0..3).collect();
-    let x = data.batch_vcb(&idx);
+    let x = data.batch_vcb(&idx).unwrap();
     let mut ws = Workspace::new(n, cfg.components, layers, padded_width(3));
     let mut g = Grads { layers: Vec::new(), c: Vec::new() };
     let terms = engine::loss_and_grad(&mut ws, &w, &nb, &x, None, 3, &maps, &cfg, &mut g, None);
@@ -83,7 +83,7 @@ fn gradient_check(layers: usize) {
 
     // Burn autodiff reference.
     let nbt = NeighborTensors::new(&nb, &device);
-    let xt = data.batch_tensor(&idx, &device);
+    let xt = data.batch_tensor(&idx, &device).unwrap();
     let (loss, ref_terms) = reference_loss(&module, xt, &nbt, &maps, &cfg);
     let grads = loss.backward();
     for (a, b) in [
@@ -139,7 +139,7 @@ fn hand_inference_matches_burn_forward() {
     let module = cfg.init(n, &device);
     let data = TrainingData::from_features(&feats).unwrap();
     let nbt = NeighborTensors::new(&nb, &device);
-    let (xh, z) = module.forward(data.batch_tensor(&[0, 1, 2, 3, 4], &device), &nbt);
+    let (xh, z) = module.forward(data.batch_tensor(&[0, 1, 2, 3, 4], &device).unwrap(), &nbt);
     let (xh, z) = (to_vec(xh), to_vec(z));
     let ae = Autoencoder::new(cfg, module, nb).unwrap();
     let codes = ae.encode(&feats).unwrap();

@@ -11,6 +11,7 @@ mod apply;
 mod eval;
 mod export;
 mod features;
+mod generate;
 mod geodesic;
 mod inspect;
 mod pose;
@@ -48,6 +49,8 @@ pub enum Command {
     Roundtrip(features::RoundtripArgs),
     /// Heat-method geodesic distances from source vertices, written as a coloured PLY.
     Geodesic(geodesic::GeodesicArgs),
+    /// Write a large NumPy sequence (float32 .npy) blended and perturbed from a small one.
+    Generate(generate::GenerateArgs),
     /// Summarise a mesh sequence: frames, vertices, faces, boundary loops, components, bounding
     /// box, warnings.
     Inspect(inspect::InspectArgs),
@@ -108,6 +111,7 @@ fn dispatch(command: Command) -> Result<()> {
         Command::Features(a) => features::features(a),
         Command::Roundtrip(a) => features::roundtrip_cmd(a),
         Command::Geodesic(a) => geodesic::run(a),
+        Command::Generate(a) => generate::run(a),
         Command::Inspect(a) => inspect::run(a),
         Command::Train(a) => train::run(a),
         Command::Eval(a) => eval::run(a),

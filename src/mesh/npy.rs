@@ -344,6 +344,34 @@ fn read_frames(r: &mut dyn Read, available: u64, what: &str, n_vertices: usize) 
             )));
         }
     };
+    let (f, n) = (f as usize, n as usize);
+    if !h.fortran {
+        // C order: one frame's bytes at a time (memory: the frames, not the file as well).
+        let decode = |b: &[u8]| -> f64 {
+            match (h.item, h.little) {
+                (8, true) => f64::from_le_bytes(b.try_into().unwrap_or_default()),
+                (8, false) => f64::from_be_bytes(b.try_into().unwrap_or_default()),
+                (_, true) => f64::from(f32::from_le_bytes(b.try_into().unwrap_or_default())),
+                (_, false) => f64::from(f32::from_be_bytes(b.try_into().unwrap_or_default())),
+            }
+        };
+        let mut buf = vec![0u8; n * 3 * h.item];
+        let mut frames = Vec::with_capacity(f);
+        for fi in 0..f {
+            r.read_exact(&mut buf)
+                .map_err(|e| bad(format!("reading the values of frame {} (0-based {fi}): {e}", fi + 1)))?;
+            let mut frame = Vec::with_capacity(n);
+            for (v, b) in buf.chunks_exact(3 * h.item).enumerate() {
+                let p = [decode(&b[..h.item]), decode(&b[h.item..2 * h.item]), decode(&b[2 * h.item..])];
+                if p.iter().any(|x| !x.is_finite()) {
+                    return Err(bad(format!("frame {} (0-based {fi}), vertex {v} is not finite: {p:?}", fi + 1)));
+                }
+                frame.push(p);
+            }
+            frames.push(frame);
+        }
+        return Ok(frames);
+    }
     let mut data = Vec::new();
     r.take(needed as u64).read_to_end(&mut data).map_err(|e| bad(format!("reading the values: {e}")))?;
     if data.len() != needed {
@@ -358,7 +386,6 @@ fn read_frames(r: &mut dyn Read, available: u64, what: &str, n_vertices: usize) 
             (_, false) => f64::from(f32::from_be_bytes(b.try_into().unwrap_or_default())),
         }
     };
-    let (f, n) = (f as usize, n as usize);
     let at = |fi: usize, v: usize, c: usize| {
         if h.fortran { value(fi + f * (v + n * c)) } else { value((fi * n + v) * 3 + c) }
     };
@@ -417,6 +444,68 @@ pub fn npy_image(frames: &[Vec<Vec3>]) -> Vec<u8> {
 /// Writes frames (all of one vertex count) as a `.npy` (F × N × 3, float64), atomically.
 pub fn write_npy(path: &Path, frames: &[Vec<Vec3>]) -> Result<()> {
     crate::artifact::write_atomic(path, &npy_image(frames))
+}
+
+/// Writes an F × N × 3 float32 `.npy` whose frames are made on demand, atomically, holding one
+/// chunk at a time: `chunk(start, len)` returns frames `start .. start + len` (at most
+/// `chunk_len` per call). A frame of another vertex count or a non-finite value ends the write
+/// with an error naming the frame, and nothing is left at `path`.
+pub fn write_npy_f32_chunked(
+    path: &Path,
+    n_frames: usize,
+    n_vertices: usize,
+    chunk_len: usize,
+    mut chunk: impl FnMut(usize, usize) -> Result<Vec<Vec<Vec3>>>,
+) -> Result<()> {
+    let mut failure: Option<Error> = None;
+    let written = crate::artifact::write_atomic_with(path, |w| {
+        use std::io::Write;
+        w.write_all(&npy_header("<f4", false, &[n_frames, n_vertices, 3]))?;
+        let mut start = 0;
+        while start < n_frames {
+            let len = chunk_len.max(1).min(n_frames - start);
+            let frames = match chunk(start, len) {
+                Ok(f) => f,
+                Err(e) => {
+                    failure = Some(e);
+                    return Err(std::io::Error::other("frame generation failed"));
+                }
+            };
+            for (j, f) in frames.iter().enumerate() {
+                let bad = if f.len() != n_vertices {
+                    Some(format!("has {} vertices, expected {n_vertices}", f.len()))
+                } else {
+                    f.iter()
+                        .flatten()
+                        .find(|x| !x.is_finite() || x.abs() > f32::MAX as f64)
+                        .map(|x| format!("holds {x}, not a finite float32"))
+                };
+                if let Some(why) = bad {
+                    failure = Some(Error::Invalid(format!("{}: frame {} {why}", path.display(), start + j)));
+                    return Err(std::io::Error::other("bad frame"));
+                }
+                let mut buf = Vec::with_capacity(n_vertices * 12);
+                for x in f.iter().flatten() {
+                    buf.extend_from_slice(&(*x as f32).to_le_bytes());
+                }
+                w.write_all(&buf)?;
+            }
+            if frames.len() != len {
+                failure = Some(Error::Invalid(format!(
+                    "{}: asked for {len} frames from {start}, got {}",
+                    path.display(),
+                    frames.len()
+                )));
+                return Err(std::io::Error::other("short chunk"));
+            }
+            start += len;
+        }
+        Ok(())
+    });
+    match failure {
+        Some(e) => Err(e),
+        None => written,
+    }
 }
 
 /// Writes named frame arrays as an uncompressed `.npz` (what `numpy.savez` writes), atomically.

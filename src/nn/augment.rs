@@ -118,16 +118,19 @@ impl Augmenter {
     /// Draws one synthetic shape from `shapes` (each `N × 9` row-major) and writes it through
     /// `put(row, value)` for every row `i * 9 + c` (so the caller can write straight into a
     /// batch layout). Needs at least one shape; with one shape the shape itself is returned.
+    ///
+    /// `shapes(s)` gives shape `s` (borrowed, or read from a file); its error ends the draw.
     pub fn draw<'s>(
         &self,
-        shapes: &dyn Fn(usize) -> &'s [f32],
+        shapes: &dyn Fn(usize) -> Result<std::borrow::Cow<'s, [f32]>>,
         n_shapes: usize,
         rng: &mut Rng,
         mut put: impl FnMut(usize, f32),
-    ) {
+    ) -> Result<()> {
         let a = rng.below(n_shapes);
         let b = if n_shapes > 1 { (a + 1 + rng.below(n_shapes - 1)) % n_shapes } else { a };
-        let (xa, xb) = (shapes(a), shapes(b));
+        let (xa, xb) = (shapes(a)?, shapes(b)?);
+        let (xa, xb): (&[f32], &[f32]) = (&xa, &xb);
         debug_assert!(xa.len() == 9 * self.n && xb.len() == 9 * self.n);
         let local = match self.mix {
             AugmentMix::Local => true,
@@ -139,7 +142,7 @@ impl Augmenter {
             for (row, (&u, &v)) in xa.iter().zip(xb).enumerate() {
                 put(row, u + t * (v - u));
             }
-            return;
+            return Ok(());
         }
         let d = &self.pool[rng.below(self.pool.len())];
         let r = (self.radius[0] + rng.uniform() * (self.radius[1] - self.radius[0])) as f32;
@@ -152,5 +155,6 @@ impl Augmenter {
                 put(row, u + m * (v - u));
             }
         }
+        Ok(())
     }
 }

@@ -1,22 +1,41 @@
 //! Training data of the autoencoder: per-shape feature matrices `N × 9` (scaled ACAP features)
 //! validated once, and their batching into the kernels' VCB layout or Burn tensors.
+//!
+//! The shapes live either in memory (`f32`, shape-major) or in a feature cache file
+//! ([`crate::representation::feature_cache::FeatureFile`]), read a shape at a time when a batch
+//! needs it (each frame checked against its checksum) and scaled on the way in — the same
+//! arithmetic as scaling in memory, so both give the same numbers; with the file, memory is a
+//! batch's, not the data's.
+
+use std::borrow::Cow;
+use std::sync::Arc;
 
 use burn::tensor::{Device, Tensor, TensorData};
 
 use super::kernels::padded_width;
 use crate::error::{Error, Result};
 use crate::representation::Features;
+use crate::representation::feature_cache::FeatureFile;
+use crate::representation::scaling::FeatureScaling;
 
 /// Feature width of the autoencoder (ACAP: 9 numbers per vertex).
 pub const WIDTH: usize = 9;
+
+/// Where the shapes are.
+#[derive(Debug, Clone)]
+enum Storage {
+    /// Shape-major `[S, N, 9]`.
+    Memory(Vec<f32>),
+    /// Unscaled features in a cache file: shape `s` is the file's frame `frames[s]`, scaled.
+    File { file: Arc<FeatureFile>, scaling: FeatureScaling, frames: Vec<usize> },
+}
 
 /// The shapes the autoencoder is trained on: `n_shapes` matrices `N × 9` (row-major, `f32`).
 #[derive(Debug, Clone)]
 pub struct TrainingData {
     n_shapes: usize,
     n_vertices: usize,
-    /// Shape-major `[S, N, 9]`.
-    data: Vec<f32>,
+    storage: Storage,
 }
 
 impl TrainingData {
@@ -56,7 +75,35 @@ impl TrainingData {
         Ok(TrainingData {
             n_shapes: f.n_frames,
             n_vertices: f.n_elements,
-            data: f.data.iter().map(|&v| v as f32).collect(),
+            storage: Storage::Memory(f.data.iter().map(|&v| v as f32).collect()),
+        })
+    }
+
+    /// The frames of a feature cache file (unscaled ACAP features, width 9), scaled by `scaling`
+    /// as they are read. The file's values were checked finite when it was written, and each
+    /// frame is checked against its checksum when read.
+    pub fn from_feature_file(file: Arc<FeatureFile>, scaling: FeatureScaling) -> Result<Self> {
+        let h = file.header();
+        if h.width != WIDTH || scaling.width != WIDTH {
+            return Err(Error::Invalid(format!(
+                "the autoencoder needs {WIDTH} numbers per vertex (ACAP features), the cache {} holds width {} (scaling width {})",
+                file.path().display(),
+                h.width,
+                scaling.width
+            )));
+        }
+        if h.n_frames == 0 || h.n_elements == 0 {
+            return Err(Error::Invalid(format!(
+                "no training data ({} frames × {} vertices)",
+                h.n_frames, h.n_elements
+            )));
+        }
+        scaling.validate()?;
+        let (n_shapes, n_vertices) = (h.n_frames, h.n_elements);
+        Ok(TrainingData {
+            n_shapes,
+            n_vertices,
+            storage: Storage::File { file, scaling, frames: (0..n_shapes).collect() },
         })
     }
 
@@ -70,10 +117,46 @@ impl TrainingData {
         self.n_vertices
     }
 
-    /// Features of shape `s`, `N × 9` row-major.
-    pub fn shape(&self, s: usize) -> &[f32] {
+    /// True when the shapes are read from a file as they are needed.
+    pub fn is_streamed(&self) -> bool {
+        matches!(self.storage, Storage::File { .. })
+    }
+
+    /// Features of shape `s`, `N × 9` row-major (borrowed from memory, or read from the file).
+    pub fn shape(&self, s: usize) -> Result<Cow<'_, [f32]>> {
         let sz = self.n_vertices * WIDTH;
-        &self.data[s * sz..(s + 1) * sz]
+        if s >= self.n_shapes {
+            return Err(Error::Invalid(format!("shape {s} of {}", self.n_shapes)));
+        }
+        match &self.storage {
+            Storage::Memory(data) => Ok(Cow::Borrowed(&data[s * sz..(s + 1) * sz])),
+            Storage::File { file, scaling, frames } => {
+                let mut x = file.frame(frames[s])?;
+                scaling.apply_in_place(&mut x)?;
+                Ok(Cow::Owned(x.into_iter().map(|v| v as f32).collect()))
+            }
+        }
+    }
+
+    /// Scaled `f64` features of the shapes `range` (what [`TrainingData::shape`] gives, before
+    /// the cast to `f32`): for encoding the training shapes a run at a time. Only for streamed
+    /// data; in memory the caller holds the `f64` features itself.
+    pub fn scaled_features(&self, range: std::ops::Range<usize>) -> Result<Features> {
+        let Storage::File { file, scaling, frames } = &self.storage else {
+            return Err(Error::Invalid("scaled_features: the shapes are held in memory".into()));
+        };
+        if range.end > self.n_shapes || range.start > range.end {
+            return Err(Error::Invalid(format!("shapes {range:?} of {}", self.n_shapes)));
+        }
+        let mut out = Features::zeros(0, self.n_vertices, WIDTH);
+        out.n_frames = range.len();
+        out.data.reserve(range.len() * self.n_vertices * WIDTH);
+        for s in range {
+            let mut x = file.frame(frames[s])?;
+            scaling.apply_in_place(&mut x)?;
+            out.data.extend_from_slice(&x);
+        }
+        Ok(out)
     }
 
     /// The shapes `indices` in VCB layout (see [`super::kernels`]) with the batch width padded to
@@ -81,21 +164,21 @@ impl TrainingData {
     ///
     /// # Shapes
     /// output: `N × 9 × bp`
-    pub fn batch_vcb(&self, indices: &[usize]) -> Vec<f32> {
-        vcb_from_shapes(indices.iter().map(|&s| self.shape(s)), indices.len(), self.n_vertices)
+    pub fn batch_vcb(&self, indices: &[usize]) -> Result<Vec<f32>> {
+        self.batch_vcb_width(indices, padded_width(indices.len()))
     }
 
     /// The shapes `indices` in VCB layout of batch width `bp` (≥ `indices.len()`, a multiple of
     /// [`super::kernels::LANES`]); the other lanes are zero.
-    pub fn batch_vcb_width(&self, indices: &[usize], bp: usize) -> Vec<f32> {
+    pub fn batch_vcb_width(&self, indices: &[usize], bp: usize) -> Result<Vec<f32>> {
         assert!(bp >= indices.len() && bp.is_multiple_of(super::kernels::LANES));
         let mut out = vec![0.0f32; self.n_vertices * WIDTH * bp];
         for (j, &s) in indices.iter().enumerate() {
-            for (row, v) in self.shape(s).iter().enumerate() {
+            for (row, v) in self.shape(s)?.iter().enumerate() {
                 out[row * bp + j] = *v;
             }
         }
-        out
+        Ok(out)
     }
 
     /// Splits off `v` shapes, evenly spaced (shape `⌊(j + ½)·S/v⌋` for j < v), as a validation
@@ -110,10 +193,19 @@ impl TrainingData {
         }
         let held: Vec<usize> = (0..v).map(|j| ((2 * j + 1) * s) / (2 * v)).collect();
         let keep: Vec<usize> = (0..s).filter(|i| !held.contains(i)).collect();
-        let sub = |idx: &[usize]| TrainingData {
-            n_shapes: idx.len(),
-            n_vertices: self.n_vertices,
-            data: idx.iter().flat_map(|&i| self.shape(i).iter().copied()).collect(),
+        let sub = |idx: &[usize]| -> TrainingData {
+            let storage = match &self.storage {
+                Storage::Memory(data) => {
+                    let sz = self.n_vertices * WIDTH;
+                    Storage::Memory(idx.iter().flat_map(|&i| data[i * sz..(i + 1) * sz].iter().copied()).collect())
+                }
+                Storage::File { file, scaling, frames } => Storage::File {
+                    file: file.clone(),
+                    scaling: scaling.clone(),
+                    frames: idx.iter().map(|&i| frames[i]).collect(),
+                },
+            };
+            TrainingData { n_shapes: idx.len(), n_vertices: self.n_vertices, storage }
         };
         Ok((sub(&keep), sub(&held), held))
     }
@@ -122,12 +214,12 @@ impl TrainingData {
     ///
     /// # Shapes
     /// output: `[B, N, 9]`
-    pub fn batch_tensor(&self, indices: &[usize], device: &Device) -> Tensor<3> {
+    pub fn batch_tensor(&self, indices: &[usize], device: &Device) -> Result<Tensor<3>> {
         let mut v = Vec::with_capacity(indices.len() * self.n_vertices * WIDTH);
         for &s in indices {
-            v.extend_from_slice(self.shape(s));
+            v.extend_from_slice(&self.shape(s)?);
         }
-        Tensor::from_data(TensorData::new(v, [indices.len(), self.n_vertices, WIDTH]), device)
+        Ok(Tensor::from_data(TensorData::new(v, [indices.len(), self.n_vertices, WIDTH]), device))
     }
 }
 

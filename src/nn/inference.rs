@@ -47,6 +47,9 @@ const FORMAT: &str = "meshdeco-autoencoder-1";
 /// Shapes processed per inference pass.
 const INFER_BATCH: usize = 32;
 
+/// Frames per run of [`Autoencoder::encode_with_passes`] (8 inference batches).
+const ENCODE_RUN: usize = 8 * INFER_BATCH;
+
 /// Codes decoded per pass of [`Autoencoder::analyze_components`] (few: it keeps only what it
 /// returns, and a pass's buffers grow with the number of codes).
 const ANALYSIS_BATCH: usize = 8;
@@ -256,18 +259,35 @@ impl Autoencoder {
     ///
     /// # Shapes
     /// `features`: F × N × 9 → output F codes of K values.
+    ///
+    /// Frames go through in runs of [`ENCODE_RUN`] (a multiple of the inference batch, so every
+    /// frame meets the same batch-mates as in one run over all): memory is one run's, not the
+    /// data's.
     pub fn encode_with_passes(&self, features: &Features, passes: usize) -> Result<Vec<Vec<f64>>> {
-        let ex = self.encode_once(features)?;
-        let mut z = ex.clone();
-        for _ in 0..passes {
-            let ed = self.encode_once(&self.decode(&z)?)?;
-            for ((zf, a), b) in z.iter_mut().zip(&ex).zip(&ed) {
-                for ((v, x), y) in zf.iter_mut().zip(a).zip(b) {
-                    *v += x - y;
+        self.check_features(features)?;
+        let per = features.n_elements * features.width;
+        let mut out = Vec::with_capacity(features.n_frames);
+        for start in (0..features.n_frames).step_by(ENCODE_RUN) {
+            let end = (start + ENCODE_RUN).min(features.n_frames);
+            let run = Features {
+                n_frames: end - start,
+                n_elements: features.n_elements,
+                width: features.width,
+                data: features.data[start * per..end * per].to_vec(),
+            };
+            let ex = self.encode_once(&run)?;
+            let mut z = ex.clone();
+            for _ in 0..passes {
+                let ed = self.encode_once(&self.decode(&z)?)?;
+                for ((zf, a), b) in z.iter_mut().zip(&ex).zip(&ed) {
+                    for ((v, x), y) in zf.iter_mut().zip(a).zip(b) {
+                        *v += x - y;
+                    }
                 }
             }
+            out.extend(z);
         }
-        Ok(z)
+        Ok(out)
     }
 
     /// The network encoder's one pass `z = C·f(x)`.
@@ -347,15 +367,26 @@ impl Autoencoder {
                 data.n_frames
             )));
         }
-        let z = self.encode(data)?;
+        self.analyze_codes(&self.encode(data)?, reference)
+    }
+
+    /// [`Autoencoder::analyze_components`] from the training shapes' codes (what
+    /// [`Autoencoder::encode`] gives), so that a caller who has them does not encode again.
+    pub fn analyze_codes(&self, z: &[Vec<f64>], reference: usize) -> Result<ComponentAnalysis> {
         let k = self.weights.k;
         let n = self.weights.n;
+        if reference >= z.len() {
+            return Err(Error::Invalid(format!("reference frame {reference} is out of range ({} codes)", z.len())));
+        }
+        if let Some(i) = z.iter().position(|c| c.len() != k) {
+            return Err(Error::Invalid(format!("code {i} has {} values, the model has {k} components", z[i].len())));
+        }
         let zr = z[reference].clone();
         let mut codes = vec![zr.clone()];
         let mut ranges = Vec::with_capacity(k);
         for kk in 0..k {
             let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
-            for zf in &z {
+            for zf in z {
                 lo = lo.min(zf[kk]);
                 hi = hi.max(zf[kk]);
             }

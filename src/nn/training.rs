@@ -193,6 +193,8 @@ pub struct Trainer<'a> {
     output_loss: Option<&'a dyn OutputLoss>,
     /// The lanes the vertex term sees this step (all, or `vertex_batch` drawn each step).
     vertex_lanes: Vec<usize>,
+    /// The shuffled order of the current epoch (mini-batches): (epoch, order).
+    epoch_order: Option<(usize, Vec<usize>)>,
 }
 
 fn adam(cfg: &AutoencoderConfig) -> ModuleOptimizer {
@@ -215,6 +217,33 @@ fn non_finite_loss(iteration: usize, terms: &LossTerms) -> Error {
 /// Seed of the mini-batch stream (distinct from the initialisation stream of the same seed).
 fn batch_rng(seed: u64) -> Rng {
     Rng::new(seed ^ 0xB47C_4000_0000_0001)
+}
+
+/// The shapes of step `iteration` with mini-batches of `b` of `n_shapes` (b < n_shapes): epoch
+/// e = iteration / ⌊S/b⌋ visits the shapes in an order shuffled by a generator seeded with
+/// (seed, e) alone, b at a time (the S mod b left over sit out that epoch), so each shape is seen
+/// once per epoch and a run resumed at any step draws the same batches as one that was not
+/// stopped. `order` caches the current epoch's order.
+pub fn epoch_batch(
+    seed: u64,
+    iteration: usize,
+    n_shapes: usize,
+    b: usize,
+    order: &mut Option<(usize, Vec<usize>)>,
+) -> Vec<usize> {
+    let b = b.clamp(1, n_shapes.max(1));
+    let per_epoch = (n_shapes / b).max(1);
+    let (epoch, slot) = (iteration / per_epoch, iteration % per_epoch);
+    if order.as_ref().map(|(e, _)| *e) != Some(epoch) {
+        let mut rng = Rng::new(seed ^ 0x5EED_E90C_0000_0000 ^ (epoch as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15));
+        let mut p: Vec<usize> = (0..n_shapes).collect();
+        for i in (1..n_shapes).rev() {
+            p.swap(i, rng.below(i + 1));
+        }
+        *order = Some((epoch, p));
+    }
+    let p = &order.as_ref().map(|(_, p)| p.as_slice()).unwrap_or(&[]);
+    p[slot * b..(slot * b + b).min(p.len())].to_vec()
 }
 
 /// A Burn module of the layers only (no component blocks): what checkpoints record of them.
@@ -265,7 +294,8 @@ impl<'a> Trainer<'a> {
         let b = config.batch_size.unwrap_or(data.n_shapes()).min(data.n_shapes());
         let bp = padded_width(b + config.augment);
         let workspace = Workspace::new(n, config.components, config.layers, bp);
-        let full_batch = (b == data.n_shapes()).then(|| data.batch_vcb_width(&(0..b).collect::<Vec<_>>(), bp));
+        let full_batch =
+            if b == data.n_shapes() { Some(data.batch_vcb_width(&(0..b).collect::<Vec<_>>(), bp)?) } else { None };
         let augmenter = if config.augment > 0 {
             Some(Augmenter::new(config.augment_mix, config.augment_radius, n, distances, config.seed)?)
         } else {
@@ -308,6 +338,7 @@ impl<'a> Trainer<'a> {
             validation: None,
             output_loss: None,
             vertex_lanes: Vec::new(),
+            epoch_order: None,
         })
     }
 
@@ -334,7 +365,7 @@ impl<'a> Trainer<'a> {
         let bp = padded_width(b);
         self.validation = Some(Validation {
             data,
-            x: data.batch_vcb_width(&(0..b).collect::<Vec<_>>(), bp),
+            x: data.batch_vcb_width(&(0..b).collect::<Vec<_>>(), bp)?,
             workspace: Workspace::new(data.n_vertices(), self.config.components, self.config.layers, bp),
             best: None,
         });
@@ -492,8 +523,11 @@ impl<'a> Trainer<'a> {
         let n_shapes = self.data.n_shapes();
         let b = self.config.batch_size.unwrap_or(n_shapes).min(n_shapes);
         if self.config.engine == Engine::Graph {
-            let idx: Vec<usize> =
-                if b == n_shapes { (0..n_shapes).collect() } else { self.rng.sample_distinct(n_shapes, b) };
+            let idx: Vec<usize> = if b == n_shapes {
+                (0..n_shapes).collect()
+            } else {
+                epoch_batch(self.config.seed, self.iteration, n_shapes, b, &mut self.epoch_order)
+            };
             let terms = self.graph_step(&idx)?;
             self.iteration += 1;
             self.last_loss = Some(terms);
@@ -509,8 +543,8 @@ impl<'a> Trainer<'a> {
         }
         let bp = self.workspace.width();
         if self.full_batch.is_none() {
-            let idx = self.rng.sample_distinct(n_shapes, b);
-            self.batch_buf = self.data.batch_vcb_width(&idx, bp);
+            let idx = epoch_batch(self.config.seed, self.iteration, n_shapes, b, &mut self.epoch_order);
+            self.batch_buf = self.data.batch_vcb_width(&idx, bp)?;
         }
         let x: &mut [f32] = match &mut self.full_batch {
             Some(x) => x,
@@ -520,7 +554,7 @@ impl<'a> Trainer<'a> {
         if let Some(aug) = &self.augmenter {
             let data = self.data;
             for j in 0..m {
-                aug.draw(&|s| data.shape(s), n_shapes, &mut self.rng, |row, v| x[row * bp + b + j] = v);
+                aug.draw(&|s| data.shape(s), n_shapes, &mut self.rng, |row, v| x[row * bp + b + j] = v)?;
             }
         }
         // Denoising: the encoder reads the batch plus fresh Gaussian noise on its real lanes; the
@@ -643,19 +677,19 @@ impl<'a> Trainer<'a> {
         let components = AutoencoderModule::component_blocks(&self.weights.c, self.weights.n, &self.device);
         let module = AutoencoderModule { layers, components };
         let x = match &self.augmenter {
-            None => self.data.batch_tensor(idx, &self.device),
+            None => self.data.batch_tensor(idx, &self.device)?,
             Some(aug) => {
                 let (n, m) = (self.data.n_vertices(), self.config.augment);
                 let mut v = Vec::with_capacity((idx.len() + m) * n * 9);
                 for &s in idx {
-                    v.extend_from_slice(self.data.shape(s));
+                    v.extend_from_slice(&self.data.shape(s)?);
                 }
                 let data = self.data;
                 for _ in 0..m {
                     let start = v.len();
                     v.resize(start + n * 9, 0.0);
                     let dst = &mut v[start..];
-                    aug.draw(&|s| data.shape(s), data.n_shapes(), &mut self.rng, |row, x| dst[row] = x);
+                    aug.draw(&|s| data.shape(s), data.n_shapes(), &mut self.rng, |row, x| dst[row] = x)?;
                 }
                 Tensor::from_data(TensorData::new(v, [idx.len() + m, n, 9]), &self.device)
             }
@@ -934,5 +968,32 @@ mod tests {
             assert_eq!(fused.centers(), plain.centers());
             assert!(fused.grads.c.is_empty(), "the fused path stored the gradient of C");
         }
+    }
+    #[test]
+    fn epoch_batches_visit_every_shape_once_and_resume_alike() {
+        let (s, b) = (23, 5);
+        let per_epoch = s / b;
+        let mut order = None;
+        let mut seen_epochs = Vec::new();
+        for epoch in 0..3 {
+            let mut seen = Vec::new();
+            for slot in 0..per_epoch {
+                let it = epoch * per_epoch + slot;
+                let batch = epoch_batch(7, it, s, b, &mut order);
+                assert_eq!(batch.len(), b);
+                // A resumed run (no cached order) draws the same batch.
+                assert_eq!(batch, epoch_batch(7, it, s, b, &mut None), "iteration {it}");
+                seen.extend(batch);
+            }
+            let mut sorted = seen.clone();
+            sorted.sort_unstable();
+            sorted.dedup();
+            assert_eq!(sorted.len(), per_epoch * b, "epoch {epoch}: a shape came twice");
+            assert!(sorted.iter().all(|&i| i < s));
+            seen_epochs.push(seen);
+        }
+        assert_ne!(seen_epochs[0], seen_epochs[1], "each epoch is shuffled anew");
+        assert_ne!(epoch_batch(7, 0, s, b, &mut None), epoch_batch(8, 0, s, b, &mut None), "the seed matters");
+        assert_eq!(epoch_batch(7, 3, 4, 9, &mut None).len(), 4, "a batch larger than the data is the data");
     }
 }

@@ -44,8 +44,8 @@ use crate::nn::{Autoencoder, CenterDistances, NeighborIndex, RunOptions, Trainer
 use crate::preprocess::{Prepared, UnitBox};
 use crate::representation::acap::Consistency;
 use crate::representation::roundtrip::Alignment;
-use crate::representation::scaling::FeatureScaling;
-use crate::representation::{Representation, RepresentationKind, RepresentationOptions};
+use crate::representation::scaling::{FeatureScaling, ScalingMode};
+use crate::representation::{Features, Representation, RepresentationKind, RepresentationOptions};
 
 /// Checkpoint and per-iteration log file names (the artefact directory's work files).
 pub use crate::artifact::{CHECKPOINT_FILE, LOG_FILE};
@@ -199,7 +199,7 @@ impl AeArtifact {
         for p in scaled.frames.iter_mut().flatten() {
             *p = self.header.unit_box.apply(*p);
         }
-        let (own, translations) = self.representation.split_pieces(&self.representation.encode(&scaled)?)?;
+        let (own, translations) = self.representation.split_pieces(self.representation.encode(&scaled)?)?;
         let xs = self.header.scaling.apply(&own)?;
         let mut codes = self.model.encode_with_passes(&xs, passes)?;
         append_translations(&self.representation, &mut codes, &translations);
@@ -574,6 +574,47 @@ fn piece_summaries(
     out
 }
 
+/// Training shapes encoded at a time after training when they stream from the cache file (a
+/// multiple of the encoder's batch).
+const STREAM_ENCODE_RUN: usize = 256;
+
+/// The autoencoder's training data: the feature scaling, the scaled shapes, the scaled `f64`
+/// features when they are held in memory (`None`: read from the cache file), and the pieces'
+/// translations per frame (multi-piece meshes; empty otherwise).
+type AeTrainingData = (FeatureScaling, TrainingData, Option<Features>, Vec<Vec<Vec3>>);
+
+/// The training features: from a cache file, read a batch at a time, when `data.cache` caches
+/// them (one-piece meshes); otherwise computed into memory (or read whole from the cache) and
+/// scaled in place. Both give the same scaled numbers.
+fn training_data(representation: &Representation, prep: &Prepared, mode: ScalingMode) -> Result<AeTrainingData> {
+    use crate::representation::feature_cache::open_or_build;
+    let own = if representation.pieces().is_none() {
+        match open_or_build(representation, &prep.sequence, &prep.train, &prep.cache)? {
+            Some(Ok((file, built))) => {
+                let verb = if built { "cached in" } else { "read from the cache" };
+                eprintln!("note: features {verb} {} (training reads them a batch at a time)", file.path().display());
+                let h = file.header();
+                let scaling = FeatureScaling::fit_column_ranges(&h.min(), &h.max(), mode)?;
+                let data = TrainingData::from_feature_file(std::sync::Arc::new(file), scaling.clone())?;
+                return Ok((scaling, data, None, Vec::new()));
+            }
+            Some(Err(why)) => {
+                eprintln!("note: features not cached: {why}");
+                representation.encode_selected(&prep.sequence, &prep.train)?
+            }
+            None => representation.encode_selected(&prep.sequence, &prep.train)?,
+        }
+    } else {
+        super::training_features(representation, prep)?
+    };
+    let (mut xs, train_t) = representation.split_pieces(own)?;
+    let scaling = FeatureScaling::fit(&xs, mode)?;
+    // Scaled in place: the unscaled features are not kept beside the scaled ones.
+    scaling.apply_in_place(&mut xs.data)?;
+    let data = TrainingData::from_features(&xs)?;
+    Ok((scaling, data, Some(xs), train_t))
+}
+
 /// Trains the autoencoder (`kind = "autoencoder"`) on prepared data. Writes its checkpoints
 /// (`checkpoint.bin`) and per-iteration log (`training.jsonl`) into `ctx.out` while it trains;
 /// with `ctx.resume`, continues from that checkpoint (same data and hyperparameters; only
@@ -592,9 +633,10 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
     let t_rep = Instant::now();
     let options = RepresentationOptions { acap_consistency: m.consistency.to_acap(), ..Default::default() };
     let representation = Representation::new(RepresentationKind::Acap, &prep.rest, options)?;
-    let train_seq = prep.train_sequence();
     // The network's 9 numbers per vertex, and the pieces' translations (multi-piece meshes).
-    let (x_train, train_t) = representation.split_pieces(&representation.encode(&train_seq)?)?;
+    // When the features are cached in a file (large data: `data.cache`), training reads them
+    // from it a batch at a time; otherwise they are computed into memory and scaled in place.
+    let features = training_data(&representation, prep, m.scaling.mode())?;
     if let Some((placement, _)) = representation.pieces() {
         let extra = 3 * (placement.n_pieces() - 1);
         eprintln!(
@@ -605,14 +647,14 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
             ae_cfg.components + extra
         );
     }
-    let scaling = FeatureScaling::fit(&x_train, m.scaling.mode())?;
-    let xs_train = scaling.apply(&x_train)?;
+    let (scaling, all, xs_train, train_t) = features;
     let representation_seconds = t_rep.elapsed().as_secs_f64();
 
     ctx.progress.stage("geodesics", 0);
     let distances = GeodesicSupport::max_normalised(&prep.rest, m.geodesic_m)?;
     let neighbors = NeighborIndex::new(representation.element_adjacency())?;
-    let all = TrainingData::from_features(&xs_train)?;
+    let all_shapes = all.n_shapes();
+    let streamed = if all.is_streamed() { Some(all.clone()) } else { None };
     // With `validation = v`, v evenly spaced training shapes are held out to choose the step.
     let (data, held_out) = if ae_cfg.validation > 0 {
         let (fit, val, _) = all.split_validation(ae_cfg.validation).map_err(crate::config::method_key)?;
@@ -704,9 +746,24 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
     let model = trainer.into_model()?;
 
     progress.stage("measuring", 0);
-    let mut train_codes = model.encode(&xs_train)?;
+    // The training shapes' codes (in runs when the shapes stream from the cache file: the runs
+    // are multiples of the encoder's batch, so the codes are those of one pass over all).
+    let mut train_codes = match &xs_train {
+        Some(x) => model.encode(x)?,
+        None => {
+            let streamed = streamed
+                .as_ref()
+                .ok_or_else(|| Error::Invalid("the training shapes are neither in memory nor in a file".into()))?;
+            let mut codes = Vec::with_capacity(all_shapes);
+            for start in (0..all_shapes).step_by(STREAM_ENCODE_RUN) {
+                let end = (start + STREAM_ENCODE_RUN).min(all_shapes);
+                codes.extend(model.encode(&streamed.scaled_features(start..end)?)?);
+            }
+            codes
+        }
+    };
+    let analysis = model.analyze_codes(&train_codes, 0)?;
     append_translations(&representation, &mut train_codes, &train_t);
-    let analysis = model.analyze_components(&xs_train, 0)?;
     let mut summaries: Vec<ComponentSummary> = analysis.components.iter().map(|c| c.summary.clone()).collect();
     summaries.sort_by_key(|c| c.dim);
     summaries.extend(piece_summaries(&representation, ae_cfg.components, &train_t, 0));
@@ -717,7 +774,7 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
         scaling,
         unit_box: prep.unit_box,
         components: ae_cfg.components,
-        train_frames: train_seq.names.clone(),
+        train_frames: prep.train_names(),
         reference: 0,
         analysis: summaries,
     };

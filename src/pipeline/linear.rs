@@ -231,7 +231,7 @@ fn training_features(
     let t = Instant::now();
     let options = RepresentationOptions { acap_consistency: consistency.to_acap(), ..Default::default() };
     let representation = Representation::new(kind, &prep.rest, options)?;
-    let mut x = representation.encode(&prep.train_sequence())?;
+    let mut x = super::training_features(&representation, prep)?;
     let rest_row = if subtract_rest {
         let rest_seq = MeshSequence {
             faces: prep.rest.faces.clone(),

@@ -17,6 +17,24 @@ pub mod train;
 pub use registry::{FitContext, FitStats, Fitted, fit, load_model};
 pub use train::{TrainOptions, TrainOutcome, train, train_prepared};
 
+/// The representation's features of the prepared training frames, through the feature cache
+/// (`data.cache`, [`crate::representation::feature_cache`]); says on stderr when it read or wrote
+/// a cache file, or could not use its folder.
+pub fn training_features(
+    representation: &crate::representation::Representation,
+    prep: &crate::preprocess::Prepared,
+) -> crate::error::Result<crate::representation::Features> {
+    use crate::representation::feature_cache::{CacheUse, encode_cached};
+    let (features, used) = encode_cached(representation, &prep.sequence, &prep.train, &prep.cache)?;
+    match used {
+        CacheUse::Computed => {}
+        CacheUse::Read(p) => eprintln!("note: features read from the cache {}", p.display()),
+        CacheUse::Written(p) => eprintln!("note: features cached in {}", p.display()),
+        CacheUse::Unavailable(why) => eprintln!("note: features not cached: {why}"),
+    }
+    Ok(features)
+}
+
 /// Progress reporting hooks of long jobs (the CLI draws them with indicatif).
 pub trait Progress {
     /// A new stage begins (`total` steps, 0 if unknown).

@@ -180,12 +180,11 @@ impl RegionArtifact {
 /// PCA per region. The resolved config records the `r` used (0.1 × the rest mesh's diagonal
 /// when not given).
 pub fn fit(m: &RegionPcaMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> Result<Fitted> {
-    let train_seq = prep.train_sequence();
     ctx.progress.stage("representation", 0);
     let t_rep = Instant::now();
     let representation =
         Representation::new(RepresentationKind::Displacement, &prep.rest, RepresentationOptions::default())?;
-    let x = representation.encode(&train_seq)?;
+    let x = super::training_features(&representation, prep)?;
     let representation_seconds = t_rep.elapsed().as_secs_f64();
 
     let sc = m.segmentation();
@@ -210,7 +209,7 @@ pub fn fit(m: &RegionPcaMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> Re
             lambda: sc.lambda,
             r: seg.r,
             threshold: sc.threshold,
-            train_frames: train_seq.names.clone(),
+            train_frames: prep.train_names(),
         },
         rest: prep.rest.clone(),
         labels: seg.labels.clone(),

@@ -19,12 +19,16 @@ use super::ae_fit::DEFAULT_FIT_GAMMA;
 use super::metrics_file::{Metrics, median};
 use crate::artifact;
 use crate::config::{Config, resolved_toml};
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::mesh::{MeshSequence, Vec3};
-use crate::metrics::erms::erms;
+use crate::metrics::erms::{erms, erms_from_squared_error, frame_squared_error};
 use crate::model::{Model, RefineOptions, reconstruct};
 use crate::pipeline::FitContext;
 use crate::preprocess::{self, Prepared};
+
+/// Training frames measured at a time (a multiple of the autoencoder's inference batch, so its
+/// codes decode with the same batch-mates as in one pass over all).
+const MEASURE_RUN: usize = 256;
 
 /// Options of [`train`] besides the config.
 #[derive(Debug, Clone, Default)]
@@ -100,15 +104,38 @@ fn fit_measure_write(
     progress.stage("measuring", 0);
     let alignment = model.alignment();
     let faces = prep.sequence.faces.clone();
-    let train_truth = frames_in_data_units(prep, &prep.train);
-    let train_rec = match model.train_weights() {
-        Some(w) => model.decode(&w)?,
-        None => reconstruct(
-            model.as_ref(),
-            &MeshSequence { faces: faces.clone(), frames: train_truth.clone(), names: Vec::new() },
-        )?,
-    };
-    let train_erms = erms(&train_truth, &train_rec, alignment)?;
+    // The training Erms, measured MEASURE_RUN frames at a time (one run's frames and
+    // reconstructions in memory, not the data's); the sum runs in frame order, as `erms` does.
+    let train_weights = model.train_weights();
+    let (mut squared, mut coords) = (0.0, 0usize);
+    for (run, idx) in prep.train.chunks(MEASURE_RUN).enumerate() {
+        let truth = frames_in_data_units(prep, idx);
+        let rec = match &train_weights {
+            Some(w) => {
+                let first = run * MEASURE_RUN;
+                let w = w.get(first..first + idx.len()).ok_or_else(|| {
+                    Error::Invalid(format!(
+                        "the model holds {} training weights, expected {}",
+                        w.len(),
+                        prep.train.len()
+                    ))
+                })?;
+                model.decode(w)?
+            }
+            None => reconstruct(
+                model.as_ref(),
+                &MeshSequence { faces: faces.clone(), frames: truth.clone(), names: Vec::new() },
+            )?,
+        };
+        if rec.len() != truth.len() {
+            return Err(Error::Invalid(format!("{} reconstructions of {} training frames", rec.len(), truth.len())));
+        }
+        for (t, r) in truth.iter().zip(&rec) {
+            squared += frame_squared_error(t, r, alignment)?;
+            coords += 3 * t.len();
+        }
+    }
+    let train_erms = erms_from_squared_error(squared, coords);
     let (mut test_erms, mut test_erms_fitted, mut test_reconstruction) = (None, None, Vec::new());
     let mut test_reconstruction_fitted = Vec::new();
     let mut test_erms_one_pass = None;

@@ -31,6 +31,7 @@ pub mod acap_fit_inverse;
 pub mod acap_reconstruct;
 pub mod acap_text;
 pub mod displacement;
+pub mod feature_cache;
 pub mod piece_placement;
 pub mod roundtrip;
 pub mod scaling;
@@ -378,6 +379,14 @@ impl Representation {
     /// Features F × E × W of every frame of `seq` (frames in parallel). Errors when the
     /// sequence's connectivity differs from the rest mesh's; the message names the frame.
     pub fn encode(&self, seq: &MeshSequence) -> Result<Features> {
+        let all: Vec<usize> = (0..seq.n_frames()).collect();
+        self.encode_selected(seq, &all)
+    }
+
+    /// Features of the frames `frames` of `seq` (0-based, in that order), written in place into
+    /// one array (frames in parallel; no copy of the sequence, no second array). Errors as
+    /// [`Representation::encode`]; an index out of range is an error naming it.
+    pub fn encode_selected(&self, seq: &MeshSequence, frames: &[usize]) -> Result<Features> {
         if seq.faces != self.rest.faces {
             return Err(Error::Invalid(format!(
                 "sequence faces ({}) differ from the rest mesh's faces ({})",
@@ -385,19 +394,23 @@ impl Representation {
                 self.rest.n_faces()
             )));
         }
-        let frames: Vec<Vec<f64>> = seq
-            .frames
-            .par_iter()
-            .enumerate()
-            .map(|(f, x)| {
-                self.encode_frame(x).map_err(|e| {
+        if let Some(&f) = frames.iter().find(|&&f| f >= seq.n_frames()) {
+            return Err(Error::Invalid(format!("frame index {f} is out of range ({} frames)", seq.n_frames())));
+        }
+        let size = self.n_elements() * self.width();
+        let mut out = Features::zeros(frames.len(), self.n_elements(), self.width());
+        if size > 0 {
+            out.data.par_chunks_mut(size).zip(frames.par_iter()).try_for_each(|(dst, &f)| -> Result<()> {
+                let v = self.encode_frame(&seq.frames[f]).map_err(|e| {
                     Error::Invalid(format!("frame {f} ({}): {e}", seq.names.get(f).map_or("?", |s| s.as_str())))
-                })
-            })
-            .collect::<Result<_>>()?;
-        let mut out = Features::zeros(0, self.n_elements(), self.width());
-        out.n_frames = frames.len();
-        out.data = frames.concat();
+                })?;
+                if v.len() != size {
+                    return Err(Error::Invalid(format!("frame {f}: {} features, expected {size}", v.len())));
+                }
+                dst.copy_from_slice(&v);
+                Ok(())
+            })?;
+        }
         Ok(out)
     }
 
@@ -425,9 +438,9 @@ impl Representation {
     /// Splits features of this representation (width W + 3 on a multi-piece mesh) into the
     /// kind's own features (width W) and, per frame, the P translations `t_p` (the mean of each
     /// piece's elements' three extra numbers). Without pieces: the features and no translations.
-    pub fn split_pieces(&self, features: &Features) -> Result<(Features, Vec<Vec<Vec3>>)> {
+    pub fn split_pieces(&self, features: Features) -> Result<(Features, Vec<Vec<Vec3>>)> {
         let Some((_, element_piece)) = &self.pieces else {
-            return Ok((features.clone(), Vec::new()));
+            return Ok((features, Vec::new()));
         };
         let (w0, w) = (self.kind.width(), self.width());
         if features.width != w
@@ -658,7 +671,7 @@ mod tests {
             let z = r.encode(&rest_seq).unwrap();
             assert!((0..r.n_elements()).all(|e| z.element(0, e)[9..].iter().all(|v| v.abs() < 1e-15)));
             let feats = r.encode(&seq).unwrap();
-            let (own, t) = r.split_pieces(&feats).unwrap();
+            let (own, t) = r.split_pieces(feats.clone()).unwrap();
             assert_eq!((own.width, t.len(), t[0].len()), (9, 3, 2));
             assert_eq!(r.join_pieces(&own, &t).unwrap(), feats);
             assert!(t.iter().all(|tf| tf[placement.anchor()] == [0.0; 3]));

@@ -127,16 +127,39 @@ impl FeatureScaling {
                 data[i]
             )));
         }
+        let mut lo = vec![f64::INFINITY; width];
+        let mut hi = vec![f64::NEG_INFINITY; width];
+        for v in data.chunks_exact(width) {
+            for (k, &x) in v.iter().enumerate() {
+                lo[k] = lo[k].min(x);
+                hi[k] = hi[k].max(x);
+            }
+        }
+        Self::fit_column_ranges(&lo, &hi, mode)
+    }
+
+    /// Fits from each dimension's training minimum and maximum (W each; what a feature cache
+    /// records): groups share the smallest minimum and largest maximum of their dimensions, as
+    /// [`FeatureScaling::fit`] on the features themselves.
+    pub fn fit_column_ranges(min: &[f64], max: &[f64], mode: ScalingMode) -> Result<Self> {
+        let width = min.len();
+        if width == 0 || max.len() != width {
+            return Err(Error::Invalid(format!("{} minima and {} maxima: cannot fit a scaling", min.len(), max.len())));
+        }
+        if let Some(k) = (0..width).find(|&k| !(min[k].is_finite() && max[k].is_finite() && min[k] <= max[k])) {
+            return Err(Error::Invalid(format!(
+                "dimension {k}: range [{}, {}] is not a finite interval",
+                min[k], max[k]
+            )));
+        }
         let label = mode.labels(width)?;
         let n_groups = label.iter().max().map_or(0, |m| m + 1);
         let mut glo = vec![f64::INFINITY; n_groups];
         let mut ghi = vec![f64::NEG_INFINITY; n_groups];
-        for v in data.chunks_exact(width) {
-            for (k, &x) in v.iter().enumerate() {
-                let g = label[k];
-                glo[g] = glo[g].min(x);
-                ghi[g] = ghi[g].max(x);
-            }
+        for k in 0..width {
+            let g = label[k];
+            glo[g] = glo[g].min(min[k]);
+            ghi[g] = ghi[g].max(max[k]);
         }
         Ok(FeatureScaling {
             min: label.iter().map(|&g| glo[g]).collect(),

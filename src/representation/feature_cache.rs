@@ -1,0 +1,567 @@
+//! The feature cache: a representation's features of a set of frames, computed once and read
+//! back by later runs (`meshdeco train` again, every `meshdeco eval` cell of one dataset).
+//!
+//! **Key.** A file is named by a 96-bit content hash of everything the features depend on: the
+//! representation kind and options, the rest mesh (positions and faces) and the positions of
+//! every selected frame, in order (after the data's preprocessing: alignment, unit box). Nothing
+//! about file names or times enters it, so a changed frame, rest shape or option is a different
+//! file, and two datasets with the same frames share one.
+//!
+//! **File** (`<key>.features` in the cache folder): a line `MESHDECO-FEATURES 2`, then the
+//! F·E·W little-endian `f64` ([`Features::data`]'s layout: the exact numbers, so a run that
+//! reads the cache gives the same model as one that computes), then one line of JSON
+//! ([`Header`]: key, F, E, W, every frame's CRC-32, each dimension's minimum and maximum), then
+//! the header's byte offset as 8 little-endian bytes. Written atomically, frames computed in
+//! parallel a run at a time (memory: one run's features). Every frame is checked against its
+//! CRC-32 whenever it is read ([`FeatureFile::frame`]), so a file can be opened at once and read
+//! frame by frame (a training batch at a time); a file whose header is unreadable or names
+//! another key or shape is recomputed and replaced (with a note on stderr), and a frame that
+//! fails its checksum is an error naming the file and frame. A cache folder that cannot be
+//! written only costs the reuse: training goes on with the computed features.
+//!
+//! **Where** ([`CachePolicy`], `data.cache`): `"auto"` (the default) uses
+//! `$MESHDECO_CACHE_DIR`, else `$XDG_CACHE_HOME/meshdeco/features`, else
+//! `$HOME/.cache/meshdeco/features`, for features of at least [`AUTO_MIN_BYTES`] (smaller ones
+//! are computed faster than read); `"off"` never caches; any other value is a folder used for
+//! every size.
+
+use std::fs::File;
+use std::io::Read;
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+use super::{Features, Representation};
+use crate::error::{Error, Result};
+use crate::mesh::MeshSequence;
+
+/// First line of a cache file.
+const MAGIC: &str = "MESHDECO-FEATURES 2";
+
+/// Smallest feature array (bytes) `"auto"` caches: 64 MiB.
+pub const AUTO_MIN_BYTES: usize = 64 << 20;
+
+/// Where features are cached (`data.cache`).
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub enum CachePolicy {
+    /// The user's cache folder, for large features only (see the module docs).
+    #[default]
+    Auto,
+    /// No cache.
+    Off,
+    /// This folder, for features of every size.
+    Dir(PathBuf),
+}
+
+impl CachePolicy {
+    /// Parses `data.cache`: `auto`, `off`, or a folder.
+    pub fn parse(s: &str) -> Self {
+        match s {
+            "auto" => CachePolicy::Auto,
+            "off" => CachePolicy::Off,
+            dir => CachePolicy::Dir(PathBuf::from(dir)),
+        }
+    }
+
+    /// The value of `data.cache` that parses to this policy.
+    pub fn to_config_string(&self) -> String {
+        match self {
+            CachePolicy::Auto => "auto".into(),
+            CachePolicy::Off => "off".into(),
+            CachePolicy::Dir(d) => d.display().to_string(),
+        }
+    }
+
+    /// The folder to use for features of `bytes` bytes, if any.
+    fn folder(&self, bytes: usize) -> Option<PathBuf> {
+        match self {
+            CachePolicy::Off => None,
+            CachePolicy::Dir(d) => Some(d.clone()),
+            CachePolicy::Auto if bytes < AUTO_MIN_BYTES => None,
+            CachePolicy::Auto => default_folder(),
+        }
+    }
+}
+
+/// `$MESHDECO_CACHE_DIR`, else `$XDG_CACHE_HOME/meshdeco/features`, else
+/// `$HOME/.cache/meshdeco/features` (`None` when none is set).
+pub fn default_folder() -> Option<PathBuf> {
+    let var = |k: &str| std::env::var_os(k).filter(|v| !v.is_empty()).map(PathBuf::from);
+    var("MESHDECO_CACHE_DIR")
+        .or_else(|| var("XDG_CACHE_HOME").map(|d| d.join("meshdeco/features")))
+        .or_else(|| var("HOME").map(|d| d.join(".cache/meshdeco/features")))
+}
+
+/// What [`encode_cached`] did.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum CacheUse {
+    /// Not cached (policy off, below the size of `auto`, or no folder): computed.
+    Computed,
+    /// Read from this file.
+    Read(PathBuf),
+    /// Computed and written to this file.
+    Written(PathBuf),
+    /// Computed; the cache could not be used (the reason).
+    Unavailable(String),
+}
+
+/// Frames computed and written at a time when a cache file is built.
+const BUILD_RUN: usize = 64;
+
+/// The header of a cache file.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Header {
+    pub key: String,
+    pub n_frames: usize,
+    pub n_elements: usize,
+    pub width: usize,
+    /// CRC-32 of each frame's E·W·8 bytes.
+    pub frame_crc32: Vec<u32>,
+    /// Each dimension's minimum over all frames and elements (W), as the bits of the `f64`
+    /// (JSON numbers would not read back exactly).
+    pub min_bits: Vec<u64>,
+    /// Each dimension's maximum (W), as bits.
+    pub max_bits: Vec<u64>,
+}
+
+impl Header {
+    /// Each dimension's minimum (W).
+    pub fn min(&self) -> Vec<f64> {
+        self.min_bits.iter().map(|&b| f64::from_bits(b)).collect()
+    }
+    /// Each dimension's maximum (W).
+    pub fn max(&self) -> Vec<f64> {
+        self.max_bits.iter().map(|&b| f64::from_bits(b)).collect()
+    }
+}
+
+/// An open, verified cache file: frames are read on demand, each checked against its CRC-32.
+#[derive(Debug)]
+pub struct FeatureFile {
+    path: PathBuf,
+    file: File,
+    data_offset: u64,
+    header: Header,
+}
+
+impl FeatureFile {
+    /// Opens a cache file: its magic line, header, key, shape and length must be what is
+    /// expected (the frames are checked when read).
+    pub fn open(path: &Path, key: &str, (n_frames, n_elements, width): (usize, usize, usize)) -> Result<Self> {
+        let bad = |why: String| Error::Invalid(format!("{}: {why}", path.display()));
+        let mut file = File::open(path).map_err(|e| Error::io(path, e))?;
+        let len = file.metadata().map_err(|e| Error::io(path, e))?.len();
+        let data_offset = (MAGIC.len() + 1) as u64;
+        if len < data_offset + 8 {
+            return Err(bad(format!("is {len} bytes: too short for a feature cache")));
+        }
+        let mut magic = vec![0u8; MAGIC.len() + 1];
+        file.read_exact(&mut magic).map_err(|e| Error::io(path, e))?;
+        if magic != format!("{MAGIC}\n").as_bytes() {
+            return Err(bad("not a meshdeco feature cache of this version".into()));
+        }
+        let mut tail = [0u8; 8];
+        read_at(&file, &mut tail, len - 8).map_err(|e| Error::io(path, e))?;
+        let header_at = u64::from_le_bytes(tail);
+        if !(data_offset..len - 8).contains(&header_at) || len - 8 - header_at > (64 << 20) {
+            return Err(bad(format!("header offset {header_at} is outside the file ({len} bytes)")));
+        }
+        let mut json = vec![0u8; (len - 8 - header_at) as usize];
+        read_at(&file, &mut json, header_at).map_err(|e| Error::io(path, e))?;
+        let header: Header = serde_json::from_slice(&json).map_err(|e| bad(format!("header: {e}")))?;
+        if header.key != key {
+            return Err(bad(format!("holds key {}, expected {key}", header.key)));
+        }
+        if (header.n_frames, header.n_elements, header.width) != (n_frames, n_elements, width) {
+            return Err(bad(format!(
+                "holds {} × {} × {} features, expected {n_frames} × {n_elements} × {width}",
+                header.n_frames, header.n_elements, header.width
+            )));
+        }
+        let data_bytes = (n_frames * n_elements * width * 8) as u64;
+        if header_at != data_offset + data_bytes
+            || header.frame_crc32.len() != n_frames
+            || header.min_bits.len() != width
+            || header.max_bits.len() != width
+        {
+            return Err(bad(format!(
+                "holds {} data bytes and {} frame checksums, expected {data_bytes} and {n_frames} (truncated or rewritten)",
+                header_at.saturating_sub(data_offset),
+                header.frame_crc32.len()
+            )));
+        }
+        Ok(FeatureFile { path: path.to_path_buf(), file, data_offset, header })
+    }
+
+    /// The file's header (shape, checksums, per-dimension ranges).
+    pub fn header(&self) -> &Header {
+        &self.header
+    }
+
+    /// Where the file is.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// Number of frames F.
+    pub fn n_frames(&self) -> usize {
+        self.header.n_frames
+    }
+
+    /// Frame `f`'s E·W features into `out` (resized), checked against its CRC-32; `bytes` is a
+    /// scratch buffer.
+    pub fn frame_into(&self, f: usize, out: &mut Vec<f64>, bytes: &mut Vec<u8>) -> Result<()> {
+        let h = &self.header;
+        if f >= h.n_frames {
+            return Err(Error::Invalid(format!("{}: frame {f} of {}", self.path.display(), h.n_frames)));
+        }
+        let size = h.n_elements * h.width * 8;
+        bytes.resize(size, 0);
+        read_at(&self.file, bytes, self.data_offset + (f * size) as u64).map_err(|e| Error::io(&self.path, e))?;
+        if crc32fast::hash(bytes) != h.frame_crc32[f] {
+            return Err(Error::Invalid(format!(
+                "{}: frame {f} fails its checksum (the cache file changed after it was written; delete it to recompute)",
+                self.path.display()
+            )));
+        }
+        out.clear();
+        out.extend(bytes.chunks_exact(8).map(|b| f64::from_le_bytes([b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7]])));
+        Ok(())
+    }
+
+    /// Frame `f`'s E·W features (see [`FeatureFile::frame_into`]).
+    pub fn frame(&self, f: usize) -> Result<Vec<f64>> {
+        let (mut out, mut bytes) = (Vec::new(), Vec::new());
+        self.frame_into(f, &mut out, &mut bytes)?;
+        Ok(out)
+    }
+
+    /// Every frame, in order, as one feature array (frames read in parallel, each verified).
+    pub fn read_all(&self) -> Result<Features> {
+        use rayon::prelude::*;
+        let h = &self.header;
+        let size = h.n_elements * h.width;
+        let mut out = Features::zeros(h.n_frames, h.n_elements, h.width);
+        if size > 0 {
+            out.data.par_chunks_mut(size).enumerate().try_for_each_init(
+                || (Vec::new(), Vec::new()),
+                |(v, b), (f, dst)| -> Result<()> {
+                    self.frame_into(f, v, b)?;
+                    dst.copy_from_slice(v);
+                    Ok(())
+                },
+            )?;
+        }
+        Ok(out)
+    }
+}
+
+#[cfg(unix)]
+fn read_at(file: &File, buf: &mut [u8], offset: u64) -> std::io::Result<()> {
+    std::os::unix::fs::FileExt::read_exact_at(file, buf, offset)
+}
+
+#[cfg(not(unix))]
+fn read_at(file: &File, buf: &mut [u8], offset: u64) -> std::io::Result<()> {
+    use std::io::{Seek, SeekFrom};
+    let mut f = file.try_clone()?;
+    f.seek(SeekFrom::Start(offset))?;
+    f.read_exact(buf)
+}
+
+/// The cache file of the features of `frames` of `seq` under `policy`, built if missing or
+/// unusable: `None` when the policy caches nothing of this size; `Err` only for errors of the
+/// data (a frame that cannot be encoded), `Ok(Some(Err(why)))` when the folder cannot be used.
+pub fn open_or_build(
+    rep: &Representation,
+    seq: &MeshSequence,
+    frames: &[usize],
+    policy: &CachePolicy,
+) -> Result<Option<std::result::Result<(FeatureFile, bool), String>>> {
+    let bytes = frames.len() * rep.n_elements() * rep.width() * 8;
+    let Some(folder) = policy.folder(bytes) else { return Ok(None) };
+    if let Some(&f) = frames.iter().find(|&&f| f >= seq.n_frames()) {
+        return Err(Error::Invalid(format!("frame index {f} is out of range ({} frames)", seq.n_frames())));
+    }
+    let key = key(rep, seq, frames);
+    let path = folder.join(format!("{key}.features"));
+    let expect = (frames.len(), rep.n_elements(), rep.width());
+    if path.is_file() {
+        match FeatureFile::open(&path, &key, expect) {
+            Ok(f) => return Ok(Some(Ok((f, false)))),
+            Err(e) => eprintln!("note: recomputing the cached features: {e}"),
+        }
+    }
+    if let Err(e) = std::fs::create_dir_all(&folder) {
+        return Ok(Some(Err(format!("{}: {e}", folder.display()))));
+    }
+    match build(rep, seq, frames, &path, &key) {
+        Ok(()) => {}
+        Err(Build::Data(e)) => return Err(e),
+        Err(Build::Io(e)) => return Ok(Some(Err(e.to_string()))),
+    }
+    match FeatureFile::open(&path, &key, expect) {
+        Ok(f) => Ok(Some(Ok((f, true)))),
+        Err(e) => Ok(Some(Err(e.to_string()))),
+    }
+}
+
+/// The features of `frames` of `seq` ([`Representation::encode_selected`]), read from the cache
+/// when a valid file exists, else computed and (when the policy caches them) written.
+pub fn encode_cached(
+    rep: &Representation,
+    seq: &MeshSequence,
+    frames: &[usize],
+    policy: &CachePolicy,
+) -> Result<(Features, CacheUse)> {
+    match open_or_build(rep, seq, frames, policy)? {
+        None => Ok((rep.encode_selected(seq, frames)?, CacheUse::Computed)),
+        Some(Err(why)) => Ok((rep.encode_selected(seq, frames)?, CacheUse::Unavailable(why))),
+        Some(Ok((file, built))) => {
+            let path = file.path().to_path_buf();
+            match file.read_all() {
+                Ok(f) => Ok((f, if built { CacheUse::Written(path) } else { CacheUse::Read(path) })),
+                Err(e) if !built => {
+                    // A frame changed on disk after the file was written: compute it again.
+                    eprintln!("note: recomputing the cached features: {e}");
+                    drop(file);
+                    let _ = std::fs::remove_file(&path);
+                    encode_cached(rep, seq, frames, policy)
+                }
+                Err(e) => Err(e),
+            }
+        }
+    }
+}
+
+/// The content key of (representation, rest mesh, frames): 24 hex digits. Frames are hashed
+/// in parallel, then combined in order.
+pub fn key(rep: &Representation, seq: &MeshSequence, frames: &[usize]) -> String {
+    use rayon::prelude::*;
+    let mut h = Hasher::new();
+    h.bytes(MAGIC.as_bytes());
+    h.bytes(rep.kind().name().as_bytes());
+    h.bytes(format!("{:?}", rep.options()).as_bytes());
+    let rest = rep.rest();
+    let (rf, rc) = frame_hash(&rest.positions);
+    h.word(rf);
+    h.word(rc as u64);
+    h.word(rest.faces.len() as u64);
+    for t in &rest.faces {
+        t.iter().for_each(|&i| h.word(i as u64));
+    }
+    h.word(frames.len() as u64);
+    let hashes: Vec<(u64, u32)> = frames.par_iter().map(|&f| frame_hash(&seq.frames[f])).collect();
+    for (a, b) in hashes {
+        h.word(a);
+        h.word(b as u64);
+    }
+    h.finish()
+}
+
+/// (FNV-1a over the coordinates' bits, CRC-32 of their bytes) of one frame.
+fn frame_hash(frame: &[crate::mesh::Vec3]) -> (u64, u32) {
+    let mut fnv = 0xcbf2_9ce4_8422_2325u64 ^ frame.len() as u64;
+    let mut crc = crc32fast::Hasher::new();
+    let mut buf = Vec::with_capacity(frame.len().min(4096) * 24);
+    for chunk in frame.chunks(4096) {
+        buf.clear();
+        for p in chunk {
+            for x in p {
+                let w = x.to_bits();
+                fnv = (fnv ^ w).wrapping_mul(0x0000_0100_0000_01b3);
+                buf.extend_from_slice(&w.to_le_bytes());
+            }
+        }
+        crc.update(&buf);
+    }
+    (fnv ^ (fnv >> 29), crc.finalize())
+}
+
+/// FNV-1a over 64-bit words beside a CRC-32 of the same words: 96 bits.
+struct Hasher {
+    fnv: u64,
+    crc: crc32fast::Hasher,
+}
+
+impl Hasher {
+    fn new() -> Self {
+        Hasher { fnv: 0xcbf2_9ce4_8422_2325, crc: crc32fast::Hasher::new() }
+    }
+    fn word(&mut self, w: u64) {
+        self.fnv = (self.fnv ^ w).wrapping_mul(0x0000_0100_0000_01b3);
+        self.fnv ^= self.fnv >> 29;
+        self.crc.update(&w.to_le_bytes());
+    }
+    fn bytes(&mut self, b: &[u8]) {
+        self.word(b.len() as u64);
+        b.iter().for_each(|&x| self.word(x as u64));
+    }
+    fn finish(self) -> String {
+        format!("{:016x}{:08x}", self.fnv, self.crc.finalize())
+    }
+}
+
+/// Why building a cache file failed: the data (an error to report) or the file (only the reuse
+/// is lost).
+enum Build {
+    Data(Error),
+    Io(Error),
+}
+
+/// Computes the features `BUILD_RUN` frames at a time (in parallel) and writes the cache file
+/// atomically.
+fn build(
+    rep: &Representation,
+    seq: &MeshSequence,
+    frames: &[usize],
+    path: &Path,
+    key: &str,
+) -> std::result::Result<(), Build> {
+    let width = rep.width();
+    let mut header = Header {
+        key: key.to_string(),
+        n_frames: frames.len(),
+        n_elements: rep.n_elements(),
+        width,
+        frame_crc32: Vec::with_capacity(frames.len()),
+        min_bits: Vec::new(),
+        max_bits: Vec::new(),
+    };
+    let (mut min, mut max) = (vec![f64::INFINITY; width], vec![f64::NEG_INFINITY; width]);
+    let mut data_error: Option<Error> = None;
+    let written = crate::artifact::write_atomic_with(path, |w| {
+        use std::io::Write;
+        writeln!(w, "{MAGIC}")?;
+        let mut offset = (MAGIC.len() + 1) as u64;
+        for run in frames.chunks(BUILD_RUN) {
+            let f = match rep.encode_selected(seq, run) {
+                Ok(f) => f,
+                Err(e) => {
+                    data_error = Some(e);
+                    return Err(std::io::Error::other("a frame could not be encoded"));
+                }
+            };
+            if let Some(i) = f.data.iter().position(|x| !x.is_finite()) {
+                data_error = Some(Error::Numerical(format!(
+                    "frame {}: feature {} is {}",
+                    run[i / (f.n_elements * width).max(1)],
+                    i,
+                    f.data[i]
+                )));
+                return Err(std::io::Error::other("non-finite features"));
+            }
+            for frame in f.data.chunks_exact((f.n_elements * width).max(1)) {
+                let bytes: Vec<u8> = frame.iter().flat_map(|x| x.to_le_bytes()).collect();
+                header.frame_crc32.push(crc32fast::hash(&bytes));
+                for v in frame.chunks_exact(width) {
+                    for (k, &x) in v.iter().enumerate() {
+                        min[k] = min[k].min(x);
+                        max[k] = max[k].max(x);
+                    }
+                }
+                w.write_all(&bytes)?;
+                offset += bytes.len() as u64;
+            }
+        }
+        header.min_bits = min.iter().map(|x| x.to_bits()).collect();
+        header.max_bits = max.iter().map(|x| x.to_bits()).collect();
+        let json = serde_json::to_vec(&header).map_err(std::io::Error::other)?;
+        w.write_all(&json)?;
+        w.write_all(&offset.to_le_bytes())?;
+        Ok(())
+    });
+    match (data_error, written) {
+        (Some(e), _) => Err(Build::Data(e)),
+        (None, Err(e)) => Err(Build::Io(e)),
+        (None, Ok(())) => Ok(()),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::representation::{RepresentationKind, RepresentationOptions};
+
+    fn setup() -> (Representation, MeshSequence) {
+        let seq = crate::synthetic::load("synthetic:bumps").unwrap();
+        let rest = crate::mesh::TriMesh::new(seq.frames[0].clone(), seq.faces.clone());
+        let rep = Representation::new(RepresentationKind::Acap, &rest, RepresentationOptions::default()).unwrap();
+        (rep, seq)
+    }
+
+    #[test]
+    fn written_then_read_back_exactly_and_corruption_recomputed() {
+        let (rep, seq) = setup();
+        let dir = std::env::temp_dir().join(format!("meshdeco-cache-test-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let policy = CachePolicy::Dir(dir.clone());
+        let frames = [3, 1, 7];
+        let (a, used) = encode_cached(&rep, &seq, &frames, &policy).unwrap();
+        let CacheUse::Written(path) = used else { panic!("expected a write, got {used:?}") };
+        assert_eq!(a, rep.encode_selected(&seq, &frames).unwrap());
+        let (b, used) = encode_cached(&rep, &seq, &frames, &policy).unwrap();
+        assert_eq!(used, CacheUse::Read(path.clone()));
+        assert_eq!(a, b, "read back bit for bit");
+        // Other frames, other order, other options: other keys.
+        assert_ne!(key(&rep, &seq, &frames), key(&rep, &seq, &[1, 3, 7]));
+        let opts = RepresentationOptions {
+            acap_consistency: crate::representation::acap::Consistency::Global,
+            ..Default::default()
+        };
+        let rep2 = Representation::new(RepresentationKind::Acap, rep.rest(), opts).unwrap();
+        assert_ne!(key(&rep, &seq, &frames), key(&rep2, &seq, &frames));
+        let mut moved = seq.clone();
+        moved.frames[7][0][0] += 1e-12;
+        assert_ne!(key(&rep, &seq, &frames), key(&rep, &moved, &frames));
+        // One flipped byte in the last frame: that frame fails its checksum when read; the
+        // cache computes it again and rewrites the file.
+        let k = key(&rep, &seq, &frames);
+        let expect = (3, a.n_elements, a.width);
+        let clean = std::fs::read(&path).unwrap();
+        let mut bytes = clean.clone();
+        let data_end = (MAGIC.len() + 1) + 8 * a.data.len();
+        bytes[data_end - 3] ^= 0x40;
+        std::fs::write(&path, &bytes).unwrap();
+        let file = FeatureFile::open(&path, &k, expect).unwrap();
+        assert!(file.frame(0).is_ok());
+        let e = file.frame(2).unwrap_err().to_string();
+        assert!(e.contains("frame 2 fails its checksum"), "{e}");
+        drop(file);
+        let (c, used) = encode_cached(&rep, &seq, &frames, &policy).unwrap();
+        assert_eq!((c, used), (a.clone(), CacheUse::Written(path.clone())));
+        assert_eq!(std::fs::read(&path).unwrap(), clean);
+        // Truncated, or another shape asked for: refused when opened.
+        std::fs::write(&path, &clean[..clean.len() - 20]).unwrap();
+        assert!(FeatureFile::open(&path, &k, expect).is_err());
+        std::fs::write(&path, &clean).unwrap();
+        let e = FeatureFile::open(&path, &k, (4, a.n_elements, a.width)).unwrap_err().to_string();
+        assert!(e.contains("expected 4 ×"), "{e}");
+        let e = FeatureFile::open(&path, "0123", expect).unwrap_err().to_string();
+        assert!(e.contains("expected 0123"), "{e}");
+        // The recorded ranges are the features' own.
+        let file = FeatureFile::open(&path, &k, expect).unwrap();
+        for d in 0..a.width {
+            let col = a.data.iter().skip(d).step_by(a.width);
+            assert_eq!(file.header().min()[d], col.clone().copied().fold(f64::INFINITY, f64::min));
+            assert_eq!(file.header().max()[d], col.copied().fold(f64::NEG_INFINITY, f64::max));
+        }
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn policies() {
+        assert_eq!(CachePolicy::parse("auto"), CachePolicy::Auto);
+        assert_eq!(CachePolicy::parse("off"), CachePolicy::Off);
+        assert_eq!(CachePolicy::parse("/x/y"), CachePolicy::Dir("/x/y".into()));
+        assert_eq!(CachePolicy::Auto.folder(AUTO_MIN_BYTES - 1), None);
+        assert_eq!(CachePolicy::Off.folder(usize::MAX), None);
+        assert_eq!(CachePolicy::Dir("d".into()).folder(0), Some(PathBuf::from("d")));
+        // An unwritable folder costs only the reuse.
+        let (rep, seq) = setup();
+        let policy = CachePolicy::Dir("/proc/meshdeco-no-such-folder".into());
+        let (f, used) = encode_cached(&rep, &seq, &[0, 1], &policy).unwrap();
+        assert!(matches!(used, CacheUse::Unavailable(_)), "{used:?}");
+        assert_eq!(f, rep.encode_selected(&seq, &[0, 1]).unwrap());
+    }
+}

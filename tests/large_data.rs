@@ -1,0 +1,146 @@
+//! Large datasets (issue 28), as a user meets them at a size CI can run: `meshdeco generate`
+//! writes a big float32 `.npy`; training with `data.cache` computes the features once into a
+//! checksummed file, reads them back on the next run, and trains the autoencoder from that file
+//! a batch at a time with exactly the model of the in-memory run; a batch job's stderr (not a
+//! terminal) gets plain progress lines.
+
+mod common;
+
+use std::path::Path;
+
+use common::{fresh_dir, meshdeco, output_text};
+
+/// The autoencoder block of the tests: small, mini-batches of 16.
+const AE: &str =
+    "kind = \"autoencoder\"\ncomponents = 6\niterations = 12\nbatch_size = 16\nlambda_vertex = 1.0\nseed = 3";
+
+fn train(d: &Path, name: &str, data: &str, method: &str, env: &[(&str, &str)]) -> std::process::Output {
+    let cfg = d.join(format!("{name}.toml"));
+    std::fs::write(&cfg, format!("name = \"{name}\"\n[data]\n{data}\n[method]\n{method}\n")).unwrap();
+    let out = d.join(name);
+    let mut cmd = std::process::Command::new(env!("CARGO_BIN_EXE_meshdeco"));
+    cmd.args(["train", "--config", cfg.to_str().unwrap(), "--out", out.to_str().unwrap()]).current_dir(d);
+    for (k, v) in env {
+        cmd.env(k, v);
+    }
+    let o = cmd.output().expect("run meshdeco");
+    assert!(o.status.success(), "{name}: {}", output_text(&o));
+    o
+}
+
+fn read(p: &Path) -> Vec<u8> {
+    std::fs::read(p).unwrap_or_else(|e| panic!("{}: {e}", p.display()))
+}
+
+#[test]
+fn generate_writes_a_float32_npy_deterministically_and_refuses_bad_arguments() {
+    let d = fresh_dir("large", "generate");
+    let o = meshdeco(&["generate", "synthetic:tube", "--frames", "300", "--out", "big.npy", "--seed", "4"], &d);
+    assert!(o.status.success(), "{}", output_text(&o));
+    let bytes = read(&d.join("big.npy"));
+    let header = String::from_utf8_lossy(&bytes[..128]);
+    assert!(header.contains("'descr': '<f4'") && header.contains("(300, 1466, 3"), "{header}");
+    assert_eq!(bytes.len() % 64, (300 * 1466 * 3 * 4) % 64);
+    assert!(d.join("big.obj").is_file(), "the template is written beside it");
+    // The same arguments give the same file; another seed another.
+    let o = meshdeco(&["generate", "synthetic:tube", "--frames", "300", "--out", "again.npy", "--seed", "4"], &d);
+    assert!(o.status.success());
+    assert_eq!(read(&d.join("again.npy")), bytes);
+    let o = meshdeco(&["generate", "synthetic:tube", "--frames", "300", "--out", "other.npy", "--seed", "5"], &d);
+    assert!(o.status.success());
+    assert_ne!(read(&d.join("other.npy")), bytes);
+    // It trains as NumPy input.
+    let data = "path = \"big.npy\"\ntemplate = \"big.obj\"\ntrain = \"1-250\"\ntest = \"rest\"";
+    let o = train(&d, "pca", data, "kind = \"pca\"\ncomponents = 5", &[]);
+    assert!(output_text(&o).contains("train Erms"), "{}", output_text(&o));
+    // Bad arguments: a message naming the flag, a non-zero exit, nothing written.
+    for (args, says) in [
+        (vec!["--frames", "0", "--out", "z.npy"], "--frames 0"),
+        (vec!["--frames", "10", "--out", "z.txt"], "--out"),
+        (vec!["--frames", "10", "--out", "z.npy", "--template", "z.npy"], "--template"),
+    ] {
+        let mut a = vec!["generate", "synthetic:tube"];
+        a.extend(args);
+        let o = meshdeco(&a, &d);
+        assert!(!o.status.success(), "{a:?} succeeded");
+        assert!(output_text(&o).contains(says), "{a:?}: {}", output_text(&o));
+        assert!(!d.join("z.npy").exists() && !d.join("z.txt").exists(), "{a:?} left a file");
+    }
+    let o = meshdeco(&["generate", "no/such/dir", "--frames", "3", "--out", "z.npy"], &d);
+    assert!(!o.status.success() && output_text(&o).contains("no/such/dir"), "{}", output_text(&o));
+    let _ = std::fs::remove_dir_all(&d);
+}
+
+#[test]
+fn cached_features_train_the_same_autoencoder_a_batch_at_a_time() {
+    let d = fresh_dir("large", "cache");
+    let o = meshdeco(&["generate", "synthetic:bumps", "--frames", "120", "--out", "b.npy", "--seed", "1"], &d);
+    assert!(o.status.success(), "{}", output_text(&o));
+    let data = |cache: &str| {
+        format!("path = \"b.npy\"\ntemplate = \"b.obj\"\ntrain = \"1-100\"\ntest = \"rest\"\ncache = \"{cache}\"")
+    };
+    // In memory (no cache) …
+    let mem = train(&d, "mem", &data("off"), AE, &[]);
+    assert!(!output_text(&mem).contains("features cached") && !output_text(&mem).contains("from the cache"), "{}", output_text(&mem));
+    // … computed into the cache and streamed from it …
+    let first = train(&d, "first", &data("cache"), AE, &[]);
+    assert!(output_text(&first).contains("features cached in"), "{}", output_text(&first));
+    let files: Vec<_> = std::fs::read_dir(d.join("cache")).unwrap().map(|e| e.unwrap().path()).collect();
+    assert_eq!(files.len(), 1, "{files:?}");
+    // … and read back from it: one model, bit for bit, and the same numbers.
+    let second = train(&d, "second", &data("cache"), AE, &[]);
+    assert!(output_text(&second).contains("features read from the cache"), "{}", output_text(&second));
+    for run in ["first", "second"] {
+        for f in ["model.bin", "weights.csv"] {
+            assert!(
+                read(&d.join("mem").join(f)) == read(&d.join(run).join(f)),
+                "{run}/{f} differs from the in-memory run's"
+            );
+        }
+        let metrics = |r: &str| -> serde_json::Value {
+            let mut m: serde_json::Value = serde_json::from_slice(&read(&d.join(r).join("metrics.json"))).unwrap();
+            m.as_object_mut().unwrap().retain(|k, _| !k.contains("seconds"));
+            m
+        };
+        assert_eq!(metrics("mem"), metrics(run), "{run}");
+    }
+    // A cache file changed on disk: training stops with an error naming it and the frame.
+    let mut bytes = read(&files[0]);
+    bytes[200] ^= 0x10;
+    std::fs::write(&files[0], &bytes).unwrap();
+    let cfg = d.join("second.toml");
+    let o = meshdeco(&["train", "--config", cfg.to_str().unwrap(), "--out", d.join("bad").to_str().unwrap()], &d);
+    assert!(!o.status.success(), "a corrupted cache trained");
+    let text = output_text(&o);
+    assert!(text.contains("fails its checksum") && text.contains(".features"), "{text}");
+    assert!(!d.join("bad").exists(), "a failed run left its artefact directory");
+    let _ = std::fs::remove_dir_all(&d);
+}
+
+#[test]
+fn a_batch_job_gets_plain_progress_lines() {
+    let d = fresh_dir("large", "progress");
+    // stderr is a pipe here, not a terminal: lines at the interval, stage starts and ends.
+    let o = train(
+        &d,
+        "demo",
+        "path = \"synthetic:tube\"\ntrain = \"every:2\"",
+        AE,
+        &[("MESHDECO_PROGRESS_SECONDS", "0.05")],
+    );
+    let err = String::from_utf8_lossy(&o.stderr);
+    let lines: Vec<&str> = err.lines().filter(|l| l.starts_with("[meshdeco ")).collect();
+    assert!(lines.iter().any(|l| l.contains("training: started (12 steps)")), "{err}");
+    assert!(lines.iter().any(|l| l.contains("training: done in")), "{err}");
+    assert!(lines.iter().any(|l| l.contains("acap features: started")), "{err}");
+    // While a stage runs: done/total, share, rate and ETA, or how long it has run.
+    assert!(
+        lines.iter().any(|l| l.contains("running for") || (l.contains("/12 (") && l.contains("eta"))),
+        "no line while a stage ran: {err}"
+    );
+    // Off with 0.
+    let o =
+        train(&d, "quiet", "path = \"synthetic:tube\"\ntrain = \"every:2\"", AE, &[("MESHDECO_PROGRESS_SECONDS", "0")]);
+    assert!(!String::from_utf8_lossy(&o.stderr).contains("[meshdeco "), "{}", output_text(&o));
+    let _ = std::fs::remove_dir_all(&d);
+}
