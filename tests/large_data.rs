@@ -81,7 +81,11 @@ fn cached_features_train_the_same_autoencoder_a_batch_at_a_time() {
     };
     // In memory (no cache) …
     let mem = train(&d, "mem", &data("off"), AE, &[]);
-    assert!(!output_text(&mem).contains("features cached") && !output_text(&mem).contains("from the cache"), "{}", output_text(&mem));
+    assert!(
+        !output_text(&mem).contains("features cached") && !output_text(&mem).contains("from the cache"),
+        "{}",
+        output_text(&mem)
+    );
     // … computed into the cache and streamed from it …
     let first = train(&d, "first", &data("cache"), AE, &[]);
     assert!(output_text(&first).contains("features cached in"), "{}", output_text(&first));

@@ -586,10 +586,16 @@ type AeTrainingData = (FeatureScaling, TrainingData, Option<Features>, Vec<Vec<V
 /// The training features: from a cache file, read a batch at a time, when `data.cache` caches
 /// them (one-piece meshes); otherwise computed into memory (or read whole from the cache) and
 /// scaled in place. Both give the same scaled numbers.
-fn training_data(representation: &Representation, prep: &Prepared, mode: ScalingMode) -> Result<AeTrainingData> {
+fn training_data(
+    representation: &Representation,
+    prep: &Prepared,
+    mode: ScalingMode,
+    progress: &mut dyn super::Progress,
+) -> Result<AeTrainingData> {
     use crate::representation::feature_cache::open_or_build;
     let own = if representation.pieces().is_none() {
-        match open_or_build(representation, &prep.sequence, &prep.train, &prep.cache)? {
+        let mut on_frames = |done: usize| progress.step(done as u64, "frames");
+        match open_or_build(representation, &prep.sequence, &prep.train, &prep.cache, &mut on_frames)? {
             Some(Ok((file, built))) => {
                 let verb = if built { "cached in" } else { "read from the cache" };
                 eprintln!("note: features {verb} {} (training reads them a batch at a time)", file.path().display());
@@ -629,14 +635,14 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
     {
         return Err(Error::Invalid(format!("--resume: no checkpoint at {}", from.display())));
     }
-    ctx.progress.stage("acap features", 0);
+    ctx.progress.stage("acap features", prep.train.len() as u64);
     let t_rep = Instant::now();
     let options = RepresentationOptions { acap_consistency: m.consistency.to_acap(), ..Default::default() };
     let representation = Representation::new(RepresentationKind::Acap, &prep.rest, options)?;
     // The network's 9 numbers per vertex, and the pieces' translations (multi-piece meshes).
     // When the features are cached in a file (large data: `data.cache`), training reads them
     // from it a batch at a time; otherwise they are computed into memory and scaled in place.
-    let features = training_data(&representation, prep, m.scaling.mode())?;
+    let features = training_data(&representation, prep, m.scaling.mode(), &mut *ctx.progress)?;
     if let Some((placement, _)) = representation.pieces() {
         let extra = 3 * (placement.n_pieces() - 1);
         eprintln!(

@@ -272,11 +272,14 @@ fn read_at(file: &File, buf: &mut [u8], offset: u64) -> std::io::Result<()> {
 /// The cache file of the features of `frames` of `seq` under `policy`, built if missing or
 /// unusable: `None` when the policy caches nothing of this size; `Err` only for errors of the
 /// data (a frame that cannot be encoded), `Ok(Some(Err(why)))` when the folder cannot be used.
+///
+/// `on_frames(done)` is called after each run of frames computed for a new file.
 pub fn open_or_build(
     rep: &Representation,
     seq: &MeshSequence,
     frames: &[usize],
     policy: &CachePolicy,
+    on_frames: &mut dyn FnMut(usize),
 ) -> Result<Option<std::result::Result<(FeatureFile, bool), String>>> {
     let bytes = frames.len() * rep.n_elements() * rep.width() * 8;
     let Some(folder) = policy.folder(bytes) else { return Ok(None) };
@@ -295,7 +298,7 @@ pub fn open_or_build(
     if let Err(e) = std::fs::create_dir_all(&folder) {
         return Ok(Some(Err(format!("{}: {e}", folder.display()))));
     }
-    match build(rep, seq, frames, &path, &key) {
+    match build(rep, seq, frames, &path, &key, on_frames) {
         Ok(()) => {}
         Err(Build::Data(e)) => return Err(e),
         Err(Build::Io(e)) => return Ok(Some(Err(e.to_string()))),
@@ -314,7 +317,7 @@ pub fn encode_cached(
     frames: &[usize],
     policy: &CachePolicy,
 ) -> Result<(Features, CacheUse)> {
-    match open_or_build(rep, seq, frames, policy)? {
+    match open_or_build(rep, seq, frames, policy, &mut |_| {})? {
         None => Ok((rep.encode_selected(seq, frames)?, CacheUse::Computed)),
         Some(Err(why)) => Ok((rep.encode_selected(seq, frames)?, CacheUse::Unavailable(why))),
         Some(Ok((file, built))) => {
@@ -417,6 +420,7 @@ fn build(
     frames: &[usize],
     path: &Path,
     key: &str,
+    on_frames: &mut dyn FnMut(usize),
 ) -> std::result::Result<(), Build> {
     let width = rep.width();
     let mut header = Header {
@@ -463,6 +467,7 @@ fn build(
                 w.write_all(&bytes)?;
                 offset += bytes.len() as u64;
             }
+            on_frames(header.frame_crc32.len());
         }
         header.min_bits = min.iter().map(|x| x.to_bits()).collect();
         header.max_bits = max.iter().map(|x| x.to_bits()).collect();
