@@ -142,6 +142,24 @@ pub fn write_atomic_with(path: &Path, body: impl FnOnce(&mut BufWriter<File>) ->
     })
 }
 
+/// [`write_atomic_with`] for a body that fails with the crate's errors (a value it refuses, not
+/// only a write): on any error nothing is left at `path` and the body's own error is returned.
+/// The body maps its write errors itself (`Error::io(path, e)`).
+pub fn write_atomic_checked(path: &Path, body: impl FnOnce(&mut BufWriter<File>) -> Result<()>) -> Result<()> {
+    let mut failure: Option<Error> = None;
+    let written = write_atomic_with(path, |w| {
+        body(w).map_err(|e| {
+            let message = e.to_string();
+            failure = Some(e);
+            std::io::Error::other(message)
+        })
+    });
+    match failure {
+        Some(e) => Err(e),
+        None => written,
+    }
+}
+
 /// Longest file name (bytes) of the common file systems (ext4, XFS, Btrfs, APFS, NTFS).
 pub const MAX_FILE_NAME: usize = 255;
 

@@ -345,16 +345,17 @@ fn read_frames(r: &mut dyn Read, available: u64, what: &str, n_vertices: usize) 
         }
     };
     let (f, n) = (f as usize, n as usize);
+    // One value from its `h.item` bytes.
+    let decode = |b: &[u8]| -> f64 {
+        match (h.item, h.little) {
+            (8, true) => f64::from_le_bytes(b.try_into().unwrap_or_default()),
+            (8, false) => f64::from_be_bytes(b.try_into().unwrap_or_default()),
+            (_, true) => f64::from(f32::from_le_bytes(b.try_into().unwrap_or_default())),
+            (_, false) => f64::from(f32::from_be_bytes(b.try_into().unwrap_or_default())),
+        }
+    };
     if !h.fortran {
         // C order: one frame's bytes at a time (memory: the frames, not the file as well).
-        let decode = |b: &[u8]| -> f64 {
-            match (h.item, h.little) {
-                (8, true) => f64::from_le_bytes(b.try_into().unwrap_or_default()),
-                (8, false) => f64::from_be_bytes(b.try_into().unwrap_or_default()),
-                (_, true) => f64::from(f32::from_le_bytes(b.try_into().unwrap_or_default())),
-                (_, false) => f64::from(f32::from_be_bytes(b.try_into().unwrap_or_default())),
-            }
-        };
         let mut buf = vec![0u8; n * 3 * h.item];
         let mut frames = Vec::with_capacity(f);
         for fi in 0..f {
@@ -377,15 +378,7 @@ fn read_frames(r: &mut dyn Read, available: u64, what: &str, n_vertices: usize) 
     if data.len() != needed {
         return Err(bad(format!("{} bytes of data read, shape {shape:?} needs {needed}", data.len())));
     }
-    let value = |i: usize| -> f64 {
-        let b = &data[i * h.item..(i + 1) * h.item];
-        match (h.item, h.little) {
-            (8, true) => f64::from_le_bytes(b.try_into().unwrap_or_default()),
-            (8, false) => f64::from_be_bytes(b.try_into().unwrap_or_default()),
-            (_, true) => f64::from(f32::from_le_bytes(b.try_into().unwrap_or_default())),
-            (_, false) => f64::from(f32::from_be_bytes(b.try_into().unwrap_or_default())),
-        }
-    };
+    let value = |i: usize| -> f64 { decode(&data[i * h.item..(i + 1) * h.item]) };
     let at = |fi: usize, v: usize, c: usize| {
         if h.fortran { value(fi + f * (v + n * c)) } else { value((fi * n + v) * 3 + c) }
     };
@@ -457,20 +450,14 @@ pub fn write_npy_f32_chunked(
     chunk_len: usize,
     mut chunk: impl FnMut(usize, usize) -> Result<Vec<Vec<Vec3>>>,
 ) -> Result<()> {
-    let mut failure: Option<Error> = None;
-    let written = crate::artifact::write_atomic_with(path, |w| {
+    crate::artifact::write_atomic_checked(path, |w| {
         use std::io::Write;
-        w.write_all(&npy_header("<f4", false, &[n_frames, n_vertices, 3]))?;
+        let io = |e: std::io::Error| Error::io(path, e);
+        w.write_all(&npy_header("<f4", false, &[n_frames, n_vertices, 3])).map_err(io)?;
         let mut start = 0;
         while start < n_frames {
             let len = chunk_len.max(1).min(n_frames - start);
-            let frames = match chunk(start, len) {
-                Ok(f) => f,
-                Err(e) => {
-                    failure = Some(e);
-                    return Err(std::io::Error::other("frame generation failed"));
-                }
-            };
+            let frames = chunk(start, len)?;
             for (j, f) in frames.iter().enumerate() {
                 let bad = if f.len() != n_vertices {
                     Some(format!("has {} vertices, expected {n_vertices}", f.len()))
@@ -481,31 +468,25 @@ pub fn write_npy_f32_chunked(
                         .map(|x| format!("holds {x}, not a finite float32"))
                 };
                 if let Some(why) = bad {
-                    failure = Some(Error::Invalid(format!("{}: frame {} {why}", path.display(), start + j)));
-                    return Err(std::io::Error::other("bad frame"));
+                    return Err(Error::Invalid(format!("{}: frame {} {why}", path.display(), start + j)));
                 }
                 let mut buf = Vec::with_capacity(n_vertices * 12);
                 for x in f.iter().flatten() {
                     buf.extend_from_slice(&(*x as f32).to_le_bytes());
                 }
-                w.write_all(&buf)?;
+                w.write_all(&buf).map_err(io)?;
             }
             if frames.len() != len {
-                failure = Some(Error::Invalid(format!(
+                return Err(Error::Invalid(format!(
                     "{}: asked for {len} frames from {start}, got {}",
                     path.display(),
                     frames.len()
                 )));
-                return Err(std::io::Error::other("short chunk"));
             }
             start += len;
         }
         Ok(())
-    });
-    match failure {
-        Some(e) => Err(e),
-        None => written,
-    }
+    })
 }
 
 /// Writes named frame arrays as an uncompressed `.npz` (what `numpy.savez` writes), atomically.

@@ -130,21 +130,28 @@ impl TrainingData {
         }
         match &self.storage {
             Storage::Memory(data) => Ok(Cow::Borrowed(&data[s * sz..(s + 1) * sz])),
-            Storage::File { file, scaling, frames } => {
-                let mut x = file.frame(frames[s])?;
-                scaling.apply_in_place(&mut x)?;
-                Ok(Cow::Owned(x.into_iter().map(|v| v as f32).collect()))
-            }
+            Storage::File { .. } => Ok(Cow::Owned(self.scaled_frame(s)?.into_iter().map(|v| v as f32).collect())),
         }
+    }
+
+    /// Shape `s` of streamed data, read from the file and scaled in `f64` (an error for shapes
+    /// held in memory).
+    fn scaled_frame(&self, s: usize) -> Result<Vec<f64>> {
+        let Storage::File { file, scaling, frames } = &self.storage else {
+            return Err(Error::Invalid("the shapes are held in memory, not in a feature file".into()));
+        };
+        let mut x = file.frame(frames[s])?;
+        scaling.apply_in_place(&mut x)?;
+        Ok(x)
     }
 
     /// Scaled `f64` features of the shapes `range` (what [`TrainingData::shape`] gives, before
     /// the cast to `f32`): for encoding the training shapes a run at a time. Only for streamed
     /// data; in memory the caller holds the `f64` features itself.
     pub fn scaled_features(&self, range: std::ops::Range<usize>) -> Result<Features> {
-        let Storage::File { file, scaling, frames } = &self.storage else {
+        if !self.is_streamed() {
             return Err(Error::Invalid("scaled_features: the shapes are held in memory".into()));
-        };
+        }
         if range.end > self.n_shapes || range.start > range.end {
             return Err(Error::Invalid(format!("shapes {range:?} of {}", self.n_shapes)));
         }
@@ -152,9 +159,7 @@ impl TrainingData {
         out.n_frames = range.len();
         out.data.reserve(range.len() * self.n_vertices * WIDTH);
         for s in range {
-            let mut x = file.frame(frames[s])?;
-            scaling.apply_in_place(&mut x)?;
-            out.data.extend_from_slice(&x);
+            out.data.extend_from_slice(&self.scaled_frame(s)?);
         }
         Ok(out)
     }

@@ -592,23 +592,24 @@ fn training_data(
     mode: ScalingMode,
     progress: &mut dyn super::Progress,
 ) -> Result<AeTrainingData> {
-    use crate::representation::feature_cache::open_or_build;
+    use crate::representation::feature_cache::{CacheUse, Opened, open_or_build};
     let own = if representation.pieces().is_none() {
         let mut on_frames = |done: usize| progress.step(done as u64, "frames");
         match open_or_build(representation, &prep.sequence, &prep.train, &prep.cache, &mut on_frames)? {
-            Some(Ok((file, built))) => {
-                let verb = if built { "cached in" } else { "read from the cache" };
-                eprintln!("note: features {verb} {} (training reads them a batch at a time)", file.path().display());
+            Opened::File { file, built } => {
+                let path = file.path().to_path_buf();
+                let used = if built { CacheUse::Written(path) } else { CacheUse::Read(path) };
+                super::note_cache_use(&used, " (training reads them a batch at a time)");
                 let h = file.header();
                 let scaling = FeatureScaling::fit_column_ranges(&h.min(), &h.max(), mode)?;
                 let data = TrainingData::from_feature_file(std::sync::Arc::new(file), scaling.clone())?;
                 return Ok((scaling, data, None, Vec::new()));
             }
-            Some(Err(why)) => {
-                eprintln!("note: features not cached: {why}");
+            Opened::Unavailable(why) => {
+                super::note_cache_use(&CacheUse::Unavailable(why), "");
                 representation.encode_selected(&prep.sequence, &prep.train)?
             }
-            None => representation.encode_selected(&prep.sequence, &prep.train)?,
+            Opened::NotCached => representation.encode_selected(&prep.sequence, &prep.train)?,
         }
     } else {
         super::training_features(representation, prep)?
@@ -659,14 +660,16 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
     ctx.progress.stage("geodesics", 0);
     let distances = GeodesicSupport::max_normalised(&prep.rest, m.geodesic_m)?;
     let neighbors = NeighborIndex::new(representation.element_adjacency())?;
-    let all_shapes = all.n_shapes();
-    let streamed = if all.is_streamed() { Some(all.clone()) } else { None };
     // With `validation = v`, v evenly spaced training shapes are held out to choose the step.
-    let (data, held_out) = if ae_cfg.validation > 0 {
-        let (fit, val, _) = all.split_validation(ae_cfg.validation).map_err(crate::config::method_key)?;
-        (fit, Some(val))
+    // `all` stays whole: the codes of every training shape are computed from it after training.
+    let split = if ae_cfg.validation > 0 {
+        Some(all.split_validation(ae_cfg.validation).map_err(crate::config::method_key)?)
     } else {
-        (all, None)
+        None
+    };
+    let (data, held_out) = match &split {
+        Some((fit, val, _)) => (fit, Some(val)),
+        None => (&all, None),
     };
 
     // The vertex term (`lambda_vertex`): the decoded shapes' error on the reconstructed vertices.
@@ -681,11 +684,11 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
 
     std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
     let mut trainer = if let Some(from) = ctx.resume {
-        Trainer::resume(from, ae_cfg.clone(), &data, &neighbors, &distances)?
+        Trainer::resume(from, ae_cfg.clone(), data, &neighbors, &distances)?
     } else {
-        Trainer::new(ae_cfg.clone(), &data, &neighbors, &distances)?
+        Trainer::new(ae_cfg.clone(), data, &neighbors, &distances)?
     };
-    if let Some(val) = &held_out {
+    if let Some(val) = held_out {
         trainer = trainer.with_validation(val)?;
     }
     if let Some(v) = &vertex_loss {
@@ -757,13 +760,10 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
     let mut train_codes = match &xs_train {
         Some(x) => model.encode(x)?,
         None => {
-            let streamed = streamed
-                .as_ref()
-                .ok_or_else(|| Error::Invalid("the training shapes are neither in memory nor in a file".into()))?;
-            let mut codes = Vec::with_capacity(all_shapes);
-            for start in (0..all_shapes).step_by(STREAM_ENCODE_RUN) {
-                let end = (start + STREAM_ENCODE_RUN).min(all_shapes);
-                codes.extend(model.encode(&streamed.scaled_features(start..end)?)?);
+            let mut codes = Vec::with_capacity(all.n_shapes());
+            for start in (0..all.n_shapes()).step_by(STREAM_ENCODE_RUN) {
+                let end = (start + STREAM_ENCODE_RUN).min(all.n_shapes());
+                codes.extend(model.encode(&all.scaled_features(start..end)?)?);
             }
             codes
         }

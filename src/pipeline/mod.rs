@@ -24,15 +24,22 @@ pub fn training_features(
     representation: &crate::representation::Representation,
     prep: &crate::preprocess::Prepared,
 ) -> crate::error::Result<crate::representation::Features> {
-    use crate::representation::feature_cache::{CacheUse, encode_cached};
+    use crate::representation::feature_cache::encode_cached;
     let (features, used) = encode_cached(representation, &prep.sequence, &prep.train, &prep.cache)?;
+    note_cache_use(&used, "");
+    Ok(features)
+}
+
+/// Says on stderr what the feature cache did (nothing when it was not used); `suffix` follows
+/// the file's name.
+fn note_cache_use(used: &crate::representation::feature_cache::CacheUse, suffix: &str) {
+    use crate::representation::feature_cache::CacheUse;
     match used {
         CacheUse::Computed => {}
-        CacheUse::Read(p) => eprintln!("note: features read from the cache {}", p.display()),
-        CacheUse::Written(p) => eprintln!("note: features cached in {}", p.display()),
+        CacheUse::Read(p) => eprintln!("note: features read from the cache {}{suffix}", p.display()),
+        CacheUse::Written(p) => eprintln!("note: features cached in {}{suffix}", p.display()),
         CacheUse::Unavailable(why) => eprintln!("note: features not cached: {why}"),
     }
-    Ok(features)
 }
 
 /// Progress reporting hooks of long jobs (the CLI draws them with indicatif).

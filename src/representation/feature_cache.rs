@@ -269,9 +269,20 @@ fn read_at(file: &File, buf: &mut [u8], offset: u64) -> std::io::Result<()> {
     f.read_exact(buf)
 }
 
+/// What [`open_or_build`] found or made.
+#[derive(Debug)]
+pub enum Opened {
+    /// A verified cache file; `built` when this call computed it.
+    File { file: FeatureFile, built: bool },
+    /// The policy caches nothing of this size.
+    NotCached,
+    /// The folder or the file could not be used (the reason): nothing is cached.
+    Unavailable(String),
+}
+
 /// The cache file of the features of `frames` of `seq` under `policy`, built if missing or
-/// unusable: `None` when the policy caches nothing of this size; `Err` only for errors of the
-/// data (a frame that cannot be encoded), `Ok(Some(Err(why)))` when the folder cannot be used.
+/// unusable. `Err` only for errors of the data (a frame that cannot be encoded); a folder or
+/// file that cannot be used is [`Opened::Unavailable`].
 ///
 /// `on_frames(done)` is called after each run of frames computed for a new file.
 pub fn open_or_build(
@@ -280,9 +291,9 @@ pub fn open_or_build(
     frames: &[usize],
     policy: &CachePolicy,
     on_frames: &mut dyn FnMut(usize),
-) -> Result<Option<std::result::Result<(FeatureFile, bool), String>>> {
+) -> Result<Opened> {
     let bytes = frames.len() * rep.n_elements() * rep.width() * 8;
-    let Some(folder) = policy.folder(bytes) else { return Ok(None) };
+    let Some(folder) = policy.folder(bytes) else { return Ok(Opened::NotCached) };
     if let Some(&f) = frames.iter().find(|&&f| f >= seq.n_frames()) {
         return Err(Error::Invalid(format!("frame index {f} is out of range ({} frames)", seq.n_frames())));
     }
@@ -291,22 +302,22 @@ pub fn open_or_build(
     let expect = (frames.len(), rep.n_elements(), rep.width());
     if path.is_file() {
         match FeatureFile::open(&path, &key, expect) {
-            Ok(f) => return Ok(Some(Ok((f, false)))),
+            Ok(file) => return Ok(Opened::File { file, built: false }),
             Err(e) => eprintln!("note: recomputing the cached features: {e}"),
         }
     }
     if let Err(e) = std::fs::create_dir_all(&folder) {
-        return Ok(Some(Err(format!("{}: {e}", folder.display()))));
+        return Ok(Opened::Unavailable(format!("{}: {e}", folder.display())));
     }
     match build(rep, seq, frames, &path, &key, on_frames) {
         Ok(()) => {}
-        Err(Build::Data(e)) => return Err(e),
-        Err(Build::Io(e)) => return Ok(Some(Err(e.to_string()))),
+        Err(e @ Error::Io { .. }) => return Ok(Opened::Unavailable(e.to_string())),
+        Err(e) => return Err(e),
     }
-    match FeatureFile::open(&path, &key, expect) {
-        Ok(f) => Ok(Some(Ok((f, true)))),
-        Err(e) => Ok(Some(Err(e.to_string()))),
-    }
+    Ok(match FeatureFile::open(&path, &key, expect) {
+        Ok(file) => Opened::File { file, built: true },
+        Err(e) => Opened::Unavailable(e.to_string()),
+    })
 }
 
 /// The features of `frames` of `seq` ([`Representation::encode_selected`]), read from the cache
@@ -318,9 +329,9 @@ pub fn encode_cached(
     policy: &CachePolicy,
 ) -> Result<(Features, CacheUse)> {
     match open_or_build(rep, seq, frames, policy, &mut |_| {})? {
-        None => Ok((rep.encode_selected(seq, frames)?, CacheUse::Computed)),
-        Some(Err(why)) => Ok((rep.encode_selected(seq, frames)?, CacheUse::Unavailable(why))),
-        Some(Ok((file, built))) => {
+        Opened::NotCached => Ok((rep.encode_selected(seq, frames)?, CacheUse::Computed)),
+        Opened::Unavailable(why) => Ok((rep.encode_selected(seq, frames)?, CacheUse::Unavailable(why))),
+        Opened::File { file, built } => {
             let path = file.path().to_path_buf();
             match file.read_all() {
                 Ok(f) => Ok((f, if built { CacheUse::Written(path) } else { CacheUse::Read(path) })),
@@ -405,15 +416,8 @@ impl Hasher {
     }
 }
 
-/// Why building a cache file failed: the data (an error to report) or the file (only the reuse
-/// is lost).
-enum Build {
-    Data(Error),
-    Io(Error),
-}
-
 /// Computes the features `BUILD_RUN` frames at a time (in parallel) and writes the cache file
-/// atomically.
+/// atomically. A write that fails is an [`Error::Io`]; any other error is the data's.
 fn build(
     rep: &Representation,
     seq: &MeshSequence,
@@ -421,7 +425,7 @@ fn build(
     path: &Path,
     key: &str,
     on_frames: &mut dyn FnMut(usize),
-) -> std::result::Result<(), Build> {
+) -> Result<()> {
     let width = rep.width();
     let mut header = Header {
         key: key.to_string(),
@@ -433,27 +437,20 @@ fn build(
         max_bits: Vec::new(),
     };
     let (mut min, mut max) = (vec![f64::INFINITY; width], vec![f64::NEG_INFINITY; width]);
-    let mut data_error: Option<Error> = None;
-    let written = crate::artifact::write_atomic_with(path, |w| {
+    crate::artifact::write_atomic_checked(path, |w| {
         use std::io::Write;
-        writeln!(w, "{MAGIC}")?;
+        let io = |e: std::io::Error| Error::io(path, e);
+        writeln!(w, "{MAGIC}").map_err(io)?;
         let mut offset = (MAGIC.len() + 1) as u64;
         for run in frames.chunks(BUILD_RUN) {
-            let f = match rep.encode_selected(seq, run) {
-                Ok(f) => f,
-                Err(e) => {
-                    data_error = Some(e);
-                    return Err(std::io::Error::other("a frame could not be encoded"));
-                }
-            };
+            let f = rep.encode_selected(seq, run)?;
             if let Some(i) = f.data.iter().position(|x| !x.is_finite()) {
-                data_error = Some(Error::Numerical(format!(
+                return Err(Error::Numerical(format!(
                     "frame {}: feature {} is {}",
                     run[i / (f.n_elements * width).max(1)],
                     i,
                     f.data[i]
                 )));
-                return Err(std::io::Error::other("non-finite features"));
             }
             for frame in f.data.chunks_exact((f.n_elements * width).max(1)) {
                 let bytes: Vec<u8> = frame.iter().flat_map(|x| x.to_le_bytes()).collect();
@@ -464,23 +461,18 @@ fn build(
                         max[k] = max[k].max(x);
                     }
                 }
-                w.write_all(&bytes)?;
+                w.write_all(&bytes).map_err(io)?;
                 offset += bytes.len() as u64;
             }
             on_frames(header.frame_crc32.len());
         }
         header.min_bits = min.iter().map(|x| x.to_bits()).collect();
         header.max_bits = max.iter().map(|x| x.to_bits()).collect();
-        let json = serde_json::to_vec(&header).map_err(std::io::Error::other)?;
-        w.write_all(&json)?;
-        w.write_all(&offset.to_le_bytes())?;
+        let json = serde_json::to_vec(&header).map_err(|e| io(std::io::Error::other(e)))?;
+        w.write_all(&json).map_err(io)?;
+        w.write_all(&offset.to_le_bytes()).map_err(io)?;
         Ok(())
-    });
-    match (data_error, written) {
-        (Some(e), _) => Err(Build::Data(e)),
-        (None, Err(e)) => Err(Build::Io(e)),
-        (None, Ok(())) => Ok(()),
-    }
+    })
 }
 
 #[cfg(test)]
