@@ -17,7 +17,7 @@ fn main() {
     let cfg = Config::from_file(Path::new(&args[1])).expect("config");
     let prep = meshdeco::preprocess::prepare(&cfg.data).expect("data");
     let art = AeArtifact::load(Path::new(&args[2])).expect("model");
-    let test = prep.test_sequence();
+    let test = prep.test_sequence().expect("test frames");
     // The one-pass encoder's codes (whatever `encoder_passes` the model was trained with).
     let z0 = art.encode_frames_with_passes(&test, 0).expect("encode");
     let mut scaled = test.clone();

@@ -43,7 +43,7 @@ fn main() {
     let model = load_model(Path::new(&args[2])).expect("model");
     let test = MeshSequence {
         faces: prep.rest.faces.clone(),
-        frames: meshdeco::pipeline::train::frames_in_data_units(&prep, &prep.test),
+        frames: meshdeco::pipeline::train::frames_in_data_units(&prep, &prep.test).expect("test frames"),
         names: Vec::new(),
     };
     let (norms, adjacency) = model.element_norms();

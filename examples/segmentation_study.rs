@@ -20,7 +20,7 @@ fn main() -> anyhow::Result<()> {
         a[1], a[2]
     ))?;
     let prep = meshdeco::preprocess::prepare(&cfg.data)?;
-    let seq = prep.train_sequence();
+    let seq = prep.train_sequence()?;
     let rep = Representation::new(RepresentationKind::Displacement, &prep.rest, RepresentationOptions::default())?;
     let x = rep.encode(&seq)?;
     let lambda: f64 = a[3].parse()?;

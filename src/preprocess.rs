@@ -7,14 +7,15 @@
 //! computes in the scaled space is mapped back with [`UnitBox::invert`] before it is written
 //! or measured, so outputs and metrics are in the data's own units.
 
+use std::borrow::Cow;
 use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
 use crate::config::{Align, DataConfig, RestShape};
 use crate::error::{Error, Result};
-use crate::geometry::rigid_align::kabsch;
-use crate::mesh::{self, MeshSequence, TriMesh, Vec3};
+use crate::geometry::rigid_align::{RigidTransform, kabsch};
+use crate::mesh::{self, FrameSource, MeshSequence, TriMesh, Vec3};
 use crate::representation::feature_cache::CachePolicy;
 
 /// An affine scaling into the unit box: x' = (x − offset)·scale.
@@ -66,10 +67,11 @@ impl UnitBox {
 }
 
 /// Data ready for a method: all frames preprocessed, the rest mesh, the split and the scaling.
-#[derive(Debug, Clone)]
+#[derive(Debug)]
 pub struct Prepared {
-    /// All frames after alignment and scaling (natural order, as loaded).
-    pub sequence: MeshSequence,
+    /// All frames after alignment and scaling (natural order, as loaded): in memory, or read on
+    /// demand from a large `.npy` ([`PreparedFrames`]).
+    pub sequence: PreparedFrames,
     /// The rest (reference) mesh in the same space.
     pub rest: TriMesh,
     /// 0-based indices of the training frames.
@@ -80,20 +82,132 @@ pub struct Prepared {
     pub unit_box: UnitBox,
     /// Where the methods cache the training frames' features (`data.cache`).
     pub cache: CachePolicy,
+    /// When frames are read on demand and features held in `f32`.
+    pub limits: MemoryLimits,
+}
+
+/// Sizes above which data is not held whole in `f64` (bytes).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct MemoryLimits {
+    /// A C-order `.npy` whose frames take more than this in `f64` (F · N · 24 bytes) is read a
+    /// frame at a time when used ([`PreparedFrames::Streamed`]). Default 1 GiB (~8 500 frames of
+    /// 5 000 vertices); `MESHDECO_STREAM_BYTES`.
+    pub stream_bytes: u64,
+    /// PCA and SPLOCS hold their training features in `f32` when the `f64` matrix would take
+    /// more than this (F · E·W · 8 bytes), and PCA then uses a randomized SVD. Default 1 GiB;
+    /// `MESHDECO_COMPACT_BYTES`.
+    pub compact_bytes: u64,
+}
+
+impl Default for MemoryLimits {
+    fn default() -> Self {
+        MemoryLimits { stream_bytes: 1 << 30, compact_bytes: 1 << 30 }
+    }
+}
+
+impl MemoryLimits {
+    /// The defaults, overridden by `MESHDECO_STREAM_BYTES` / `MESHDECO_COMPACT_BYTES` (a whole
+    /// number of bytes); a value that is not one is an error naming the variable.
+    pub fn from_env() -> Result<Self> {
+        let mut m = MemoryLimits::default();
+        for (name, slot) in
+            [("MESHDECO_STREAM_BYTES", &mut m.stream_bytes), ("MESHDECO_COMPACT_BYTES", &mut m.compact_bytes)]
+        {
+            if let Ok(v) = std::env::var(name) {
+                *slot = v.trim().parse().map_err(|_| {
+                    Error::Invalid(format!("environment variable {name} is `{v}`, not a whole number of bytes"))
+                })?;
+            }
+        }
+        Ok(m)
+    }
 }
 
 impl Prepared {
     /// Training frames as their own sequence.
-    pub fn train_sequence(&self) -> MeshSequence {
-        self.sequence.select(&self.train)
+    pub fn train_sequence(&self) -> Result<MeshSequence> {
+        self.sequence.select_frames(&self.train)
     }
     /// Names of the training frames (without copying their positions).
     pub fn train_names(&self) -> Vec<String> {
-        self.train.iter().map(|&f| self.sequence.names[f].clone()).collect()
+        self.train.iter().map(|&f| self.sequence.name(f).to_string()).collect()
     }
     /// Test frames as their own sequence.
-    pub fn test_sequence(&self) -> MeshSequence {
-        self.sequence.select(&self.test)
+    pub fn test_sequence(&self) -> Result<MeshSequence> {
+        self.sequence.select_frames(&self.test)
+    }
+}
+
+/// The prepared frames: held in memory, or — for a C-order `.npy` whose frames would take more
+/// than [`MemoryLimits::stream_bytes`] in `f64` — read from the file whenever a frame is used, aligned and
+/// scaled on the way with the same arithmetic as in memory (the same numbers, bit for bit).
+#[derive(Debug)]
+pub enum PreparedFrames {
+    /// Every frame in memory.
+    Memory(MeshSequence),
+    /// Frames read on demand.
+    Streamed(StreamedFrames),
+}
+
+/// Frames of a `.npy` read on demand, with each frame's rigid alignment (if any) and the unit
+/// box (if any) applied when read.
+#[derive(Debug)]
+pub struct StreamedFrames {
+    file: mesh::npy::NpyFrames,
+    faces: Vec<[usize; 3]>,
+    names: Vec<String>,
+    /// Per frame: the rigid motion onto the rest shape (`align = "rigid"`).
+    alignment: Option<Vec<RigidTransform>>,
+    /// The unit box (`unit_box = true`).
+    unit_box: Option<UnitBox>,
+}
+
+impl FrameSource for PreparedFrames {
+    fn faces(&self) -> &[[usize; 3]] {
+        match self {
+            PreparedFrames::Memory(s) => &s.faces,
+            PreparedFrames::Streamed(s) => &s.faces,
+        }
+    }
+    fn n_frames(&self) -> usize {
+        match self {
+            PreparedFrames::Memory(s) => s.n_frames(),
+            PreparedFrames::Streamed(s) => s.file.n_frames(),
+        }
+    }
+    fn n_vertices(&self) -> usize {
+        match self {
+            PreparedFrames::Memory(s) => s.n_vertices(),
+            PreparedFrames::Streamed(s) => s.file.n_vertices(),
+        }
+    }
+    fn name(&self, f: usize) -> &str {
+        match self {
+            PreparedFrames::Memory(s) => FrameSource::name(s, f),
+            PreparedFrames::Streamed(s) => s.names.get(f).map_or("?", String::as_str),
+        }
+    }
+    fn frame(&self, f: usize) -> Result<Cow<'_, [Vec3]>> {
+        match self {
+            PreparedFrames::Memory(s) => s.frame(f),
+            PreparedFrames::Streamed(s) => {
+                let mut frame = s.file.read_frame(f)?;
+                if let Some(t) = &s.alignment {
+                    frame.iter_mut().for_each(|p| *p = t[f].apply(*p));
+                }
+                if let Some(u) = &s.unit_box {
+                    frame.iter_mut().for_each(|p| *p = u.apply(*p));
+                }
+                Ok(Cow::Owned(frame))
+            }
+        }
+    }
+}
+
+impl PreparedFrames {
+    /// Whether the frames are read on demand.
+    pub fn is_streamed(&self) -> bool {
+        matches!(self, PreparedFrames::Streamed(_))
     }
 }
 
@@ -130,13 +244,32 @@ pub fn load_data(cfg: &DataConfig) -> Result<MeshSequence> {
 
 /// Loads and preprocesses the data of a config.
 pub fn prepare(cfg: &DataConfig) -> Result<Prepared> {
-    let seq = load_data(cfg)?;
-    prepare_sequence(seq, cfg)
+    prepare_with(cfg, MemoryLimits::from_env()?)
 }
 
-/// Preprocesses an already loaded sequence according to `cfg`.
-pub fn prepare_sequence(mut seq: MeshSequence, cfg: &DataConfig) -> Result<Prepared> {
-    let f = seq.n_frames();
+/// [`prepare`] with the given [`MemoryLimits`] (tests pass 0 to stream small sets).
+pub fn prepare_with(cfg: &DataConfig, limits: MemoryLimits) -> Result<Prepared> {
+    if let Some(template) = cfg.numpy_template()? {
+        let path = Path::new(&cfg.path);
+        let npz = path.extension().and_then(|e| e.to_str()).is_some_and(|e| e.eq_ignore_ascii_case("npz"));
+        if !npz && cfg.array.is_none() {
+            let tmpl = mesh::load_mesh(template)?;
+            if let Some(file) = mesh::npy::NpyFrames::open(path, tmpl.n_vertices())? {
+                let bytes = (file.n_frames() * file.n_vertices()) as u64 * 24;
+                if bytes > limits.stream_bytes {
+                    return prepare_streamed(file, tmpl.faces, cfg, limits);
+                }
+            }
+        }
+    }
+    let seq = load_data(cfg)?;
+    let mut prep = prepare_sequence(seq, cfg)?;
+    prep.limits = limits;
+    Ok(prep)
+}
+
+/// The train/test split of `f` frames (a warning when they overlap).
+fn split(cfg: &DataConfig, f: usize) -> Result<(Vec<usize>, Vec<usize>)> {
     let train = cfg.train.resolve("data.train", f, None)?;
     let test = match &cfg.test {
         Some(t) => t.resolve("data.test", f, Some(&train))?,
@@ -151,6 +284,58 @@ pub fn prepare_sequence(mut seq: MeshSequence, cfg: &DataConfig) -> Result<Prepa
             if overlap.len() > 10 { ", …" } else { "" }
         );
     }
+    Ok((train, test))
+}
+
+/// [`prepare_sequence`] for frames read on demand: one pass reads (and so checks) every frame
+/// and computes its alignment; only the rest shape and one rigid motion per frame are kept.
+fn prepare_streamed(
+    file: mesh::npy::NpyFrames,
+    faces: Vec<[usize; 3]>,
+    cfg: &DataConfig,
+    limits: MemoryLimits,
+) -> Result<Prepared> {
+    let names = file.names();
+    let mut raw = StreamedFrames { file, faces, names, alignment: None, unit_box: None };
+    let (train, test) = split(cfg, raw.file.n_frames())?;
+    let seq = PreparedFrames::Streamed(raw);
+    let rest_positions = rest_shape(&seq, &cfg.rest, &train)?;
+    let PreparedFrames::Streamed(r) = seq else { unreachable!("built as streamed above") };
+    raw = r;
+    // Every frame is read once here: a bad value fails now, not half way through training.
+    let rigid = cfg.align == Align::Rigid;
+    let mut alignment = Vec::with_capacity(if rigid { raw.file.n_frames() } else { 0 });
+    for f in 0..raw.file.n_frames() {
+        let frame = raw.file.read_frame(f)?;
+        if rigid {
+            alignment.push(kabsch(&frame, &rest_positions));
+        }
+    }
+    let mut rest = TriMesh::new(rest_positions, raw.faces.clone());
+    let unit_box = if cfg.unit_box { UnitBox::fit(&rest.positions)? } else { UnitBox::identity() };
+    if cfg.unit_box {
+        for p in rest.positions.iter_mut() {
+            *p = unit_box.apply(*p);
+        }
+        raw.unit_box = Some(unit_box);
+    }
+    if rigid {
+        raw.alignment = Some(alignment);
+    }
+    Ok(Prepared {
+        sequence: PreparedFrames::Streamed(raw),
+        rest,
+        train,
+        test,
+        unit_box,
+        cache: cfg.cache.clone(),
+        limits,
+    })
+}
+
+/// Preprocesses an already loaded sequence according to `cfg`.
+pub fn prepare_sequence(mut seq: MeshSequence, cfg: &DataConfig) -> Result<Prepared> {
+    let (train, test) = split(cfg, seq.n_frames())?;
     let rest_positions = rest_shape(&seq, &cfg.rest, &train)?;
     if cfg.align == Align::Rigid {
         align_rigid(&mut seq, &rest_positions);
@@ -165,19 +350,27 @@ pub fn prepare_sequence(mut seq: MeshSequence, cfg: &DataConfig) -> Result<Prepa
             *p = unit_box.apply(*p);
         }
     }
-    Ok(Prepared { sequence: seq, rest, train, test, unit_box, cache: cfg.cache.clone() })
+    Ok(Prepared {
+        sequence: PreparedFrames::Memory(seq),
+        rest,
+        train,
+        test,
+        unit_box,
+        cache: cfg.cache.clone(),
+        limits: MemoryLimits::from_env()?,
+    })
 }
 
 /// The rest shape's positions: the first training frame, the mean of the training frames, or a
 /// mesh file with the sequence's vertex count and faces.
-pub fn rest_shape(seq: &MeshSequence, rest: &RestShape, train: &[usize]) -> Result<Vec<Vec3>> {
+pub fn rest_shape(seq: &dyn FrameSource, rest: &RestShape, train: &[usize]) -> Result<Vec<Vec3>> {
     match rest {
-        RestShape::First => Ok(seq.frames[train[0]].clone()),
+        RestShape::First => Ok(seq.frame(train[0])?.into_owned()),
         RestShape::Mean => {
             let n = seq.n_vertices();
             let mut mean = vec![[0.0; 3]; n];
             for &f in train {
-                for (m, p) in mean.iter_mut().zip(&seq.frames[f]) {
+                for (m, p) in mean.iter_mut().zip(seq.frame(f)?.iter()) {
                     for k in 0..3 {
                         m[k] += p[k];
                     }
@@ -198,7 +391,7 @@ pub fn rest_shape(seq: &MeshSequence, rest: &RestShape, train: &[usize]) -> Resu
                     ),
                 });
             }
-            if m.faces != seq.faces {
+            if m.faces != seq.faces() {
                 return Err(Error::Mismatch {
                     path: path.clone(),
                     message: "rest mesh faces differ from the sequence's faces".into(),
@@ -267,7 +460,7 @@ mod tests {
         // Frame 4 was moved rigidly; after alignment it matches the alignment of the original.
         let mut reference = seq0.clone();
         align_rigid(&mut reference, &seq0.frames[0]);
-        for (a, b) in prep.sequence.frames[3].iter().zip(&reference.frames[3]) {
+        for (a, b) in prep.sequence.frame(3).unwrap().iter().zip(&reference.frames[3]) {
             assert!(mesh::dist(*a, *b) < 1e-9);
         }
     }

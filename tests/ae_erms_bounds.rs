@@ -36,7 +36,7 @@ fn autoencoder_test_erms_beats_rest_shape_and_pca_at_equal_k_on_the_tube() {
     train(&pca_cfg, &base.join("pca"), &TrainOptions::default(), &mut Silent).unwrap();
 
     let prepared = meshdeco::preprocess::prepare(&ae_cfg.data).unwrap();
-    let test_seq = prepared.sequence.select(&prepared.test);
+    let test_seq = prepared.test_sequence().unwrap();
     let truth = &test_seq.frames;
     let rest = common::constant_shape_erms(truth, &prepared.rest.positions, Alignment::Centroid);
     let measure = |dir: &str| {

@@ -194,7 +194,7 @@ fn training_reports_fitted_test_erms() {
     // Against the rest shape (all weights zero) on the same test frames, centroid-aligned like
     // the autoencoder's ACAP Erms: measured encoder 2.35, fitted 2.14, rest shape ≈ 3.88.
     let prepared = meshdeco::preprocess::prepare(&cfg.data).unwrap();
-    let test_frames: Vec<Vec<Vec3>> = prepared.test.iter().map(|&i| prepared.sequence.frames[i].clone()).collect();
+    let test_frames: Vec<Vec<Vec3>> = prepared.test_sequence().unwrap().frames;
     let rest = common::constant_shape_erms(
         &test_frames,
         &prepared.rest.positions,

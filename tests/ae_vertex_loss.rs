@@ -211,7 +211,7 @@ fn residual_encoder_passes_lower_the_unseen_shapes_error_and_are_reported() {
     let art = AeArtifact::load(&base).unwrap();
     assert_eq!(art.model.config().encoder_passes, 2);
     let prep = meshdeco::preprocess::prepare(&cfg.data).unwrap();
-    let test = prep.test_sequence();
+    let test = prep.test_sequence().unwrap();
     let (own, _) = art.representation.split_pieces(art.representation.encode(&test).unwrap()).unwrap();
     let xs = art.header.scaling.apply(&own).unwrap();
     let feature_error = |passes: usize| {

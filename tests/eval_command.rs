@@ -132,7 +132,7 @@ fn sweep_table_reuse_reproducibility_and_retraining() {
     // iterations (it is here for the cache), 1.84 × the rest shape: its Erms is bounded in
     // tests/ae_erms_bounds.rs.
     let prepared = meshdeco::preprocess::prepare(&cfg.datasets[0].data).unwrap();
-    let test_frames: Vec<_> = prepared.test.iter().map(|&i| prepared.sequence.frames[i].clone()).collect();
+    let test_frames: Vec<_> = prepared.test_sequence().unwrap().frames;
     for (l, bound) in lines[1..4].iter().zip([0.35, 0.06, 0.2]) {
         let f: Vec<&str> = l.split(',').collect();
         let alignment = if l.contains(",centroid,") { Alignment::Centroid } else { Alignment::None };

@@ -29,7 +29,7 @@ fn fit(name: &str, align: &str, method: &str) -> (f64, f64, Option<f64>, Option<
         Config::from_toml(&format!("name = \"{name}\"\n{DATA}align = \"{align}\"\n[method]\n{method}\n")).unwrap();
     let out = train(&cfg, &base.join("model"), &TrainOptions::default(), &mut Silent).unwrap();
     let prepared = meshdeco::preprocess::prepare(&cfg.data).unwrap();
-    let frames = frames_in_data_units(&prepared, &prepared.train);
+    let frames = frames_in_data_units(&prepared, &prepared.train).unwrap();
     let rest: Vec<[f64; 3]> = prepared.rest.positions.iter().map(|p| prepared.unit_box.invert(*p)).collect();
     let rest_erms = common::constant_shape_erms(&frames, &rest, Alignment::Centroid);
     let train_erms = out.metrics.train_erms;

@@ -49,7 +49,7 @@ use control_points::{ControlPointErms, erms_curve};
 
 use crate::artifact;
 use crate::error::{Error, Result};
-use crate::mesh::Vec3;
+use crate::mesh::{FrameSource, Vec3};
 use crate::metrics::erms::Alignment;
 use crate::metrics::locality::{SUPPORT_THRESHOLD, support_regions};
 use crate::metrics::sted::{FrameOrder, Sted, StedParams};
@@ -200,8 +200,8 @@ impl DatasetData {
 
     fn load(d: &EvalDataset) -> Result<Self> {
         let prep = preprocess::prepare(&d.data)?;
-        let test = frames_in_data_units(&prep, &prep.test);
-        let names = prep.test.iter().map(|&f| prep.sequence.names.get(f).cloned().unwrap_or_default()).collect();
+        let test = frames_in_data_units(&prep, &prep.test)?;
+        let names = prep.test.iter().map(|&f| prep.sequence.name(f).to_string()).collect();
         let sted = Sted::new(prep.rest.n_vertices(), &prep.rest.faces, StedParams::default())?.with_frame_names(names);
         Ok(DatasetData { prep, test, sted })
     }

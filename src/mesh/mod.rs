@@ -119,6 +119,53 @@ impl MeshSequence {
     }
 }
 
+/// Read access to the frames of a sequence, held in memory ([`MeshSequence`]) or read on demand
+/// (a prepared data set too large to hold: `preprocess::PreparedFrames`). A frame comes back in
+/// the data's positions, `f64`, N of them; reading one may fail (a file read on demand).
+pub trait FrameSource: Sync {
+    /// Triangles shared by every frame.
+    fn faces(&self) -> &[[usize; 3]];
+    /// Number of frames F.
+    fn n_frames(&self) -> usize;
+    /// Number of vertices N.
+    fn n_vertices(&self) -> usize;
+    /// The name of frame `f` (`"?"` out of range).
+    fn name(&self, f: usize) -> &str;
+    /// Frame `f` (0-based); an index out of range is an error naming it.
+    fn frame(&self, f: usize) -> crate::Result<std::borrow::Cow<'_, [Vec3]>>;
+    /// The frames `indices` (0-based, in that order) as their own sequence.
+    fn select_frames(&self, indices: &[usize]) -> crate::Result<MeshSequence> {
+        Ok(MeshSequence {
+            faces: self.faces().to_vec(),
+            frames: indices
+                .iter()
+                .map(|&i| self.frame(i).map(std::borrow::Cow::into_owned))
+                .collect::<crate::Result<_>>()?,
+            names: indices.iter().map(|&i| self.name(i).to_string()).collect(),
+        })
+    }
+}
+
+impl FrameSource for MeshSequence {
+    fn faces(&self) -> &[[usize; 3]] {
+        &self.faces
+    }
+    fn n_frames(&self) -> usize {
+        self.frames.len()
+    }
+    fn n_vertices(&self) -> usize {
+        MeshSequence::n_vertices(self)
+    }
+    fn name(&self, f: usize) -> &str {
+        self.names.get(f).map_or("?", String::as_str)
+    }
+    fn frame(&self, f: usize) -> crate::Result<std::borrow::Cow<'_, [Vec3]>> {
+        self.frames.get(f).map(|v| std::borrow::Cow::Borrowed(v.as_slice())).ok_or_else(|| {
+            crate::Error::Invalid(format!("frame index {f} is out of range ({} frames)", self.frames.len()))
+        })
+    }
+}
+
 /// Axis-aligned bounding box `(min, max)` of points; `([0;3],[0;3])` for none.
 pub fn bounding_box(points: &[Vec3]) -> (Vec3, Vec3) {
     if points.is_empty() {

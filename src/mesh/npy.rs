@@ -53,9 +53,7 @@ pub fn load_npy_with_faces(
         let what = path.display().to_string();
         read_frames(&mut std::io::BufReader::new(file), len, &what, n_vertices)?
     };
-    let stem = path.file_stem().and_then(|s| s.to_str()).unwrap_or("frame").to_string();
-    let width = frames.len().to_string().len();
-    let names = (1..=frames.len()).map(|i| format!("{stem}_{i:0width$}")).collect();
+    let names = frame_names(path, frames.len());
     Ok(MeshSequence { faces, frames, names })
 }
 
@@ -310,50 +308,136 @@ impl Lit<'_> {
     }
 }
 
+/// Checks an F × N × 3 header against the bytes present (`available` in all) and the template's
+/// `n_vertices`; returns (F, N, bytes of data).
+fn check_shape(h: &NpyHeader, available: u64, n_vertices: usize) -> std::result::Result<(usize, usize, usize), String> {
+    let shape = &h.shape;
+    if shape.len() != 3 || shape[2] != 3 {
+        return Err(format!("shape {shape:?}, expected (frames, {n_vertices}, 3)"));
+    }
+    let (f, n) = (shape[0], shape[1]);
+    if n != n_vertices as u64 {
+        return Err(format!(
+            "shape {shape:?}: {n} vertices per frame, the template mesh has {n_vertices} (expected ({f}, {n_vertices}, 3))"
+        ));
+    }
+    if n == 0 {
+        return Err(format!("shape {shape:?}: no vertex per frame"));
+    }
+    if f == 0 {
+        return Err("the array holds no frame".into());
+    }
+    let present = available - h.len;
+    let needed = f.checked_mul(n).and_then(|x| x.checked_mul(3)).and_then(|x| x.checked_mul(h.item as u64));
+    match needed {
+        Some(b) if b <= present => Ok((f as usize, n as usize, b as usize)),
+        Some(b) => Err(format!("shape {shape:?} needs {b} bytes of data, {present} follow the header")),
+        None => Err(format!("shape {shape:?} needs more than 2^64 bytes of data, {present} follow the header")),
+    }
+}
+
+/// One value from its `h.item` bytes.
+fn decode_value(h: &NpyHeader, b: &[u8]) -> f64 {
+    match (h.item, h.little) {
+        (8, true) => f64::from_le_bytes(b.try_into().unwrap_or_default()),
+        (8, false) => f64::from_be_bytes(b.try_into().unwrap_or_default()),
+        (_, true) => f64::from(f32::from_le_bytes(b.try_into().unwrap_or_default())),
+        (_, false) => f64::from(f32::from_be_bytes(b.try_into().unwrap_or_default())),
+    }
+}
+
+/// One frame's `3·N·item` bytes decoded, every value checked finite (`fi`: the 0-based frame,
+/// for the message).
+fn decode_frame(h: &NpyHeader, buf: &[u8], fi: usize) -> std::result::Result<Vec<Vec3>, String> {
+    let mut frame = Vec::with_capacity(buf.len() / (3 * h.item));
+    for (v, b) in buf.chunks_exact(3 * h.item).enumerate() {
+        let p =
+            [decode_value(h, &b[..h.item]), decode_value(h, &b[h.item..2 * h.item]), decode_value(h, &b[2 * h.item..])];
+        if p.iter().any(|x| !x.is_finite()) {
+            return Err(format!("frame {} (0-based {fi}), vertex {v} is not finite: {p:?}", fi + 1));
+        }
+        frame.push(p);
+    }
+    Ok(frame)
+}
+
+/// A C-order `.npy` (F × N × 3, `float32` or `float64`) opened to read one frame at a time, in
+/// any order: a data set too large to hold in memory stays on disk and each frame is read when
+/// used. The header is checked when opened (shape against the template and the file's length);
+/// every frame read is checked (length, finite values); errors name the file and the frame.
+#[derive(Debug)]
+pub struct NpyFrames {
+    path: std::path::PathBuf,
+    file: std::sync::Mutex<std::fs::File>,
+    header: NpyHeader,
+    n_frames: usize,
+    n_vertices: usize,
+}
+
+impl NpyFrames {
+    /// Opens `path` (a regular file) for frames of `n_vertices` vertices; `Ok(None)` when the
+    /// array is in Fortran order (a frame is then scattered over the file: read it whole).
+    pub fn open(path: &Path, n_vertices: usize) -> Result<Option<Self>> {
+        let (mut file, len) = open_regular(path)?;
+        let bad = |m: String| Error::Invalid(format!("{}: {m}", path.display()));
+        let header = read_header(&mut file, len).map_err(bad)?;
+        let (n_frames, n, _) = check_shape(&header, len, n_vertices).map_err(bad)?;
+        if header.fortran {
+            return Ok(None);
+        }
+        Ok(Some(NpyFrames {
+            path: path.to_path_buf(),
+            file: std::sync::Mutex::new(file),
+            header,
+            n_frames,
+            n_vertices: n,
+        }))
+    }
+    /// Number of frames F.
+    pub fn n_frames(&self) -> usize {
+        self.n_frames
+    }
+    /// Number of vertices N.
+    pub fn n_vertices(&self) -> usize {
+        self.n_vertices
+    }
+    /// The frames' names, as [`load_npy_with_faces`] gives them (`<stem>_<i>`).
+    pub fn names(&self) -> Vec<String> {
+        frame_names(&self.path, self.n_frames)
+    }
+    /// Frame `f` (0-based), checked; errors name the file and the frame.
+    pub fn read_frame(&self, f: usize) -> Result<Vec<Vec3>> {
+        use std::io::{Seek, SeekFrom};
+        let what = self.path.display();
+        if f >= self.n_frames {
+            return Err(Error::Invalid(format!("{what}: frame index {f} is out of range ({} frames)", self.n_frames)));
+        }
+        let size = self.n_vertices * 3 * self.header.item;
+        let mut buf = vec![0u8; size];
+        {
+            let mut file = self.file.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+            file.seek(SeekFrom::Start(self.header.len + (f * size) as u64))
+                .and_then(|_| file.read_exact(&mut buf))
+                .map_err(|e| Error::Invalid(format!("{what}: reading frame {} (0-based {f}): {e}", f + 1)))?;
+        }
+        decode_frame(&self.header, &buf, f).map_err(|m| Error::Invalid(format!("{what}: {m}")))
+    }
+}
+
+/// Names of `n` frames of the array file `path`: `<stem>_<i>`, 1-based, zero-padded.
+fn frame_names(path: &Path, n: usize) -> Vec<String> {
+    let stem = path.file_stem().and_then(|s| s.to_str()).unwrap_or("frame").to_string();
+    let width = n.to_string().len();
+    (1..=n).map(|i| format!("{stem}_{i:0width$}")).collect()
+}
+
 /// Reads a whole `.npy` image (header and F × N × 3 data) from `r`, which holds `available`
 /// bytes, checking the shape against `n_vertices`. Exactly the bytes the header implies are read.
 fn read_frames(r: &mut dyn Read, available: u64, what: &str, n_vertices: usize) -> Result<Vec<Vec<Vec3>>> {
     let bad = |m: String| Error::Invalid(format!("{what}: {m}"));
     let h = read_header(r, available).map_err(bad)?;
-    let shape = &h.shape;
-    if shape.len() != 3 || shape[2] != 3 {
-        return Err(bad(format!("shape {shape:?}, expected (frames, {n_vertices}, 3)")));
-    }
-    let (f, n) = (shape[0], shape[1]);
-    if n != n_vertices as u64 {
-        return Err(bad(format!(
-            "shape {shape:?}: {n} vertices per frame, the template mesh has {n_vertices} (expected ({f}, {n_vertices}, 3))"
-        )));
-    }
-    if n == 0 {
-        return Err(bad(format!("shape {shape:?}: no vertex per frame")));
-    }
-    if f == 0 {
-        return Err(bad("the array holds no frame".into()));
-    }
-    let present = available - h.len;
-    let needed = f.checked_mul(n).and_then(|x| x.checked_mul(3)).and_then(|x| x.checked_mul(h.item as u64));
-    let needed = match needed {
-        Some(b) if b <= present => b as usize,
-        Some(b) => {
-            return Err(bad(format!("shape {shape:?} needs {b} bytes of data, {present} follow the header")));
-        }
-        None => {
-            return Err(bad(format!(
-                "shape {shape:?} needs more than 2^64 bytes of data, {present} follow the header"
-            )));
-        }
-    };
-    let (f, n) = (f as usize, n as usize);
-    // One value from its `h.item` bytes.
-    let decode = |b: &[u8]| -> f64 {
-        match (h.item, h.little) {
-            (8, true) => f64::from_le_bytes(b.try_into().unwrap_or_default()),
-            (8, false) => f64::from_be_bytes(b.try_into().unwrap_or_default()),
-            (_, true) => f64::from(f32::from_le_bytes(b.try_into().unwrap_or_default())),
-            (_, false) => f64::from(f32::from_be_bytes(b.try_into().unwrap_or_default())),
-        }
-    };
+    let (f, n, needed) = check_shape(&h, available, n_vertices).map_err(bad)?;
+    let decode = |b: &[u8]| decode_value(&h, b);
     if !h.fortran {
         // C order: one frame's bytes at a time (memory: the frames, not the file as well).
         let mut buf = vec![0u8; n * 3 * h.item];
@@ -361,14 +445,7 @@ fn read_frames(r: &mut dyn Read, available: u64, what: &str, n_vertices: usize) 
         for fi in 0..f {
             r.read_exact(&mut buf)
                 .map_err(|e| bad(format!("reading the values of frame {} (0-based {fi}): {e}", fi + 1)))?;
-            let mut frame = Vec::with_capacity(n);
-            for (v, b) in buf.chunks_exact(3 * h.item).enumerate() {
-                let p = [decode(&b[..h.item]), decode(&b[h.item..2 * h.item]), decode(&b[2 * h.item..])];
-                if p.iter().any(|x| !x.is_finite()) {
-                    return Err(bad(format!("frame {} (0-based {fi}), vertex {v} is not finite: {p:?}", fi + 1)));
-                }
-                frame.push(p);
-            }
+            let frame = decode_frame(&h, &buf, fi).map_err(bad)?;
             frames.push(frame);
         }
         return Ok(frames);
@@ -376,12 +453,10 @@ fn read_frames(r: &mut dyn Read, available: u64, what: &str, n_vertices: usize) 
     let mut data = Vec::new();
     r.take(needed as u64).read_to_end(&mut data).map_err(|e| bad(format!("reading the values: {e}")))?;
     if data.len() != needed {
-        return Err(bad(format!("{} bytes of data read, shape {shape:?} needs {needed}", data.len())));
+        return Err(bad(format!("{} bytes of data read, shape {:?} needs {needed}", data.len(), h.shape)));
     }
     let value = |i: usize| -> f64 { decode(&data[i * h.item..(i + 1) * h.item]) };
-    let at = |fi: usize, v: usize, c: usize| {
-        if h.fortran { value(fi + f * (v + n * c)) } else { value((fi * n + v) * 3 + c) }
-    };
+    let at = |fi: usize, v: usize, c: usize| value(fi + f * (v + n * c));
     let mut frames = Vec::with_capacity(f);
     for fi in 0..f {
         let mut frame = Vec::with_capacity(n);

@@ -99,3 +99,124 @@ impl<'a> DataMatrix<'a> {
         &self.data[f * c..(f + 1) * c]
     }
 }
+
+/// A data matrix held in `f32` (row-major, the layout of [`DataMatrix`]): for data sets whose
+/// `f64` matrix would not fit beside everything else (issue 28: 20 000 frames × 15 783 columns
+/// is 2.5 GB in `f64`, 1.26 GB here). Values are rounded to `f32` once, when stored; every
+/// product over it is computed in `f64` from blocks converted back ([`DataRef::read_rows`],
+/// [`DataRef::read_cols`]). Construction checks the length and that every value is finite.
+#[derive(Debug, Clone)]
+pub struct CompactMatrix {
+    data: Vec<f32>,
+    n_rows: usize,
+    n_elements: usize,
+    width: usize,
+}
+
+impl CompactMatrix {
+    /// Wraps `data` (row-major `n_rows` × `n_elements · width`); errors as [`DataMatrix::new`].
+    pub fn new(data: Vec<f32>, n_rows: usize, n_elements: usize, width: usize) -> Result<Self> {
+        if n_rows == 0 || n_elements == 0 || width == 0 {
+            return Err(Error::Invalid(format!(
+                "data matrix must be non-empty (rows {n_rows}, elements {n_elements}, width {width})"
+            )));
+        }
+        let cols = n_elements * width;
+        if data.len() != n_rows * cols {
+            return Err(Error::Invalid(format!(
+                "data matrix has {} values, expected rows {n_rows} × elements {n_elements} × width {width} = {}",
+                data.len(),
+                n_rows * cols
+            )));
+        }
+        if let Some(i) = data.iter().position(|v| !v.is_finite()) {
+            return Err(Error::Invalid(format!(
+                "data matrix value at row {}, column {} is not finite ({})",
+                i / cols,
+                i % cols,
+                data[i]
+            )));
+        }
+        Ok(CompactMatrix { data, n_rows, n_elements, width })
+    }
+    /// All values, row-major.
+    pub fn data(&self) -> &[f32] {
+        &self.data
+    }
+}
+
+/// A data matrix in either precision: what the linear methods that can work on large data
+/// (PCA's randomized SVD, SPLOCS) read. Rows and column blocks come out in `f64`.
+#[derive(Debug, Clone, Copy)]
+pub enum DataRef<'a> {
+    /// Held in `f64` (every data set that fits: the exact path).
+    F64(DataMatrix<'a>),
+    /// Held in `f32` ([`CompactMatrix`]).
+    F32(&'a CompactMatrix),
+}
+
+impl DataRef<'_> {
+    /// Number of rows F.
+    pub fn n_rows(&self) -> usize {
+        match self {
+            DataRef::F64(x) => x.n_rows(),
+            DataRef::F32(x) => x.n_rows,
+        }
+    }
+    /// Number of elements E.
+    pub fn n_elements(&self) -> usize {
+        match self {
+            DataRef::F64(x) => x.n_elements(),
+            DataRef::F32(x) => x.n_elements,
+        }
+    }
+    /// Group width W.
+    pub fn width(&self) -> usize {
+        match self {
+            DataRef::F64(x) => x.width(),
+            DataRef::F32(x) => x.width,
+        }
+    }
+    /// Number of columns E·W.
+    pub fn n_cols(&self) -> usize {
+        self.n_elements() * self.width()
+    }
+    /// Rows `start .. start + count` into `out` (row-major, `count · n_cols` numbers).
+    ///
+    /// # Panics
+    /// If the rows are out of range or `out` has the wrong length (caller bugs).
+    pub fn read_rows(&self, start: usize, count: usize, out: &mut [f64]) {
+        let c = self.n_cols();
+        let r = start * c..(start + count) * c;
+        match self {
+            DataRef::F64(x) => out.copy_from_slice(&x.data()[r]),
+            DataRef::F32(x) => out.iter_mut().zip(&x.data[r]).for_each(|(o, &v)| *o = f64::from(v)),
+        }
+    }
+    /// Columns `cols` of every row into `out` (row-major F × `cols.len()`).
+    ///
+    /// # Panics
+    /// If the columns are out of range or `out` has the wrong length (caller bugs).
+    pub fn read_cols(&self, cols: std::ops::Range<usize>, out: &mut [f64]) {
+        let (c, nc) = (self.n_cols(), cols.len());
+        for (row, o) in out.chunks_exact_mut(nc).enumerate() {
+            let r = row * c + cols.start..row * c + cols.end;
+            match self {
+                DataRef::F64(x) => o.copy_from_slice(&x.data()[r]),
+                DataRef::F32(x) => o.iter_mut().zip(&x.data[r]).for_each(|(o, &v)| *o = f64::from(v)),
+            }
+        }
+    }
+}
+
+impl<'a> From<DataMatrix<'a>> for DataRef<'a> {
+    fn from(x: DataMatrix<'a>) -> Self {
+        DataRef::F64(x)
+    }
+}
+
+impl<'a> From<&'a CompactMatrix> for DataRef<'a> {
+    fn from(x: &'a CompactMatrix) -> Self {
+        DataRef::F32(x)
+    }
+}

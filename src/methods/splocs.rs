@@ -47,7 +47,7 @@ use serde::{Deserialize, Serialize};
 
 use super::splocs_admm::{AdmmAcc, AdmmShared, Blocks, admm_block, project_weights, update_weights};
 use super::support_map::{ComponentLocality, SupportCache, SupportDistances, component_locality};
-use super::{DataMatrix, LinearModel, WeightConstraint};
+use super::{DataRef, LinearModel, WeightConstraint};
 use crate::{Error, Result};
 
 /// ADMM settings of the component update.
@@ -195,7 +195,7 @@ pub struct SplocsFit {
 pub struct SplocsSolver<'a, P: SupportDistances + ?Sized> {
     config: SplocsConfig,
     provider: &'a P,
-    x: DataMatrix<'a>,
+    x: DataRef<'a>,
     f: usize,
     k: usize,
     d: usize,
@@ -225,13 +225,25 @@ pub struct SplocsSolver<'a, P: SupportDistances + ?Sized> {
     converged: bool,
 }
 
+/// Rows per block when the data is in `f32` ([`DataRef::F32`]): each block is converted to
+/// `f64` (256 × D numbers) before its products.
+const COMPACT_ROWS: usize = 256;
+
+/// Σ g(x) over `f32` values taken as `f64`, in blocks summed in order (in parallel).
+fn compact_sum(data: &[f32], g: impl Fn(f64) -> f64 + Sync) -> f64 {
+    use rayon::prelude::*;
+    let parts: Vec<f64> = data.par_chunks(1 << 16).map(|c| c.iter().map(|&v| g(f64::from(v))).sum::<f64>()).collect();
+    parts.iter().sum()
+}
+
 /// Target columns per block of the blocked ADMM (a few K × 240 buffers stay in L2).
 const BLOCK_COLS: usize = 240;
 
 impl<'a, P: SupportDistances + ?Sized> SplocsSolver<'a, P> {
     /// Validates the config against the data and the provider, standardises, and runs the
     /// deflation initialisation (E_0 is the first entry of the objective history).
-    pub fn new(x: DataMatrix<'a>, provider: &'a P, config: &SplocsConfig) -> Result<Self> {
+    pub fn new(x: impl Into<DataRef<'a>>, provider: &'a P, config: &SplocsConfig) -> Result<Self> {
+        let x = x.into();
         config.validate()?;
         let (f, e, width, d) = (x.n_rows(), x.n_elements(), x.width(), x.n_cols());
         let k = config.components;
@@ -251,14 +263,24 @@ impl<'a, P: SupportDistances + ?Sized> SplocsSolver<'a, P> {
         }
         // numpy-style std over all entries
         let n = (f * d) as f64;
-        let mean = x.data().iter().sum::<f64>() / n;
-        let var = x.data().iter().map(|v| (v - mean) * (v - mean)).sum::<f64>() / n;
+        let (var, sq) = match x {
+            DataRef::F64(m) => {
+                let mean = m.data().iter().sum::<f64>() / n;
+                let var = m.data().iter().map(|v| (v - mean) * (v - mean)).sum::<f64>() / n;
+                (var, m.data().iter().map(|v| v * v).sum::<f64>())
+            }
+            DataRef::F32(m) => {
+                let mean = compact_sum(m.data(), |v| v) / n;
+                let var = compact_sum(m.data(), |v| (v - mean) * (v - mean)) / n;
+                (var, compact_sum(m.data(), |v| v * v))
+            }
+        };
         let std = var.sqrt();
         if !(std > 0.0 && std.is_finite()) {
             return Err(Error::Invalid(format!("data matrix has zero or non-finite standard deviation ({std})")));
         }
         let inv_scale = 1.0 / std;
-        let x_norm2 = x.data().iter().map(|v| v * v).sum::<f64>() * inv_scale * inv_scale;
+        let x_norm2 = sq * inv_scale * inv_scale;
         let [d_min, d_max] = config.support;
         let mut s = SplocsSolver {
             config: config.clone(),
@@ -294,9 +316,19 @@ impl<'a, P: SupportDistances + ?Sized> SplocsSolver<'a, P> {
         }
         // deflation on row-major C, then products and the blocked layout
         let mut c_rm = vec![0.0; k * d];
-        let e0 = s.initialize(&mut c_rm)?;
+        let e0 = match s.x {
+            DataRef::F64(_) => {
+                let e0 = s.initialize(&mut c_rm)?;
+                s.update_products(&c_rm, config.par());
+                e0
+            }
+            DataRef::F32(_) => {
+                let sparsity = s.initialize_implicit(&mut c_rm)?;
+                s.update_products(&c_rm, config.par());
+                s.residual_from_products() + sparsity
+            }
+        };
         s.history.push(e0);
-        s.update_products(&c_rm, config.par());
         s.blocks.to_blocked(&c_rm, &mut s.c);
         Ok(s)
     }
@@ -305,7 +337,7 @@ impl<'a, P: SupportDistances + ?Sized> SplocsSolver<'a, P> {
     /// initialisation and after every outer iteration i = 1, 2, … (objective in standardised
     /// units), e.g. to drive a progress bar of `max_iterations + 1` ticks.
     pub fn fit(
-        x: DataMatrix<'a>,
+        x: impl Into<DataRef<'a>>,
         provider: &'a P,
         config: &SplocsConfig,
         mut on_iteration: impl FnMut(usize, f64),
@@ -346,7 +378,8 @@ impl<'a, P: SupportDistances + ?Sized> SplocsSolver<'a, P> {
         let (f, d, w, k) = (self.f, self.d, self.width, self.k);
         let e_count = self.x.n_elements();
         let constraint = self.config.weights;
-        let mut r: Vec<f64> = self.x.data().iter().map(|v| v * self.inv_scale).collect();
+        let DataRef::F64(x) = self.x else { unreachable!("initialize runs on f64 data") };
+        let mut r: Vec<f64> = x.data().iter().map(|v| v * self.inv_scale).collect();
         let mut enorm = vec![0.0; e_count];
         for row in r.chunks_exact(d) {
             for (en, g) in enorm.iter_mut().zip(row.chunks_exact(w)) {
@@ -447,6 +480,166 @@ impl<'a, P: SupportDistances + ?Sized> SplocsSolver<'a, P> {
         Ok(res2 + sparsity)
     }
 
+    /// The deflation initialisation of [`Self::initialize`] without holding the residual
+    /// R = X/s − W·C (for data in `f32`, [`DataRef::F32`], where a second copy of X is what
+    /// must not be held): R's centre block is X's block minus W·C there, w_kᵀR is w_kᵀX/s −
+    /// (w_kᵀW)·C (one pass over X per component), and the residual norms of the elements move
+    /// by Σ_q (c_q²·w_kᵀw_k − 2·c_q·(w_kᵀR)_q) over each element's numbers q — the same
+    /// quantities, summed in another order. Returns Ω(C); the data term comes from the Gram
+    /// products ([`Self::residual_from_products`]).
+    fn initialize_implicit(&mut self, c: &mut [f64]) -> Result<f64> {
+        use rayon::prelude::*;
+        let (f, d, w, k) = (self.f, self.d, self.width, self.k);
+        let e_count = self.x.n_elements();
+        let constraint = self.config.weights;
+        let (xr, inv_scale) = (self.x, self.inv_scale);
+        let n_blocks = f.div_ceil(COMPACT_ROWS);
+        // Σ_f ‖X_f,e / s‖² per element
+        let mut enorm = (0..n_blocks)
+            .into_par_iter()
+            .fold(
+                || vec![0.0; e_count],
+                |mut en, b| {
+                    let rows = COMPACT_ROWS.min(f - b * COMPACT_ROWS);
+                    let mut buf = vec![0.0; rows * d];
+                    xr.read_rows(b * COMPACT_ROWS, rows, &mut buf);
+                    for row in buf.chunks_exact(d) {
+                        for (e, g) in en.iter_mut().zip(row.chunks_exact(w)) {
+                            *e += g.iter().map(|v| (v * inv_scale) * (v * inv_scale)).sum::<f64>();
+                        }
+                    }
+                    en
+                },
+            )
+            .reduce(|| vec![0.0; e_count], |a, b| a.iter().zip(&b).map(|(p, q)| p + q).collect());
+        for kk in 0..k {
+            let set = if kk < self.config.fixed_centers.len() {
+                let mut s = self.config.fixed_centers[kk].clone();
+                s.sort_unstable();
+                s.dedup();
+                s
+            } else {
+                let mut best = 0;
+                for (i, &v) in enorm.iter().enumerate() {
+                    if v > enorm[best] {
+                        best = i;
+                    }
+                }
+                vec![best]
+            };
+            // the centre block of R = X/s − W·C (components ≥ kk are still zero)
+            let m = set.len() * w;
+            let mut col = vec![0.0; f * w];
+            let mut block = Mat::<f64>::zeros(f, m);
+            for (j, &el) in set.iter().enumerate() {
+                xr.read_cols(el * w..(el + 1) * w, &mut col);
+                for row in 0..f {
+                    for q in 0..w {
+                        let cq = el * w + q;
+                        let wc: f64 = (0..kk).map(|j2| self.wts[row * k + j2] * c[j2 * d + cq]).sum();
+                        block[(row, j * w + q)] = col[row * w + q] * inv_scale - wc;
+                    }
+                }
+            }
+            let mut wk = vec![0.0; f];
+            if m > 0 && f > 0 {
+                let svd = block.thin_svd().map_err(|e| Error::Numerical(format!("SPLOCS init: SVD failed: {e:?}")))?;
+                let s0 = svd.S().column_vector()[0];
+                for (row, v) in wk.iter_mut().enumerate() {
+                    *v = s0 * svd.U()[(row, 0)];
+                }
+            }
+            let mut p1 = wk.clone();
+            project_weights(&mut p1, constraint);
+            let mut p2: Vec<f64> = wk.iter().map(|v| -v).collect();
+            project_weights(&mut p2, constraint);
+            let n1: f64 = p1.iter().map(|v| v * v).sum();
+            let n2: f64 = p2.iter().map(|v| v * v).sum();
+            let wk = if n1 > n2 { p1 } else { p2 };
+            self.cache.ensure(self.provider, std::slice::from_ref(&set))?;
+            let ramp = self.cache.ramp(&set).to_vec();
+            let ww: f64 = wk.iter().map(|v| v * v).sum();
+            if ww > 0.0 {
+                // w_kᵀR = w_kᵀX/s − (w_kᵀW)·C
+                let wkr = &wk;
+                let mut acc = (0..n_blocks)
+                    .into_par_iter()
+                    .fold(
+                        || vec![0.0; d],
+                        |mut a, b| {
+                            let first = b * COMPACT_ROWS;
+                            let rows = COMPACT_ROWS.min(f - first);
+                            if wkr[first..first + rows].iter().all(|&v| v == 0.0) {
+                                return a;
+                            }
+                            let mut buf = vec![0.0; rows * d];
+                            xr.read_rows(first, rows, &mut buf);
+                            for (row, xrow) in buf.chunks_exact(d).enumerate() {
+                                let wf = wkr[first + row];
+                                if wf != 0.0 {
+                                    a.iter_mut().zip(xrow).for_each(|(av, xv)| *av += wf * (xv * inv_scale));
+                                }
+                            }
+                            a
+                        },
+                    )
+                    .reduce(|| vec![0.0; d], |a, b| a.iter().zip(&b).map(|(p, q)| p + q).collect());
+                for j2 in 0..kk {
+                    let wtw: f64 = (0..f).map(|row| wk[row] * self.wts[row * k + j2]).sum();
+                    if wtw != 0.0 {
+                        acc.iter_mut().zip(&c[j2 * d..(j2 + 1) * d]).for_each(|(a, cv)| *a -= wtw * cv);
+                    }
+                }
+                let ck = &mut c[kk * d..(kk + 1) * d];
+                for (e, (cg, ag)) in ck.chunks_exact_mut(w).zip(acc.chunks_exact(w)).enumerate() {
+                    let mask = 1.0 - ramp[e];
+                    for (cv, av) in cg.iter_mut().zip(ag) {
+                        *cv = mask * av / ww;
+                    }
+                }
+                for e in (0..e_count).filter(|&e| ramp[e] < 1.0) {
+                    let delta: f64 = (e * w..(e + 1) * w).map(|q| ck[q] * ck[q] * ww - 2.0 * ck[q] * acc[q]).sum();
+                    enorm[e] = (enorm[e] + delta).max(0.0);
+                }
+            } else {
+                c[kk * d..(kk + 1) * d].iter_mut().for_each(|v| *v = 0.0);
+            }
+            for (row, v) in wk.iter().enumerate() {
+                self.wts[row * k + kk] = *v;
+            }
+            self.centers.push(set);
+        }
+        self.set_lambda()?;
+        let mut sparsity = 0.0;
+        for kk in 0..k {
+            for e in 0..e_count {
+                let lam = self.lambda[kk * e_count + e];
+                if lam > 0.0 {
+                    let g = &c[kk * d + e * w..kk * d + (e + 1) * w];
+                    sparsity += lam * g.iter().map(|v| v * v).sum::<f64>().sqrt();
+                }
+            }
+        }
+        Ok(sparsity)
+    }
+
+    /// ‖X/s − W·C‖² from the products X·Cᵀ/s and C·Cᵀ of the current C and W (as the outer
+    /// iterations measure it).
+    fn residual_from_products(&self) -> f64 {
+        let (f, k) = (self.f, self.k);
+        let wm = MatRef::from_row_major_slice(&self.wts, f, k);
+        let mut wtw = Mat::<f64>::zeros(k, k);
+        matmul(wtw.as_mut(), Accum::Replace, wm.transpose(), wm, 1.0, Par::Seq);
+        let cross: f64 = self.wts.iter().zip(&self.xct).map(|(a, b)| a * b).sum();
+        let mut quad = 0.0;
+        for a in 0..k {
+            for b in 0..k {
+                quad += wtw[(a, b)] * self.cct[a * k + b];
+            }
+        }
+        (self.x_norm2 - 2.0 * cross + quad).max(0.0)
+    }
+
     /// Λ from the current centre sets (ensuring their support maps are cached).
     fn set_lambda(&mut self) -> Result<()> {
         self.cache.ensure(self.provider, &self.centers)?;
@@ -464,16 +657,37 @@ impl<'a, P: SupportDistances + ?Sized> SplocsSolver<'a, P> {
     /// X·Cᵀ/s and C·Cᵀ for a row-major C.
     fn update_products(&mut self, c: &[f64], par: Par) {
         let (f, k, d) = (self.f, self.k, self.d);
-        let x = MatRef::from_row_major_slice(self.x.data(), f, d);
         let c = MatRef::from_row_major_slice(c, k, d);
-        matmul(
-            MatMut::from_row_major_slice_mut(&mut self.xct, f, k),
-            Accum::Replace,
-            x,
-            c.transpose(),
-            self.inv_scale,
-            par,
-        );
+        match self.x {
+            DataRef::F64(x) => {
+                let x = MatRef::from_row_major_slice(x.data(), f, d);
+                matmul(
+                    MatMut::from_row_major_slice_mut(&mut self.xct, f, k),
+                    Accum::Replace,
+                    x,
+                    c.transpose(),
+                    self.inv_scale,
+                    par,
+                );
+            }
+            DataRef::F32(_) => {
+                use rayon::prelude::*;
+                let (xr, inv_scale) = (self.x, self.inv_scale);
+                self.xct.par_chunks_mut(COMPACT_ROWS * k).enumerate().for_each(|(b, out)| {
+                    let rows = out.len() / k;
+                    let mut buf = vec![0.0; rows * d];
+                    xr.read_rows(b * COMPACT_ROWS, rows, &mut buf);
+                    matmul(
+                        MatMut::from_row_major_slice_mut(out, rows, k),
+                        Accum::Replace,
+                        MatRef::from_row_major_slice(&buf, rows, d),
+                        c.transpose(),
+                        inv_scale,
+                        Par::Seq,
+                    );
+                });
+            }
+        }
         matmul(MatMut::from_row_major_slice_mut(&mut self.cct, k, k), Accum::Replace, c, c.transpose(), 1.0, par);
     }
 
@@ -505,7 +719,7 @@ impl<'a, P: SupportDistances + ?Sized> SplocsSolver<'a, P> {
             g.llt(Side::Lower).map_err(|e| Error::Numerical(format!("SPLOCS: Cholesky of WᵀW + ρI failed: {e:?}")))?;
         let minv = llt.inverse();
         let shared = AdmmShared {
-            x: self.x.data(),
+            x: self.x,
             inv_scale: self.inv_scale,
             weights: &self.wts,
             minv: minv.as_ref(),
@@ -519,6 +733,7 @@ impl<'a, P: SupportDistances + ?Sized> SplocsSolver<'a, P> {
             width: w,
         };
         let blocks = &self.blocks;
+        let compact = matches!(self.x, DataRef::F32(_));
         let max_cols = (0..blocks.len()).map(|b| blocks.cols(b).len()).max().unwrap_or(0);
         let items: Vec<(usize, &mut [f64], &mut [f64])> = blocks
             .split_mut(&mut self.c)
@@ -529,7 +744,7 @@ impl<'a, P: SupportDistances + ?Sized> SplocsSolver<'a, P> {
             .collect();
         let acc = match (&self.pool, self.config.threads) {
             (None, 1) => {
-                let mut acc = AdmmAcc::new(f, k, max_cols);
+                let mut acc = AdmmAcc::new(f, k, max_cols, compact);
                 for (b, c, u) in items {
                     admm_block(&shared, blocks, b, c, u, &mut acc);
                 }
@@ -541,14 +756,14 @@ impl<'a, P: SupportDistances + ?Sized> SplocsSolver<'a, P> {
                     items
                         .into_par_iter()
                         .fold(
-                            || AdmmAcc::new(f, k, max_cols),
+                            || AdmmAcc::new(f, k, max_cols, compact),
                             |mut acc, (b, c, u)| {
                                 admm_block(&shared, blocks, b, c, u, &mut acc);
                                 acc
                             },
                         )
                         .reduce_with(AdmmAcc::merge)
-                        .unwrap_or_else(|| AdmmAcc::new(f, k, 0))
+                        .unwrap_or_else(|| AdmmAcc::new(f, k, 0, false))
                 };
                 match pool {
                     Some(p) => p.install(run),
@@ -634,6 +849,7 @@ impl<'a, P: SupportDistances + ?Sized> SplocsSolver<'a, P> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::methods::{CompactMatrix, DataMatrix};
 
     /// Distances along a line of `n` elements spaced `h`.
     struct Line {
@@ -670,6 +886,42 @@ mod tests {
             }
         }
         (x, f, e, w)
+    }
+
+    /// The same data held in `f32` (values exactly representable, so both precisions see the
+    /// same numbers): the implicit-residual initialisation and the converted blocks give the
+    /// exact path's fit up to summation order, for both constraints and fixed centres. Catches
+    /// a wrong sign or term in the implicit residual (w_kᵀR, the norms' update), a block
+    /// conversion reading the wrong rows or columns, and a wrong data term of E_0.
+    #[test]
+    fn f32_data_fits_like_f64_data() {
+        let (x, f, e, w) = two_bumps();
+        let x32: Vec<f32> = x.iter().map(|&v| v as f32).collect();
+        let x64: Vec<f64> = x32.iter().map(|&v| f64::from(v)).collect();
+        let compact = CompactMatrix::new(x32, f, e, w).unwrap();
+        let p = Line { n: e, h: 0.025 };
+        for (constraint, fixed) in
+            [(WeightConstraint::Nonnegative, vec![]), (WeightConstraint::Signed, vec![vec![30usize, 31]])]
+        {
+            let cfg = SplocsConfig {
+                components: 3,
+                weights: constraint,
+                fixed_centers: fixed,
+                max_iterations: 15,
+                ..Default::default()
+            };
+            let exact = SplocsSolver::fit(DataMatrix::new(&x64, f, e, w).unwrap(), &p, &cfg, |_, _| {}).unwrap();
+            let small = SplocsSolver::fit(&compact, &p, &cfg, |_, _| {}).unwrap();
+            assert_eq!(exact.centers, small.centers);
+            assert_eq!(exact.objective_history.len(), small.objective_history.len());
+            for (a, b) in exact.objective_history.iter().zip(&small.objective_history) {
+                assert!((a - b).abs() <= 1e-9 * a.abs(), "objective {a} vs {b}");
+            }
+            let scale = exact.model.components.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            for (a, b) in exact.model.components.iter().zip(&small.model.components) {
+                assert!((a - b).abs() <= 1e-8 * scale, "component {a} vs {b}");
+            }
+        }
     }
 
     #[test]

@@ -162,8 +162,8 @@ impl Blocks {
 
 /// Read-only inputs of the blocked ADMM of one outer iteration.
 pub(crate) struct AdmmShared<'a> {
-    /// F × D data (row-major, unscaled) and its scale 1/s.
-    pub x: &'a [f64],
+    /// F × D data (unscaled) and its scale 1/s.
+    pub x: super::DataRef<'a>,
     pub inv_scale: f64,
     /// F × K weights.
     pub weights: &'a [f64],
@@ -191,10 +191,13 @@ pub(crate) struct AdmmAcc {
     xc: Vec<f64>,
     g: Vec<f64>,
     rows: Vec<usize>,
+    /// F × (block columns) of the data in `f64`, when it is held in `f32`.
+    xcols: Vec<f64>,
 }
 
 impl AdmmAcc {
-    pub(crate) fn new(f: usize, k: usize, max_cols: usize) -> Self {
+    /// `compact`: the data is in `f32` (each block's columns are converted into a buffer).
+    pub(crate) fn new(f: usize, k: usize, max_cols: usize, compact: bool) -> Self {
         AdmmAcc {
             xct: vec![0.0; f * k],
             cct: vec![0.0; k * k],
@@ -205,6 +208,7 @@ impl AdmmAcc {
             xc: vec![0.0; f * k],
             g: vec![0.0; k * k],
             rows: Vec::with_capacity(k),
+            xcols: if compact { vec![0.0; f * max_cols] } else { Vec::new() },
         }
     }
     pub(crate) fn merge(mut self, o: AdmmAcc) -> AdmmAcc {
@@ -235,7 +239,13 @@ pub(crate) fn admm_block(
     let elems = blocks.elems(b);
     let nc = cols.len();
     let ne = elems.len();
-    let xb = MatRef::from_row_major_slice(sh.x, f, sh.d).subcols(cols.start, nc);
+    let xb = match sh.x {
+        super::DataRef::F64(x) => MatRef::from_row_major_slice(x.data(), f, sh.d).subcols(cols.start, nc),
+        super::DataRef::F32(_) => {
+            sh.x.read_cols(cols.clone(), &mut acc.xcols[..f * nc]);
+            MatRef::from_row_major_slice(&acc.xcols[..f * nc], f, nc)
+        }
+    };
     let wm = MatRef::from_row_major_slice(sh.weights, f, k);
     let wx = &mut acc.wx[..k * nc];
     let s = &mut acc.t[..k * nc];

@@ -18,13 +18,13 @@ use crate::artifact::{self, ArrayStore};
 use crate::config::{ConsistencyName, MethodConfig, MethodKind, PcaMethod, SplocsMethod, method_key};
 use crate::error::{Error, Result};
 use crate::mesh::{MeshSequence, TriMesh, Vec3};
-use crate::methods::pca::{Pca, PcaConfig};
+use crate::methods::pca::{Pca, PcaConfig, RandomizedSvd};
 use crate::methods::posing::{LinearPoser, PoseConfig, linear_shape_metric};
 use crate::methods::splocs::SplocsSolver;
 use crate::methods::support_map::{
     ComponentLocality, SupportDistances, TriangleSupport, component_locality, support_ramp,
 };
-use crate::methods::{DataMatrix, LinearModel, WeightConstraint};
+use crate::methods::{DataMatrix, DataRef, LinearModel, WeightConstraint};
 use crate::model::{Component, Model, PointFit, PoseOptions, PosePrior, PoseResult, argmax};
 use crate::preprocess::{Prepared, UnitBox};
 use crate::representation::acap::Consistency;
@@ -218,35 +218,46 @@ pub fn index_array(name: &str, values: &[f64], bound: usize) -> Result<Vec<usize
         .collect()
 }
 
-/// The representation of the training frames: the representation bound to the rest mesh, the
-/// features, and (with `subtract_rest`) the rest shape's own features subtracted from every row
-/// and returned (SPLOCS models deformations from the rest shape: zero for displacements and
-/// triangle gradients; logR = 0, S = I for ACAP), with the wall time.
+/// The training frames' features and (with `subtract_rest`) the rest shape's own features,
+/// subtracted from every row and returned (SPLOCS models deformations from the rest shape: zero
+/// for displacements and triangle gradients; logR = 0, S = I for ACAP).
 fn training_features(
+    representation: &Representation,
+    prep: &Prepared,
+    subtract_rest: bool,
+) -> Result<(Features, Option<Vec<f64>>)> {
+    let mut x = super::training_features(representation, prep)?;
+    let rest_row = if subtract_rest { Some(rest_features(representation, prep)?) } else { None };
+    if let Some(r) = &rest_row {
+        for row in x.data.chunks_exact_mut(r.len()) {
+            row.iter_mut().zip(r).for_each(|(v, o)| *v -= o);
+        }
+    }
+    Ok((x, rest_row))
+}
+
+/// The representation bound to the prepared rest mesh.
+fn representation_of(
     kind: RepresentationKind,
     consistency: ConsistencyName,
     prep: &Prepared,
-    subtract_rest: bool,
-) -> Result<(Representation, Features, Option<Vec<f64>>, f64)> {
-    let t = Instant::now();
+) -> Result<Representation> {
     let options = RepresentationOptions { acap_consistency: consistency.to_acap(), ..Default::default() };
-    let representation = Representation::new(kind, &prep.rest, options)?;
-    let mut x = super::training_features(&representation, prep)?;
-    let rest_row = if subtract_rest {
-        let rest_seq = MeshSequence {
-            faces: prep.rest.faces.clone(),
-            frames: vec![prep.rest.positions.clone()],
-            names: Vec::new(),
-        };
-        let r = representation.encode(&rest_seq)?.data;
-        for row in x.data.chunks_exact_mut(r.len()) {
-            row.iter_mut().zip(&r).for_each(|(v, o)| *v -= o);
-        }
-        Some(r)
-    } else {
-        None
-    };
-    Ok((representation, x, rest_row, t.elapsed().as_secs_f64()))
+    Representation::new(kind, &prep.rest, options)
+}
+
+/// The rest shape's own features (one row).
+fn rest_features(representation: &Representation, prep: &Prepared) -> Result<Vec<f64>> {
+    let rest_seq =
+        MeshSequence { faces: prep.rest.faces.clone(), frames: vec![prep.rest.positions.clone()], names: Vec::new() };
+    Ok(representation.encode(&rest_seq)?.data)
+}
+
+/// Whether the training features of `representation` take more than
+/// `prep.limits.compact_bytes` in `f64`: PCA and SPLOCS then hold them in `f32`.
+fn compact(representation: &Representation, prep: &Prepared) -> bool {
+    let bytes = prep.train.len() as u64 * (representation.n_elements() * representation.width()) as u64 * 8;
+    bytes > prep.limits.compact_bytes
 }
 
 fn artifact_of(
@@ -276,14 +287,30 @@ fn artifact_of(
 
 /// Fits holistic PCA (`kind = "pca"`).
 pub fn fit_pca(m: &PcaMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> Result<Fitted> {
-    ctx.progress.stage("representation", 0);
-    let (representation, x, _, representation_seconds) =
-        training_features(m.representation, m.consistency, prep, false)?;
     let pc = PcaConfig { components: m.components, ..Default::default() };
-    ctx.progress.stage(MethodKind::Pca.name(), 1);
     let t = Instant::now();
-    let model = Pca::fit(DataMatrix::from_features(&x)?, &pc).map_err(method_key)?;
-    let train_seconds = t.elapsed().as_secs_f64();
+    let representation = representation_of(m.representation, m.consistency, prep)?;
+    let (model, representation_seconds, train_seconds) = if compact(&representation, prep) {
+        // Large data: the features in f32, a randomized SVD streamed over them.
+        ctx.progress.stage("representation", prep.train.len() as u64);
+        let progress = &mut *ctx.progress;
+        let x = super::training_features_f32(&representation, prep, &|_| {}, &mut |done| {
+            progress.step(done as u64, "frames")
+        })?;
+        let representation_seconds = t.elapsed().as_secs_f64();
+        ctx.progress.stage(MethodKind::Pca.name(), 1);
+        let t = Instant::now();
+        let model = Pca::fit_randomized(DataRef::F32(&x), &pc, &RandomizedSvd::default()).map_err(method_key)?;
+        (model, representation_seconds, t.elapsed().as_secs_f64())
+    } else {
+        ctx.progress.stage("representation", 0);
+        let (x, _) = training_features(&representation, prep, false)?;
+        let representation_seconds = t.elapsed().as_secs_f64();
+        ctx.progress.stage(MethodKind::Pca.name(), 1);
+        let t = Instant::now();
+        let model = Pca::fit(DataMatrix::from_features(&x)?, &pc).map_err(method_key)?;
+        (model, representation_seconds, t.elapsed().as_secs_f64())
+    };
     ctx.progress.step(1, "done");
     ctx.progress.finish_stage();
     let locality = measure_locality(&model, &representation, &prep.rest, [0.1, 0.7])?;
@@ -358,12 +385,35 @@ fn scale_model(model: &mut LinearModel, columns: &[(usize, f64)], invert: bool) 
 
 /// Fits SPLOCS (`kind = "splocs"`) on the configured representation.
 pub fn fit_splocs(m: &SplocsMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> Result<Fitted> {
-    ctx.progress.stage("representation", 0);
-    let (representation, mut x, rest_row, representation_seconds) =
-        training_features(m.representation, m.consistency, prep, true)?;
+    let t = Instant::now();
+    let representation = representation_of(m.representation, m.consistency, prep)?;
     let translation_columns = piece_translation_columns(&representation);
-    scale_rows(&mut x.data, x.n_elements * x.width, &translation_columns, false);
-    let data = DataMatrix::from_features(&x)?;
+    let n_cols = representation.n_elements() * representation.width();
+    // Large data: the features in f32 (the rest row subtracted and the pieces' translation
+    // columns weighted in f64 first); otherwise in f64, the exact path.
+    let (features, compact_x, rest_row, representation_seconds) = if compact(&representation, prep) {
+        ctx.progress.stage("representation", prep.train.len() as u64);
+        let rest = rest_features(&representation, prep)?;
+        let transform = |row: &mut [f64]| {
+            row.iter_mut().zip(&rest).for_each(|(v, o)| *v -= o);
+            scale_rows(row, n_cols, &translation_columns, false);
+        };
+        let progress = &mut *ctx.progress;
+        let x = super::training_features_f32(&representation, prep, &transform, &mut |done| {
+            progress.step(done as u64, "frames")
+        })?;
+        (None, Some(x), Some(rest), t.elapsed().as_secs_f64())
+    } else {
+        ctx.progress.stage("representation", 0);
+        let (mut x, rest_row) = training_features(&representation, prep, true)?;
+        scale_rows(&mut x.data, n_cols, &translation_columns, false);
+        (Some(x), None, rest_row, t.elapsed().as_secs_f64())
+    };
+    let data = match (&features, &compact_x) {
+        (Some(x), _) => DataRef::F64(DataMatrix::from_features(x)?),
+        (None, Some(x)) => DataRef::F32(x),
+        (None, None) => unreachable!("one of the two is built above"),
+    };
     let sc = m.solver_config()?;
     sc.validate().map_err(method_key)?;
     // The timer includes the heat-method factorisation of the support maps.

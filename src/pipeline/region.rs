@@ -220,7 +220,7 @@ pub fn fit(m: &RegionPcaMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> Re
     };
     let train_truth = MeshSequence {
         faces: prep.rest.faces.clone(),
-        frames: super::train::frames_in_data_units(prep, &prep.train),
+        frames: super::train::frames_in_data_units(prep, &prep.train)?,
         names: Vec::new(),
     };
     artifact.train_weights = artifact.encode_frames(&train_truth)?;

@@ -13,6 +13,7 @@ use super::region::{self, RegionArtifact};
 use crate::artifact;
 use crate::config::{MethodConfig, MethodKind};
 use crate::error::{Error, Result};
+use crate::mesh::FrameSource;
 use crate::methods::support_map::ComponentLocality;
 use crate::model::Model;
 use crate::preprocess::Prepared;
@@ -92,7 +93,7 @@ fn check_training_data(prep: &Prepared, method: &MethodConfig) -> Result<()> {
     let diag = crate::mesh::dist(lo, hi);
     let mut mean = vec![[0.0f64; 3]; n];
     for &t in &prep.train {
-        for (m, p) in mean.iter_mut().zip(&prep.sequence.frames[t]) {
+        for (m, p) in mean.iter_mut().zip(prep.sequence.frame(t)?.iter()) {
             for c in 0..3 {
                 m[c] += p[c] / f.max(1) as f64;
             }
@@ -100,7 +101,7 @@ fn check_training_data(prep: &Prepared, method: &MethodConfig) -> Result<()> {
     }
     let mut dev = 0.0f64;
     for &t in &prep.train {
-        for (m, p) in mean.iter().zip(&prep.sequence.frames[t]) {
+        for (m, p) in mean.iter().zip(prep.sequence.frame(t)?.iter()) {
             dev = dev.max(crate::mesh::dist(*m, *p));
         }
     }

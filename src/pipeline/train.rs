@@ -20,7 +20,7 @@ use super::metrics_file::{Metrics, median};
 use crate::artifact;
 use crate::config::{Config, resolved_toml};
 use crate::error::{Error, Result};
-use crate::mesh::{MeshSequence, Vec3};
+use crate::mesh::{FrameSource, MeshSequence, Vec3};
 use crate::metrics::erms::{erms, erms_from_squared_error, frame_squared_error};
 use crate::model::{Model, RefineOptions, reconstruct};
 use crate::pipeline::FitContext;
@@ -59,8 +59,8 @@ pub fn train(cfg: &Config, out: &Path, options: &TrainOptions, progress: &mut dy
 }
 
 /// The frames of `idx` in data units.
-pub fn frames_in_data_units(prep: &Prepared, idx: &[usize]) -> Vec<Vec<Vec3>> {
-    idx.iter().map(|&f| prep.sequence.frames[f].iter().map(|p| prep.unit_box.invert(*p)).collect()).collect()
+pub fn frames_in_data_units(prep: &Prepared, idx: &[usize]) -> Result<Vec<Vec<Vec3>>> {
+    idx.iter().map(|&f| Ok(prep.sequence.frame(f)?.iter().map(|p| prep.unit_box.invert(*p)).collect())).collect()
 }
 
 /// Fits `cfg.method` on prepared data, measures, and writes the artefact directory `out`.
@@ -103,13 +103,13 @@ fn fit_measure_write(
 
     progress.stage("measuring", 0);
     let alignment = model.alignment();
-    let faces = prep.sequence.faces.clone();
+    let faces = prep.sequence.faces().to_vec();
     // The training Erms, measured MEASURE_RUN frames at a time (one run's frames and
     // reconstructions in memory, not the data's); the sum runs in frame order, as `erms` does.
     let train_weights = model.train_weights();
     let (mut squared, mut coords) = (0.0, 0usize);
     for (run, idx) in prep.train.chunks(MEASURE_RUN).enumerate() {
-        let truth = frames_in_data_units(prep, idx);
+        let truth = frames_in_data_units(prep, idx)?;
         let rec = match &train_weights {
             Some(w) => {
                 let first = run * MEASURE_RUN;
@@ -140,7 +140,7 @@ fn fit_measure_write(
     let mut test_reconstruction_fitted = Vec::new();
     let mut test_erms_one_pass = None;
     if !prep.test.is_empty() {
-        let test = MeshSequence { faces, frames: frames_in_data_units(prep, &prep.test), names: Vec::new() };
+        let test = MeshSequence { faces, frames: frames_in_data_units(prep, &prep.test)?, names: Vec::new() };
         let codes = model.encode(&test)?;
         test_reconstruction = model.decode(&codes)?;
         test_erms = Some(erms(&test.frames, &test_reconstruction, alignment)?);

@@ -33,7 +33,7 @@ use serde::{Deserialize, Serialize};
 
 use super::{Features, Representation};
 use crate::error::{Error, Result};
-use crate::mesh::MeshSequence;
+use crate::mesh::FrameSource;
 
 /// First line of a cache file.
 const MAGIC: &str = "MESHDECO-FEATURES 2";
@@ -287,7 +287,7 @@ pub enum Opened {
 /// `on_frames(done)` is called after each run of frames computed for a new file.
 pub fn open_or_build(
     rep: &Representation,
-    seq: &MeshSequence,
+    seq: &dyn FrameSource,
     frames: &[usize],
     policy: &CachePolicy,
     on_frames: &mut dyn FnMut(usize),
@@ -297,7 +297,7 @@ pub fn open_or_build(
     if let Some(&f) = frames.iter().find(|&&f| f >= seq.n_frames()) {
         return Err(Error::Invalid(format!("frame index {f} is out of range ({} frames)", seq.n_frames())));
     }
-    let key = key(rep, seq, frames);
+    let key = key(rep, seq, frames)?;
     let path = folder.join(format!("{key}.features"));
     let expect = (frames.len(), rep.n_elements(), rep.width());
     if path.is_file() {
@@ -324,7 +324,7 @@ pub fn open_or_build(
 /// when a valid file exists, else computed and (when the policy caches them) written.
 pub fn encode_cached(
     rep: &Representation,
-    seq: &MeshSequence,
+    seq: &dyn FrameSource,
     frames: &[usize],
     policy: &CachePolicy,
 ) -> Result<(Features, CacheUse)> {
@@ -350,7 +350,7 @@ pub fn encode_cached(
 
 /// The content key of (representation, rest mesh, frames): 24 hex digits. Frames are hashed
 /// in parallel, then combined in order.
-pub fn key(rep: &Representation, seq: &MeshSequence, frames: &[usize]) -> String {
+pub fn key(rep: &Representation, seq: &dyn FrameSource, frames: &[usize]) -> Result<String> {
     use rayon::prelude::*;
     let mut h = Hasher::new();
     h.bytes(MAGIC.as_bytes());
@@ -365,12 +365,13 @@ pub fn key(rep: &Representation, seq: &MeshSequence, frames: &[usize]) -> String
         t.iter().for_each(|&i| h.word(i as u64));
     }
     h.word(frames.len() as u64);
-    let hashes: Vec<(u64, u32)> = frames.par_iter().map(|&f| frame_hash(&seq.frames[f])).collect();
+    let hashes: Vec<(u64, u32)> =
+        frames.par_iter().map(|&f| seq.frame(f).map(|p| frame_hash(&p))).collect::<Result<_>>()?;
     for (a, b) in hashes {
         h.word(a);
         h.word(b as u64);
     }
-    h.finish()
+    Ok(h.finish())
 }
 
 /// (FNV-1a over the coordinates' bits, CRC-32 of their bytes) of one frame.
@@ -420,7 +421,7 @@ impl Hasher {
 /// atomically. A write that fails is an [`Error::Io`]; any other error is the data's.
 fn build(
     rep: &Representation,
-    seq: &MeshSequence,
+    seq: &dyn FrameSource,
     frames: &[usize],
     path: &Path,
     key: &str,
@@ -478,6 +479,7 @@ fn build(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::mesh::MeshSequence;
     use crate::representation::{RepresentationKind, RepresentationOptions};
 
     fn setup() -> (Representation, MeshSequence) {
@@ -501,19 +503,19 @@ mod tests {
         assert_eq!(used, CacheUse::Read(path.clone()));
         assert_eq!(a, b, "read back bit for bit");
         // Other frames, other order, other options: other keys.
-        assert_ne!(key(&rep, &seq, &frames), key(&rep, &seq, &[1, 3, 7]));
+        assert_ne!(key(&rep, &seq, &frames).unwrap(), key(&rep, &seq, &[1, 3, 7]).unwrap());
         let opts = RepresentationOptions {
             acap_consistency: crate::representation::acap::Consistency::Global,
             ..Default::default()
         };
         let rep2 = Representation::new(RepresentationKind::Acap, rep.rest(), opts).unwrap();
-        assert_ne!(key(&rep, &seq, &frames), key(&rep2, &seq, &frames));
+        assert_ne!(key(&rep, &seq, &frames).unwrap(), key(&rep2, &seq, &frames).unwrap());
         let mut moved = seq.clone();
         moved.frames[7][0][0] += 1e-12;
-        assert_ne!(key(&rep, &seq, &frames), key(&rep, &moved, &frames));
+        assert_ne!(key(&rep, &seq, &frames).unwrap(), key(&rep, &moved, &frames).unwrap());
         // One flipped byte in the last frame: that frame fails its checksum when read; the
         // cache computes it again and rewrites the file.
-        let k = key(&rep, &seq, &frames);
+        let k = key(&rep, &seq, &frames).unwrap();
         let expect = (3, a.n_elements, a.width);
         let clean = std::fs::read(&path).unwrap();
         let mut bytes = clean.clone();

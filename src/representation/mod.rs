@@ -41,7 +41,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
-use crate::mesh::{MeshSequence, Topology, TriMesh, Vec3};
+use crate::mesh::{FrameSource, MeshSequence, Topology, TriMesh, Vec3};
 use acap::{Acap, Consistency};
 use displacement::Displacement;
 use piece_placement::PiecePlacement;
@@ -386,11 +386,11 @@ impl Representation {
     /// Features of the frames `frames` of `seq` (0-based, in that order), written in place into
     /// one array (frames in parallel; no copy of the sequence, no second array). Errors as
     /// [`Representation::encode`]; an index out of range is an error naming it.
-    pub fn encode_selected(&self, seq: &MeshSequence, frames: &[usize]) -> Result<Features> {
-        if seq.faces != self.rest.faces {
+    pub fn encode_selected(&self, seq: &dyn FrameSource, frames: &[usize]) -> Result<Features> {
+        if seq.faces() != self.rest.faces.as_slice() {
             return Err(Error::Invalid(format!(
                 "sequence faces ({}) differ from the rest mesh's faces ({})",
-                seq.n_faces(),
+                seq.faces().len(),
                 self.rest.n_faces()
             )));
         }
@@ -401,9 +401,9 @@ impl Representation {
         let mut out = Features::zeros(frames.len(), self.n_elements(), self.width());
         if size > 0 {
             out.data.par_chunks_mut(size).zip(frames.par_iter()).try_for_each(|(dst, &f)| -> Result<()> {
-                let v = self.encode_frame(&seq.frames[f]).map_err(|e| {
-                    Error::Invalid(format!("frame {f} ({}): {e}", seq.names.get(f).map_or("?", |s| s.as_str())))
-                })?;
+                let v = self
+                    .encode_frame(&seq.frame(f)?)
+                    .map_err(|e| Error::Invalid(format!("frame {f} ({}): {e}", seq.name(f))))?;
                 if v.len() != size {
                     return Err(Error::Invalid(format!("frame {f}: {} features, expected {size}", v.len())));
                 }
