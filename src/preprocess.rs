@@ -89,8 +89,8 @@ pub struct Prepared {
 /// Sizes above which data is not held whole in `f64` (bytes).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct MemoryLimits {
-    /// A C-order `.npy` whose frames take more than this in `f64` (F · N · 24 bytes) is read a
-    /// frame at a time when used ([`PreparedFrames::Streamed`]). Default 1 GiB (~8 500 frames of
+    /// A C-order `.npy`, or a folder (pattern) of mesh files, whose frames take more than this in
+    /// `f64` (F · N · 24 bytes) is read a frame at a time when used ([`PreparedFrames::Streamed`]). Default 1 GiB (~8 500 frames of
     /// 5 000 vertices); `MESHDECO_STREAM_BYTES`.
     pub stream_bytes: u64,
     /// PCA and SPLOCS hold their training features in `f32` when the `f64` matrix would take
@@ -138,8 +138,9 @@ impl Prepared {
     }
 }
 
-/// The prepared frames: held in memory, or — for a C-order `.npy` whose frames would take more
-/// than [`MemoryLimits::stream_bytes`] in `f64` — read from the file whenever a frame is used, aligned and
+/// The prepared frames: held in memory, or — for a C-order `.npy` or a folder of mesh files
+/// whose frames would take more than [`MemoryLimits::stream_bytes`] in `f64` — read from the
+/// file whenever a frame is used, aligned and
 /// scaled on the way with the same arithmetic as in memory (the same numbers, bit for bit).
 #[derive(Debug)]
 pub enum PreparedFrames {
@@ -149,17 +150,52 @@ pub enum PreparedFrames {
     Streamed(StreamedFrames),
 }
 
-/// Frames of a `.npy` read on demand, with each frame's rigid alignment (if any) and the unit
+/// Frames of a `.npy` or of mesh files read on demand, with each frame's rigid alignment (if any) and the unit
 /// box (if any) applied when read.
 #[derive(Debug)]
 pub struct StreamedFrames {
-    file: mesh::npy::NpyFrames,
+    file: FrameFiles,
     faces: Vec<[usize; 3]>,
     names: Vec<String>,
     /// Per frame: the rigid motion onto the rest shape (`align = "rigid"`).
     alignment: Option<Vec<RigidTransform>>,
     /// The unit box (`unit_box = true`).
     unit_box: Option<UnitBox>,
+}
+
+/// Where streamed frames come from: a C-order `.npy`, or a folder (or pattern) of mesh files.
+#[derive(Debug)]
+enum FrameFiles {
+    Npy(mesh::npy::NpyFrames),
+    Meshes(mesh::sequence::MeshFiles),
+}
+
+impl FrameFiles {
+    fn n_frames(&self) -> usize {
+        match self {
+            FrameFiles::Npy(n) => n.n_frames(),
+            FrameFiles::Meshes(m) => m.n_frames(),
+        }
+    }
+    fn n_vertices(&self) -> usize {
+        match self {
+            FrameFiles::Npy(n) => n.n_vertices(),
+            FrameFiles::Meshes(m) => m.n_vertices(),
+        }
+    }
+    fn names(&self) -> Vec<String> {
+        match self {
+            FrameFiles::Npy(n) => n.names(),
+            FrameFiles::Meshes(m) => m.names(),
+        }
+    }
+    /// Frame `f` as stored, with the mesh reader's warnings (none for a `.npy`).
+    fn read_frame(&self, f: usize) -> Result<(Vec<Vec3>, Vec<String>)> {
+        match self {
+            FrameFiles::Npy(n) => Ok((n.read_frame(f)?, Vec::new())),
+            FrameFiles::Meshes(m) => m.read_frame(f),
+        }
+    }
 }
 
 impl FrameSource for PreparedFrames {
@@ -191,7 +227,7 @@ impl FrameSource for PreparedFrames {
         match self {
             PreparedFrames::Memory(s) => s.frame(f),
             PreparedFrames::Streamed(s) => {
-                let mut frame = s.file.read_frame(f)?;
+                let (mut frame, _) = s.file.read_frame(f)?;
                 if let Some(t) = &s.alignment {
                     frame.iter_mut().for_each(|p| *p = t[f].apply(*p));
                 }
@@ -247,7 +283,8 @@ pub fn prepare(cfg: &DataConfig) -> Result<Prepared> {
     prepare_with(cfg, MemoryLimits::from_env()?)
 }
 
-/// [`prepare`] with the given [`MemoryLimits`] (tests pass 0 to stream small sets).
+/// [`prepare`] with the given [`MemoryLimits`] (tests pass 0 to stream small sets): a C-order
+/// `.npy` or a folder of mesh files past `stream_bytes` is read on demand.
 pub fn prepare_with(cfg: &DataConfig, limits: MemoryLimits) -> Result<Prepared> {
     if let Some(template) = cfg.numpy_template()? {
         let path = Path::new(&cfg.path);
@@ -257,9 +294,16 @@ pub fn prepare_with(cfg: &DataConfig, limits: MemoryLimits) -> Result<Prepared> 
             if let Some(file) = mesh::npy::NpyFrames::open(path, tmpl.n_vertices())? {
                 let bytes = (file.n_frames() * file.n_vertices()) as u64 * 24;
                 if bytes > limits.stream_bytes {
-                    return prepare_streamed(file, tmpl.faces, cfg, limits);
+                    return prepare_streamed(FrameFiles::Npy(file), tmpl.faces, cfg, limits);
                 }
             }
+        }
+    } else if !crate::synthetic::is_synthetic(&cfg.path) {
+        let files = mesh::sequence::MeshFiles::open(&cfg.path)?;
+        let bytes = (files.n_frames() * files.n_vertices()) as u64 * 24;
+        if bytes > limits.stream_bytes && files.n_frames() > 1 {
+            let faces = files.faces().to_vec();
+            return prepare_streamed(FrameFiles::Meshes(files), faces, cfg, limits);
         }
     }
     let seq = load_data(cfg)?;
@@ -290,7 +334,7 @@ fn split(cfg: &DataConfig, f: usize) -> Result<(Vec<usize>, Vec<usize>)> {
 /// [`prepare_sequence`] for frames read on demand: one pass reads (and so checks) every frame
 /// and computes its alignment; only the rest shape and one rigid motion per frame are kept.
 fn prepare_streamed(
-    file: mesh::npy::NpyFrames,
+    file: FrameFiles,
     faces: Vec<[usize; 3]>,
     cfg: &DataConfig,
     limits: MemoryLimits,
@@ -305,10 +349,25 @@ fn prepare_streamed(
     // Every frame is read once here: a bad value fails now, not half way through training.
     let rigid = cfg.align == Align::Rigid;
     let mut alignment = Vec::with_capacity(if rigid { raw.file.n_frames() } else { 0 });
+    let mut warnings = Vec::new();
     for f in 0..raw.file.n_frames() {
-        let frame = raw.file.read_frame(f)?;
+        let (frame, w) = raw.file.read_frame(f)?;
         if rigid {
             alignment.push(kabsch(&frame, &rest_positions));
+        }
+        warnings.push(w);
+    }
+    // The mesh readers' warnings, as loading a sequence prints them, and the first frame's
+    // connectivity problems.
+    if let FrameFiles::Meshes(m) = &raw.file {
+        for w in m.merge_warnings(&warnings) {
+            eprintln!("warning: {w}");
+        }
+        let first =
+            MeshSequence { faces: raw.faces.clone(), frames: vec![raw.file.read_frame(0)?.0], names: Vec::new() };
+        let topology = mesh::Topology::new(first.n_vertices(), &first.faces);
+        for w in mesh::inspect::problem_warnings(&first, &topology) {
+            eprintln!("warning: {}: {w}", cfg.path);
         }
     }
     let mut rest = TriMesh::new(rest_positions, raw.faces.clone());

@@ -85,36 +85,93 @@ pub fn sequence_from_meshes(files: &[PathBuf], meshes: Vec<TriMesh>) -> Result<M
     let Some(first) = meshes.first() else {
         return Err(Error::Invalid("a sequence needs at least one frame".into()));
     };
-    let first_file = files[0].display();
     let (n, faces) = (first.n_vertices(), first.faces.clone());
     for (file, m) in files.iter().zip(&meshes).skip(1) {
-        if m.n_vertices() != n {
-            return Err(Error::Mismatch {
-                path: file.clone(),
-                message: format!("{} vertices, but the first frame {first_file} has {n}", m.n_vertices()),
-            });
-        }
-        if m.faces != faces {
-            let first_diff = m.faces.iter().zip(&faces).position(|(a, b)| a != b);
-            let mut message = if m.faces.len() != faces.len() {
-                format!("{} faces, but the first frame {first_file} has {}", m.faces.len(), faces.len())
-            } else {
-                let n_diff = m.faces.iter().zip(&faces).filter(|(a, b)| a != b).count();
-                format!("face list differs from the first frame {first_file} in {n_diff} of {} faces", faces.len())
-            };
-            if let Some(i) = first_diff {
-                message += &format!(
-                    "; first difference at face {i} (0-based): {:?} here, {:?} in the first frame",
-                    m.faces[i], faces[i]
-                );
-            }
-            return Err(Error::Mismatch { path: file.clone(), message });
-        }
+        same_connectivity(file, m, &files[0], n, &faces)?;
     }
     let names =
         files.iter().map(|f| f.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default()).collect();
     let frames = meshes.into_iter().map(|m| m.positions).collect();
     Ok(MeshSequence { faces, frames, names })
+}
+
+/// `Ok` when `m` (read from `file`) has `n` vertices and exactly the face list `faces` of the
+/// first frame `first_file`; otherwise an error naming `file` (and the first differing face).
+fn same_connectivity(file: &Path, m: &TriMesh, first_file: &Path, n: usize, faces: &[[usize; 3]]) -> Result<()> {
+    let first_file = first_file.display();
+    if m.n_vertices() != n {
+        return Err(Error::Mismatch {
+            path: file.to_path_buf(),
+            message: format!("{} vertices, but the first frame {first_file} has {n}", m.n_vertices()),
+        });
+    }
+    if m.faces != faces {
+        let first_diff = m.faces.iter().zip(faces).position(|(a, b)| a != b);
+        let mut message = if m.faces.len() != faces.len() {
+            format!("{} faces, but the first frame {first_file} has {}", m.faces.len(), faces.len())
+        } else {
+            let n_diff = m.faces.iter().zip(faces).filter(|(a, b)| a != b).count();
+            format!("face list differs from the first frame {first_file} in {n_diff} of {} faces", faces.len())
+        };
+        if let Some(i) = first_diff {
+            message += &format!(
+                "; first difference at face {i} (0-based): {:?} here, {:?} in the first frame",
+                m.faces[i], faces[i]
+            );
+        }
+        return Err(Error::Mismatch { path: file.to_path_buf(), message });
+    }
+    Ok(())
+}
+
+/// The mesh files of a sequence `spec` (see the module docs) opened to read one frame at a
+/// time, in any order: a folder too large to hold stays on disk. The first file is read when
+/// opened (its faces are the sequence's); every frame read is checked against it like
+/// [`read_sequence`] checks (vertex count, face list), and the readers' own checks apply.
+#[derive(Debug)]
+pub struct MeshFiles {
+    files: Vec<PathBuf>,
+    faces: Vec<[usize; 3]>,
+    n_vertices: usize,
+}
+
+impl MeshFiles {
+    /// Resolves `spec` and reads its first file. Errors as [`read_sequence`].
+    pub fn open(spec: &str) -> Result<Self> {
+        let files = resolve_spec(spec)?;
+        let first = read_mesh(&files[0])?.mesh;
+        Ok(MeshFiles { n_vertices: first.n_vertices(), faces: first.faces, files })
+    }
+    /// Number of frames F (files).
+    pub fn n_frames(&self) -> usize {
+        self.files.len()
+    }
+    /// Number of vertices N of every frame.
+    pub fn n_vertices(&self) -> usize {
+        self.n_vertices
+    }
+    /// The faces of the first frame (every frame's).
+    pub fn faces(&self) -> &[[usize; 3]] {
+        &self.faces
+    }
+    /// The frames' names: the file stems, as [`read_sequence`] gives them.
+    pub fn names(&self) -> Vec<String> {
+        self.files.iter().map(|f| f.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default()).collect()
+    }
+    /// Frame `f` (0-based) with the reader's warnings; errors name the file.
+    pub fn read_frame(&self, f: usize) -> Result<(Vec<super::Vec3>, Vec<String>)> {
+        let file = self
+            .files
+            .get(f)
+            .ok_or_else(|| Error::Invalid(format!("frame index {f} is out of range ({} frames)", self.files.len())))?;
+        let m = read_mesh(file)?;
+        same_connectivity(file, &m.mesh, &self.files[0], self.n_vertices, &self.faces)?;
+        Ok((m.mesh.positions, m.warnings))
+    }
+    /// Merges per-frame reader warnings as [`read_sequence`] does (`per_file`: one list per file).
+    pub fn merge_warnings(&self, per_file: &[Vec<String>]) -> Vec<String> {
+        merge_warnings(&self.files, per_file)
+    }
 }
 
 /// `Ok` when `meta` (of `path`) is a regular file; otherwise the readers' one error, e.g.
