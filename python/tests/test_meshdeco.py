@@ -7,6 +7,7 @@ import _thread
 import json
 import pydoc
 import subprocess
+import signal
 import threading
 import time
 from pathlib import Path
@@ -225,6 +226,9 @@ def test_keyboard_interrupt_stops_training_cleanly(tmp_path):
         "data": {"path": "synthetic:tube", "train": "every:2"},
         "method": {"kind": "autoencoder", "components": 4, "iterations": 200000, "seed": 1},
     }
+    # Python's own Ctrl-C handler, as in a terminal session: a process started in the background
+    # by a non-interactive shell inherits SIGINT ignored, and then interrupt_main does nothing.
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
     timer = threading.Timer(3.0, _thread.interrupt_main)
     timer.start()
     t = time.monotonic()
@@ -233,6 +237,7 @@ def test_keyboard_interrupt_stops_training_cleanly(tmp_path):
             meshdeco.train(cfg, out=tmp_path / "long", progress=False)
     finally:
         timer.cancel()
+        signal.signal(signal.SIGINT, previous)
     assert time.monotonic() - t < 60
     # The package still works after the interrupt.
     assert meshdeco.load_sequence("synthetic:bumps")[0].ndim == 3
