@@ -207,9 +207,12 @@ fn features_in_f32_give_the_exact_erms() {
         format!("path = \"c.npy\"\ntemplate = \"c.obj\"\ntrain = \"1-70\"\ntest = \"rest\"\ncache = \"{cache}\"")
     };
     let small = [("MESHDECO_COMPACT_BYTES", "0")];
-    for (name, method) in
-        [("pca", "kind = \"pca\"\ncomponents = 8"), ("splocs", "kind = \"splocs\"\ncomponents = 6\nmax_iterations = 8")]
-    {
+    for (name, method) in [
+        ("pca", "kind = \"pca\"\ncomponents = 8"),
+        ("splocs", "kind = \"splocs\"\ncomponents = 6\nmax_iterations = 8"),
+        // a representation whose rest row is not zero (ACAP: S = I)
+        ("splocs-acap", "kind = \"splocs\"\nrepresentation = \"acap\"\ncomponents = 6\nmax_iterations = 8"),
+    ] {
         train(&d, &format!("{name}-exact"), &data("off"), method, &[]);
         let runs = [(format!("{name}-f32"), data("off")), (format!("{name}-f32-cached"), data("cache"))];
         for (run, data) in &runs {
