@@ -366,6 +366,23 @@ pub fn write_weights_csv(path: &Path, frame_names: &[String], weights: &[f64], k
     write_atomic(path, s.as_bytes())
 }
 
+/// Reads exactly `buf.len()` bytes of `file` at `offset`, without moving a shared cursor on
+/// Unix (so several threads may read one file: the feature cache, a `.npy` read a frame at a
+/// time).
+#[cfg(unix)]
+pub fn read_exact_at(file: &std::fs::File, buf: &mut [u8], offset: u64) -> std::io::Result<()> {
+    std::os::unix::fs::FileExt::read_exact_at(file, buf, offset)
+}
+
+/// Reads exactly `buf.len()` bytes of `file` at `offset` (seek, then read).
+#[cfg(not(unix))]
+pub fn read_exact_at(file: &std::fs::File, buf: &mut [u8], offset: u64) -> std::io::Result<()> {
+    use std::io::{Read, Seek, SeekFrom};
+    let mut f = file.try_clone()?;
+    f.seek(SeekFrom::Start(offset))?;
+    f.read_exact(buf)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -198,52 +198,56 @@ impl FrameFiles {
     }
 }
 
-impl FrameSource for PreparedFrames {
+/// Frames as stored, aligned and scaled when read.
+impl FrameSource for StreamedFrames {
     fn faces(&self) -> &[[usize; 3]] {
-        match self {
-            PreparedFrames::Memory(s) => &s.faces,
-            PreparedFrames::Streamed(s) => &s.faces,
-        }
+        &self.faces
     }
     fn n_frames(&self) -> usize {
-        match self {
-            PreparedFrames::Memory(s) => s.n_frames(),
-            PreparedFrames::Streamed(s) => s.file.n_frames(),
-        }
+        self.file.n_frames()
     }
     fn n_vertices(&self) -> usize {
-        match self {
-            PreparedFrames::Memory(s) => s.n_vertices(),
-            PreparedFrames::Streamed(s) => s.file.n_vertices(),
-        }
+        self.file.n_vertices()
     }
     fn name(&self, f: usize) -> &str {
-        match self {
-            PreparedFrames::Memory(s) => FrameSource::name(s, f),
-            PreparedFrames::Streamed(s) => s.names.get(f).map_or("?", String::as_str),
-        }
+        self.names.get(f).map_or("?", String::as_str)
     }
     fn frame(&self, f: usize) -> Result<Cow<'_, [Vec3]>> {
-        match self {
-            PreparedFrames::Memory(s) => s.frame(f),
-            PreparedFrames::Streamed(s) => {
-                let (mut frame, _) = s.file.read_frame(f)?;
-                if let Some(t) = &s.alignment {
-                    frame.iter_mut().for_each(|p| *p = t[f].apply(*p));
-                }
-                if let Some(u) = &s.unit_box {
-                    frame.iter_mut().for_each(|p| *p = u.apply(*p));
-                }
-                Ok(Cow::Owned(frame))
-            }
+        let (mut frame, _) = self.file.read_frame(f)?;
+        if let Some(t) = &self.alignment {
+            frame.iter_mut().for_each(|p| *p = t[f].apply(*p));
         }
+        if let Some(u) = &self.unit_box {
+            frame.iter_mut().for_each(|p| *p = u.apply(*p));
+        }
+        Ok(Cow::Owned(frame))
     }
 }
 
 impl PreparedFrames {
-    /// Whether the frames are read on demand.
-    pub fn is_streamed(&self) -> bool {
-        matches!(self, PreparedFrames::Streamed(_))
+    fn source(&self) -> &dyn FrameSource {
+        match self {
+            PreparedFrames::Memory(s) => s,
+            PreparedFrames::Streamed(s) => s,
+        }
+    }
+}
+
+impl FrameSource for PreparedFrames {
+    fn faces(&self) -> &[[usize; 3]] {
+        self.source().faces()
+    }
+    fn n_frames(&self) -> usize {
+        self.source().n_frames()
+    }
+    fn n_vertices(&self) -> usize {
+        self.source().n_vertices()
+    }
+    fn name(&self, f: usize) -> &str {
+        self.source().name(f)
+    }
+    fn frame(&self, f: usize) -> Result<Cow<'_, [Vec3]>> {
+        self.source().frame(f)
     }
 }
 
@@ -286,30 +290,33 @@ pub fn prepare(cfg: &DataConfig) -> Result<Prepared> {
 /// [`prepare`] with the given [`MemoryLimits`] (tests pass 0 to stream small sets): a C-order
 /// `.npy` or a folder of mesh files past `stream_bytes` is read on demand.
 pub fn prepare_with(cfg: &DataConfig, limits: MemoryLimits) -> Result<Prepared> {
-    if let Some(template) = cfg.numpy_template()? {
-        let path = Path::new(&cfg.path);
-        let npz = path.extension().and_then(|e| e.to_str()).is_some_and(|e| e.eq_ignore_ascii_case("npz"));
-        if !npz && cfg.array.is_none() {
+    let seq = match cfg.numpy_template()? {
+        Some(template) => {
+            let path = Path::new(&cfg.path);
             let tmpl = mesh::load_mesh(template)?;
-            if let Some(file) = mesh::npy::NpyFrames::open(path, tmpl.n_vertices())? {
-                let bytes = (file.n_frames() * file.n_vertices()) as u64 * 24;
-                if bytes > limits.stream_bytes {
-                    return prepare_streamed(FrameFiles::Npy(file), tmpl.faces, cfg, limits);
-                }
+            let npz = path.extension().and_then(|e| e.to_str()).is_some_and(|e| e.eq_ignore_ascii_case("npz"));
+            if !npz
+                && cfg.array.is_none()
+                && let Some(file) = mesh::npy::NpyFrames::open(path, tmpl.n_vertices())?
+                && (file.n_frames() * file.n_vertices()) as u64 * 24 > limits.stream_bytes
+            {
+                return prepare_streamed(FrameFiles::Npy(file), tmpl.faces, cfg, limits);
             }
+            // what `load_data` reads, with the template already loaded
+            mesh::npy::load_npy_with_faces(path, cfg.array.as_deref(), tmpl.n_vertices(), tmpl.faces)?
         }
-    } else if !crate::synthetic::is_synthetic(&cfg.path) {
-        let files = mesh::sequence::MeshFiles::open(&cfg.path)?;
-        let bytes = (files.n_frames() * files.n_vertices()) as u64 * 24;
-        if bytes > limits.stream_bytes && files.n_frames() > 1 {
-            let faces = files.faces().to_vec();
-            return prepare_streamed(FrameFiles::Meshes(files), faces, cfg, limits);
+        None if !crate::synthetic::is_synthetic(&cfg.path) => {
+            let files = mesh::sequence::MeshFiles::open(&cfg.path)?;
+            let bytes = (files.n_frames() * files.n_vertices()) as u64 * 24;
+            if bytes > limits.stream_bytes && files.n_frames() > 1 {
+                let faces = files.faces().to_vec();
+                return prepare_streamed(FrameFiles::Meshes(files), faces, cfg, limits);
+            }
+            load_frames(&cfg.path)?
         }
-    }
-    let seq = load_data(cfg)?;
-    let mut prep = prepare_sequence(seq, cfg)?;
-    prep.limits = limits;
-    Ok(prep)
+        None => load_frames(&cfg.path)?,
+    };
+    prepare_sequence_with(seq, cfg, limits)
 }
 
 /// The train/test split of `f` frames (a warning when they overlap).
@@ -340,22 +347,24 @@ fn prepare_streamed(
     limits: MemoryLimits,
 ) -> Result<Prepared> {
     let names = file.names();
+    // Not yet aligned or scaled: the rest shape is taken from the frames as stored.
     let mut raw = StreamedFrames { file, faces, names, alignment: None, unit_box: None };
     let (train, test) = split(cfg, raw.file.n_frames())?;
-    let seq = PreparedFrames::Streamed(raw);
-    let rest_positions = rest_shape(&seq, &cfg.rest, &train)?;
-    let PreparedFrames::Streamed(r) = seq else { unreachable!("built as streamed above") };
-    raw = r;
+    let rest_positions = rest_shape(&raw, &cfg.rest, &train)?;
     // Every frame is read once here: a bad value fails now, not half way through training.
     let rigid = cfg.align == Align::Rigid;
     let mut alignment = Vec::with_capacity(if rigid { raw.file.n_frames() } else { 0 });
     let mut warnings = Vec::new();
+    let mut first = Vec::new();
     for f in 0..raw.file.n_frames() {
         let (frame, w) = raw.file.read_frame(f)?;
         if rigid {
             alignment.push(kabsch(&frame, &rest_positions));
         }
         warnings.push(w);
+        if f == 0 {
+            first = frame;
+        }
     }
     // The mesh readers' warnings, as loading a sequence prints them, and the first frame's
     // connectivity problems.
@@ -363,8 +372,7 @@ fn prepare_streamed(
         for w in m.merge_warnings(&warnings) {
             eprintln!("warning: {w}");
         }
-        let first =
-            MeshSequence { faces: raw.faces.clone(), frames: vec![raw.file.read_frame(0)?.0], names: Vec::new() };
+        let first = MeshSequence { faces: raw.faces.clone(), frames: vec![first], names: Vec::new() };
         let topology = mesh::Topology::new(first.n_vertices(), &first.faces);
         for w in mesh::inspect::problem_warnings(&first, &topology) {
             eprintln!("warning: {}: {w}", cfg.path);
@@ -393,7 +401,12 @@ fn prepare_streamed(
 }
 
 /// Preprocesses an already loaded sequence according to `cfg`.
-pub fn prepare_sequence(mut seq: MeshSequence, cfg: &DataConfig) -> Result<Prepared> {
+pub fn prepare_sequence(seq: MeshSequence, cfg: &DataConfig) -> Result<Prepared> {
+    prepare_sequence_with(seq, cfg, MemoryLimits::from_env()?)
+}
+
+/// [`prepare_sequence`] with the given [`MemoryLimits`] (what the linear fits read).
+fn prepare_sequence_with(mut seq: MeshSequence, cfg: &DataConfig, limits: MemoryLimits) -> Result<Prepared> {
     let (train, test) = split(cfg, seq.n_frames())?;
     let rest_positions = rest_shape(&seq, &cfg.rest, &train)?;
     if cfg.align == Align::Rigid {
@@ -416,7 +429,7 @@ pub fn prepare_sequence(mut seq: MeshSequence, cfg: &DataConfig) -> Result<Prepa
         test,
         unit_box,
         cache: cfg.cache.clone(),
-        limits: MemoryLimits::from_env()?,
+        limits,
     })
 }
 

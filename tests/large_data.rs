@@ -17,15 +17,27 @@ const AE: &str =
 fn train(d: &Path, name: &str, data: &str, method: &str, env: &[(&str, &str)]) -> std::process::Output {
     let cfg = d.join(format!("{name}.toml"));
     std::fs::write(&cfg, format!("name = \"{name}\"\n[data]\n{data}\n[method]\n{method}\n")).unwrap();
-    let out = d.join(name);
-    let mut cmd = std::process::Command::new(env!("CARGO_BIN_EXE_meshdeco"));
-    cmd.args(["train", "--config", cfg.to_str().unwrap(), "--out", out.to_str().unwrap()]).current_dir(d);
-    for (k, v) in env {
-        cmd.env(k, v);
-    }
-    let o = cmd.output().expect("run meshdeco");
+    let o = run_train(d, name, name, env);
     assert!(o.status.success(), "{name}: {}", output_text(&o));
     o
+}
+
+/// `meshdeco train --config <d>/<config>.toml --out <d>/<out>` in `d` with `env` added.
+fn run_train(d: &Path, config: &str, out: &str, env: &[(&str, &str)]) -> std::process::Output {
+    let (cfg, out) = (d.join(format!("{config}.toml")), d.join(out));
+    let mut cmd = std::process::Command::new(env!("CARGO_BIN_EXE_meshdeco"));
+    cmd.args(["train", "--config", cfg.to_str().unwrap(), "--out", out.to_str().unwrap()]).current_dir(d);
+    cmd.envs(env.iter().copied()).output().expect("run meshdeco")
+}
+
+/// Trains `<d>/<config>.toml` into `<d>/bad`, which must fail (`what`: the bad input, for the
+/// message) and leave no artefact directory; returns stdout and stderr.
+fn train_fails(d: &Path, config: &str, env: &[(&str, &str)], what: &str) -> String {
+    let o = run_train(d, config, "bad", env);
+    let text = output_text(&o);
+    assert!(!o.status.success(), "{what} trained: {text}");
+    assert!(!d.join("bad").exists(), "a failed run ({what}) left its artefact directory");
+    text
 }
 
 fn read(p: &Path) -> Vec<u8> {
@@ -112,12 +124,8 @@ fn cached_features_train_the_same_autoencoder_a_batch_at_a_time() {
     let mut bytes = read(&files[0]);
     bytes[200] ^= 0x10;
     std::fs::write(&files[0], &bytes).unwrap();
-    let cfg = d.join("second.toml");
-    let o = meshdeco(&["train", "--config", cfg.to_str().unwrap(), "--out", d.join("bad").to_str().unwrap()], &d);
-    assert!(!o.status.success(), "a corrupted cache trained");
-    let text = output_text(&o);
+    let text = train_fails(&d, "second", &[], "a corrupted cache");
     assert!(text.contains("fails its checksum") && text.contains(".features"), "{text}");
-    assert!(!d.join("bad").exists(), "a failed run left its artefact directory");
     let _ = std::fs::remove_dir_all(&d);
 }
 
@@ -181,15 +189,8 @@ fn a_large_npy_read_a_frame_at_a_time_trains_the_same_model() {
     let at = header + 40 * frame_bytes + 8;
     bytes[at..at + 4].copy_from_slice(&f32::NAN.to_le_bytes());
     std::fs::write(d.join("s.npy"), &bytes).unwrap();
-    let cfg = d.join("streamed.toml");
-    let out = d.join("bad");
-    let mut cmd = std::process::Command::new(env!("CARGO_BIN_EXE_meshdeco"));
-    cmd.args(["train", "--config", cfg.to_str().unwrap(), "--out", out.to_str().unwrap()]).current_dir(&d);
-    let o = cmd.env("MESHDECO_STREAM_BYTES", "0").output().unwrap();
-    let text = output_text(&o);
-    assert!(!o.status.success(), "a NaN trained: {text}");
+    let text = train_fails(&d, "streamed", &[("MESHDECO_STREAM_BYTES", "0")], "a NaN");
     assert!(text.contains("s.npy") && text.contains("frame 41") && text.contains("not finite"), "{text}");
-    assert!(!out.exists(), "a failed run left its artefact directory");
     let _ = std::fs::remove_dir_all(&d);
 }
 
@@ -258,14 +259,7 @@ fn a_large_folder_of_meshes_read_a_frame_at_a_time_trains_the_same_model() {
     let mut m = meshdeco::mesh::TriMesh::new(seq.frames[11].clone(), seq.faces.clone());
     m.faces.swap(0, 1);
     meshdeco::mesh::write_obj(&d.join("frames").join("f12.obj"), &m).unwrap();
-    let cfg = d.join("streamed.toml");
-    let out = d.join("bad");
-    let mut cmd = std::process::Command::new(env!("CARGO_BIN_EXE_meshdeco"));
-    cmd.args(["train", "--config", cfg.to_str().unwrap(), "--out", out.to_str().unwrap()]).current_dir(&d);
-    let o = cmd.env("MESHDECO_STREAM_BYTES", "0").output().unwrap();
-    let text = output_text(&o);
-    assert!(!o.status.success(), "a frame with other faces trained: {text}");
+    let text = train_fails(&d, "streamed", &[("MESHDECO_STREAM_BYTES", "0")], "a frame with other faces");
     assert!(text.contains("f12.obj") && text.contains("face list differs"), "{text}");
-    assert!(!out.exists(), "a failed run left its artefact directory");
     let _ = std::fs::remove_dir_all(&d);
 }

@@ -368,7 +368,7 @@ fn decode_frame(h: &NpyHeader, buf: &[u8], fi: usize) -> std::result::Result<Vec
 #[derive(Debug)]
 pub struct NpyFrames {
     path: std::path::PathBuf,
-    file: std::sync::Mutex<std::fs::File>,
+    file: std::fs::File,
     header: NpyHeader,
     n_frames: usize,
     n_vertices: usize,
@@ -385,13 +385,7 @@ impl NpyFrames {
         if header.fortran {
             return Ok(None);
         }
-        Ok(Some(NpyFrames {
-            path: path.to_path_buf(),
-            file: std::sync::Mutex::new(file),
-            header,
-            n_frames,
-            n_vertices: n,
-        }))
+        Ok(Some(NpyFrames { path: path.to_path_buf(), file, header, n_frames, n_vertices: n }))
     }
     /// Number of frames F.
     pub fn n_frames(&self) -> usize {
@@ -407,19 +401,14 @@ impl NpyFrames {
     }
     /// Frame `f` (0-based), checked; errors name the file and the frame.
     pub fn read_frame(&self, f: usize) -> Result<Vec<Vec3>> {
-        use std::io::{Seek, SeekFrom};
         let what = self.path.display();
         if f >= self.n_frames {
             return Err(Error::Invalid(format!("{what}: frame index {f} is out of range ({} frames)", self.n_frames)));
         }
         let size = self.n_vertices * 3 * self.header.item;
         let mut buf = vec![0u8; size];
-        {
-            let mut file = self.file.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
-            file.seek(SeekFrom::Start(self.header.len + (f * size) as u64))
-                .and_then(|_| file.read_exact(&mut buf))
-                .map_err(|e| Error::Invalid(format!("{what}: reading frame {} (0-based {f}): {e}", f + 1)))?;
-        }
+        crate::artifact::read_exact_at(&self.file, &mut buf, self.header.len + (f * size) as u64)
+            .map_err(|e| Error::Invalid(format!("{what}: reading frame {} (0-based {f}): {e}", f + 1)))?;
         decode_frame(&self.header, &buf, f).map_err(|m| Error::Invalid(format!("{what}: {m}")))
     }
 }

@@ -44,27 +44,7 @@ impl<'a> DataMatrix<'a> {
     /// Wraps `data` (length `n_rows · n_elements · width`, row-major). Errors on a length
     /// mismatch, on an empty matrix, or on a non-finite value (reporting its row and column).
     pub fn new(data: &'a [f64], n_rows: usize, n_elements: usize, width: usize) -> Result<Self> {
-        if n_rows == 0 || n_elements == 0 || width == 0 {
-            return Err(Error::Invalid(format!(
-                "data matrix must be non-empty (rows {n_rows}, elements {n_elements}, width {width})"
-            )));
-        }
-        let expected = n_rows * n_elements * width;
-        if data.len() != expected {
-            return Err(Error::Invalid(format!(
-                "data matrix has {} values, expected rows {n_rows} × elements {n_elements} × width {width} = {expected}",
-                data.len()
-            )));
-        }
-        let cols = n_elements * width;
-        if let Some(i) = data.iter().position(|v| !v.is_finite()) {
-            return Err(Error::Invalid(format!(
-                "data matrix value at row {}, column {} is not finite ({})",
-                i / cols,
-                i % cols,
-                data[i]
-            )));
-        }
+        check_matrix(data, n_rows, n_elements, width)?;
         Ok(DataMatrix { data, n_rows, n_elements, width })
     }
 
@@ -100,6 +80,39 @@ impl<'a> DataMatrix<'a> {
     }
 }
 
+/// The checks of a data matrix's construction ([`DataMatrix::new`], [`CompactMatrix::new`]):
+/// non-empty, `n_rows · n_elements · width` values, every value finite (the error names its row
+/// and column).
+fn check_matrix<T: Copy + Into<f64> + std::fmt::Display>(
+    data: &[T],
+    n_rows: usize,
+    n_elements: usize,
+    width: usize,
+) -> Result<()> {
+    if n_rows == 0 || n_elements == 0 || width == 0 {
+        return Err(Error::Invalid(format!(
+            "data matrix must be non-empty (rows {n_rows}, elements {n_elements}, width {width})"
+        )));
+    }
+    let expected = n_rows * n_elements * width;
+    if data.len() != expected {
+        return Err(Error::Invalid(format!(
+            "data matrix has {} values, expected rows {n_rows} × elements {n_elements} × width {width} = {expected}",
+            data.len()
+        )));
+    }
+    let cols = n_elements * width;
+    if let Some(i) = data.iter().position(|&v| !v.into().is_finite()) {
+        return Err(Error::Invalid(format!(
+            "data matrix value at row {}, column {} is not finite ({})",
+            i / cols,
+            i % cols,
+            data[i]
+        )));
+    }
+    Ok(())
+}
+
 /// A data matrix held in `f32` (row-major, the layout of [`DataMatrix`]): for data sets whose
 /// `f64` matrix would not fit beside everything else (issue 28: 20 000 frames × 15 783 columns
 /// is 2.5 GB in `f64`, 1.26 GB here). Values are rounded to `f32` once, when stored; every
@@ -116,27 +129,7 @@ pub struct CompactMatrix {
 impl CompactMatrix {
     /// Wraps `data` (row-major `n_rows` × `n_elements · width`); errors as [`DataMatrix::new`].
     pub fn new(data: Vec<f32>, n_rows: usize, n_elements: usize, width: usize) -> Result<Self> {
-        if n_rows == 0 || n_elements == 0 || width == 0 {
-            return Err(Error::Invalid(format!(
-                "data matrix must be non-empty (rows {n_rows}, elements {n_elements}, width {width})"
-            )));
-        }
-        let cols = n_elements * width;
-        if data.len() != n_rows * cols {
-            return Err(Error::Invalid(format!(
-                "data matrix has {} values, expected rows {n_rows} × elements {n_elements} × width {width} = {}",
-                data.len(),
-                n_rows * cols
-            )));
-        }
-        if let Some(i) = data.iter().position(|v| !v.is_finite()) {
-            return Err(Error::Invalid(format!(
-                "data matrix value at row {}, column {} is not finite ({})",
-                i / cols,
-                i % cols,
-                data[i]
-            )));
-        }
+        check_matrix(&data, n_rows, n_elements, width)?;
         Ok(CompactMatrix { data, n_rows, n_elements, width })
     }
     /// All values, row-major.

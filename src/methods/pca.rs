@@ -186,6 +186,27 @@ fn orthonormalise(m: MatRef<'_, f64>) -> Result<Mat<f64>> {
     Ok(q)
 }
 
+/// The first `k` columns of `u` (D × ≥k) as K × D row-major components, each flipped so that
+/// its entry of largest magnitude (the first such) is positive.
+fn signed_components(u: MatRef<'_, f64>, k: usize) -> Vec<f64> {
+    let d = u.nrows();
+    let mut components = vec![0.0; k * d];
+    for c in 0..k {
+        let col = u.col(c);
+        let mut imax = 0;
+        for i in 0..d {
+            if col[i].abs() > col[imax].abs() {
+                imax = i;
+            }
+        }
+        let sign = if col[imax] < 0.0 { -1.0 } else { 1.0 };
+        for i in 0..d {
+            components[c * d + i] = sign * col[i];
+        }
+    }
+    components
+}
+
 /// Holistic PCA (see the module docs).
 pub struct Pca;
 
@@ -220,20 +241,7 @@ impl Pca {
         let xt = MatRef::from_column_major_slice(&centred, d, f);
         let svd = xt.thin_svd().map_err(|e| Error::Numerical(format!("PCA: SVD failed: {e:?}")))?;
         let u = svd.U();
-        let mut components = vec![0.0; k * d];
-        for c in 0..k {
-            let col = u.col(c);
-            let mut imax = 0;
-            for i in 0..d {
-                if col[i].abs() > col[imax].abs() {
-                    imax = i;
-                }
-            }
-            let sign = if col[imax] < 0.0 { -1.0 } else { 1.0 };
-            for i in 0..d {
-                components[c * d + i] = sign * col[i];
-            }
-        }
+        let components = signed_components(u, k);
         let mut weights = vec![0.0; f * k];
         for r in 0..f {
             let row = &centred[r * d..(r + 1) * d];
@@ -316,21 +324,7 @@ impl Pca {
         drop(q);
         let svd = bt.thin_svd().map_err(|e| Error::Numerical(format!("PCA (randomized): SVD failed: {e:?}")))?;
         let u = svd.U();
-        // Components as a D × K column-major matrix (= C row-major K × D).
-        let mut components = vec![0.0; k * d];
-        for c in 0..k {
-            let col = u.col(c);
-            let mut imax = 0;
-            for i in 0..d {
-                if col[i].abs() > col[imax].abs() {
-                    imax = i;
-                }
-            }
-            let sign = if col[imax] < 0.0 { -1.0 } else { 1.0 };
-            for i in 0..d {
-                components[c * d + i] = sign * col[i];
-            }
-        }
+        let components = signed_components(u, k);
         drop(svd);
         drop(bt);
         let mut weights = vec![0.0; f * k];

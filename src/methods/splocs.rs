@@ -225,6 +225,28 @@ pub struct SplocsSolver<'a, P: SupportDistances + ?Sized> {
     converged: bool,
 }
 
+/// The deflation start's weights of one component from its centre's residual block (F × m):
+/// the leading left singular vector times its singular value, projected onto the constraint set
+/// with the sign that keeps the larger projected norm.
+fn start_weights(block: MatRef<'_, f64>, constraint: WeightConstraint) -> Result<Vec<f64>> {
+    let f = block.nrows();
+    let mut wk = vec![0.0; f];
+    if block.ncols() > 0 && f > 0 {
+        let svd = block.thin_svd().map_err(|e| Error::Numerical(format!("SPLOCS init: SVD failed: {e:?}")))?;
+        let s0 = svd.S().column_vector()[0];
+        for (row, v) in wk.iter_mut().enumerate() {
+            *v = s0 * svd.U()[(row, 0)];
+        }
+    }
+    let mut p1 = wk.clone();
+    project_weights(&mut p1, constraint);
+    let mut p2: Vec<f64> = wk.iter().map(|v| -v).collect();
+    project_weights(&mut p2, constraint);
+    let n1: f64 = p1.iter().map(|v| v * v).sum();
+    let n2: f64 = p2.iter().map(|v| v * v).sum();
+    Ok(if n1 > n2 { p1 } else { p2 })
+}
+
 /// Rows per block when the data is in `f32` ([`DataRef::F32`]): each block is converted to
 /// `f64` (256 × D numbers) before its products.
 const COMPACT_ROWS: usize = 256;
@@ -388,39 +410,11 @@ impl<'a, P: SupportDistances + ?Sized> SplocsSolver<'a, P> {
         }
         let mut acc = vec![0.0; d];
         for kk in 0..k {
-            let set = if kk < self.config.fixed_centers.len() {
-                let mut s = self.config.fixed_centers[kk].clone();
-                s.sort_unstable();
-                s.dedup();
-                s
-            } else {
-                // first maximum, like numpy.argmax
-                let mut best = 0;
-                for (i, &v) in enorm.iter().enumerate() {
-                    if v > enorm[best] {
-                        best = i;
-                    }
-                }
-                vec![best]
-            };
+            let set = self.start_centre(kk, &enorm);
             // weights: leading left singular vector × singular value of the centre block
             let m = set.len() * w;
             let block = Mat::<f64>::from_fn(f, m, |row, j| r[row * d + set[j / w] * w + j % w]);
-            let mut wk = vec![0.0; f];
-            if m > 0 && f > 0 {
-                let svd = block.thin_svd().map_err(|e| Error::Numerical(format!("SPLOCS init: SVD failed: {e:?}")))?;
-                let s0 = svd.S().column_vector()[0];
-                for (row, v) in wk.iter_mut().enumerate() {
-                    *v = s0 * svd.U()[(row, 0)];
-                }
-            }
-            let mut p1 = wk.clone();
-            project_weights(&mut p1, constraint);
-            let mut p2: Vec<f64> = wk.iter().map(|v| -v).collect();
-            project_weights(&mut p2, constraint);
-            let n1: f64 = p1.iter().map(|v| v * v).sum();
-            let n2: f64 = p2.iter().map(|v| v * v).sum();
-            let wk = if n1 > n2 { p1 } else { p2 };
+            let wk = start_weights(block.as_ref(), constraint)?;
             self.cache.ensure(self.provider, std::slice::from_ref(&set))?;
             let ramp = self.cache.ramp(&set);
             let ww: f64 = wk.iter().map(|v| v * v).sum();
@@ -467,17 +461,7 @@ impl<'a, P: SupportDistances + ?Sized> SplocsSolver<'a, P> {
         }
         self.set_lambda()?;
         let res2: f64 = r.iter().map(|v| v * v).sum();
-        let mut sparsity = 0.0;
-        for kk in 0..k {
-            for e in 0..e_count {
-                let lam = self.lambda[kk * e_count + e];
-                if lam > 0.0 {
-                    let g = &c[kk * d + e * w..kk * d + (e + 1) * w];
-                    sparsity += lam * g.iter().map(|v| v * v).sum::<f64>().sqrt();
-                }
-            }
-        }
-        Ok(res2 + sparsity)
+        Ok(res2 + self.sparsity_of(c))
     }
 
     /// The deflation initialisation of [`Self::initialize`] without holding the residual
@@ -513,20 +497,7 @@ impl<'a, P: SupportDistances + ?Sized> SplocsSolver<'a, P> {
             )
             .reduce(|| vec![0.0; e_count], |a, b| a.iter().zip(&b).map(|(p, q)| p + q).collect());
         for kk in 0..k {
-            let set = if kk < self.config.fixed_centers.len() {
-                let mut s = self.config.fixed_centers[kk].clone();
-                s.sort_unstable();
-                s.dedup();
-                s
-            } else {
-                let mut best = 0;
-                for (i, &v) in enorm.iter().enumerate() {
-                    if v > enorm[best] {
-                        best = i;
-                    }
-                }
-                vec![best]
-            };
+            let set = self.start_centre(kk, &enorm);
             // the centre block of R = X/s − W·C (components ≥ kk are still zero)
             let m = set.len() * w;
             let mut col = vec![0.0; f * w];
@@ -541,21 +512,7 @@ impl<'a, P: SupportDistances + ?Sized> SplocsSolver<'a, P> {
                     }
                 }
             }
-            let mut wk = vec![0.0; f];
-            if m > 0 && f > 0 {
-                let svd = block.thin_svd().map_err(|e| Error::Numerical(format!("SPLOCS init: SVD failed: {e:?}")))?;
-                let s0 = svd.S().column_vector()[0];
-                for (row, v) in wk.iter_mut().enumerate() {
-                    *v = s0 * svd.U()[(row, 0)];
-                }
-            }
-            let mut p1 = wk.clone();
-            project_weights(&mut p1, constraint);
-            let mut p2: Vec<f64> = wk.iter().map(|v| -v).collect();
-            project_weights(&mut p2, constraint);
-            let n1: f64 = p1.iter().map(|v| v * v).sum();
-            let n2: f64 = p2.iter().map(|v| v * v).sum();
-            let wk = if n1 > n2 { p1 } else { p2 };
+            let wk = start_weights(block.as_ref(), constraint)?;
             self.cache.ensure(self.provider, std::slice::from_ref(&set))?;
             let ramp = self.cache.ramp(&set).to_vec();
             let ww: f64 = wk.iter().map(|v| v * v).sum();
@@ -610,17 +567,7 @@ impl<'a, P: SupportDistances + ?Sized> SplocsSolver<'a, P> {
             self.centers.push(set);
         }
         self.set_lambda()?;
-        let mut sparsity = 0.0;
-        for kk in 0..k {
-            for e in 0..e_count {
-                let lam = self.lambda[kk * e_count + e];
-                if lam > 0.0 {
-                    let g = &c[kk * d + e * w..kk * d + (e + 1) * w];
-                    sparsity += lam * g.iter().map(|v| v * v).sum::<f64>().sqrt();
-                }
-            }
-        }
-        Ok(sparsity)
+        Ok(self.sparsity_of(c))
     }
 
     /// ‖X/s − W·C‖² from the products X·Cᵀ/s and C·Cᵀ of the current C and W (as the outer
@@ -638,6 +585,41 @@ impl<'a, P: SupportDistances + ?Sized> SplocsSolver<'a, P> {
             }
         }
         (self.x_norm2 - 2.0 * cross + quad).max(0.0)
+    }
+
+    /// The centre set of component `kk` in the deflation start: the user's painted set (sorted,
+    /// without repeats), else the element of largest residual norm `enorm` (the first maximum,
+    /// like numpy.argmax).
+    fn start_centre(&self, kk: usize, enorm: &[f64]) -> Vec<usize> {
+        if kk < self.config.fixed_centers.len() {
+            let mut s = self.config.fixed_centers[kk].clone();
+            s.sort_unstable();
+            s.dedup();
+            return s;
+        }
+        let mut best = 0;
+        for (i, &v) in enorm.iter().enumerate() {
+            if v > enorm[best] {
+                best = i;
+            }
+        }
+        vec![best]
+    }
+
+    /// Ω(C) = Σ_k Σ_e Λ_k,e ‖C_k,e‖ of a row-major C with the current Λ.
+    fn sparsity_of(&self, c: &[f64]) -> f64 {
+        let (d, w, e_count) = (self.d, self.width, self.x.n_elements());
+        let mut sparsity = 0.0;
+        for kk in 0..self.k {
+            for e in 0..e_count {
+                let lam = self.lambda[kk * e_count + e];
+                if lam > 0.0 {
+                    let g = &c[kk * d + e * w..kk * d + (e + 1) * w];
+                    sparsity += lam * g.iter().map(|v| v * v).sum::<f64>().sqrt();
+                }
+            }
+        }
+        sparsity
     }
 
     /// Λ from the current centre sets (ensuring their support maps are cached).

@@ -218,24 +218,6 @@ pub fn index_array(name: &str, values: &[f64], bound: usize) -> Result<Vec<usize
         .collect()
 }
 
-/// The training frames' features and (with `subtract_rest`) the rest shape's own features,
-/// subtracted from every row and returned (SPLOCS models deformations from the rest shape: zero
-/// for displacements and triangle gradients; logR = 0, S = I for ACAP).
-fn training_features(
-    representation: &Representation,
-    prep: &Prepared,
-    subtract_rest: bool,
-) -> Result<(Features, Option<Vec<f64>>)> {
-    let mut x = super::training_features(representation, prep)?;
-    let rest_row = if subtract_rest { Some(rest_features(representation, prep)?) } else { None };
-    if let Some(r) = &rest_row {
-        for row in x.data.chunks_exact_mut(r.len()) {
-            row.iter_mut().zip(r).for_each(|(v, o)| *v -= o);
-        }
-    }
-    Ok((x, rest_row))
-}
-
 /// The representation bound to the prepared rest mesh.
 fn representation_of(
     kind: RepresentationKind,
@@ -246,7 +228,9 @@ fn representation_of(
     Representation::new(kind, &prep.rest, options)
 }
 
-/// The rest shape's own features (one row).
+/// The rest shape's own features (one row): SPLOCS models deformations from the rest shape
+/// (zero for displacements and triangle gradients; logR = 0, S = I for ACAP), so they are
+/// subtracted from every training row and become the model's offset.
 fn rest_features(representation: &Representation, prep: &Prepared) -> Result<Vec<f64>> {
     let rest_seq =
         MeshSequence { faces: prep.rest.faces.clone(), frames: vec![prep.rest.positions.clone()], names: Vec::new() };
@@ -304,7 +288,7 @@ pub fn fit_pca(m: &PcaMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> Resu
         (model, representation_seconds, t.elapsed().as_secs_f64())
     } else {
         ctx.progress.stage("representation", 0);
-        let (x, _) = training_features(&representation, prep, false)?;
+        let x = super::training_features(&representation, prep)?;
         let representation_seconds = t.elapsed().as_secs_f64();
         ctx.progress.stage(MethodKind::Pca.name(), 1);
         let t = Instant::now();
@@ -383,36 +367,41 @@ fn scale_model(model: &mut LinearModel, columns: &[(usize, f64)], invert: bool) 
     scale_rows(&mut model.offset, n_cols, columns, invert);
 }
 
+/// SPLOCS's training features, in the precision they are held in.
+enum Held {
+    F64(Features),
+    F32(crate::methods::CompactMatrix),
+}
+
 /// Fits SPLOCS (`kind = "splocs"`) on the configured representation.
 pub fn fit_splocs(m: &SplocsMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> Result<Fitted> {
     let t = Instant::now();
     let representation = representation_of(m.representation, m.consistency, prep)?;
     let translation_columns = piece_translation_columns(&representation);
     let n_cols = representation.n_elements() * representation.width();
-    // Large data: the features in f32 (the rest row subtracted and the pieces' translation
-    // columns weighted in f64 first); otherwise in f64, the exact path.
-    let (features, compact_x, rest_row, representation_seconds) = if compact(&representation, prep) {
+    // Every row: the rest row subtracted, the pieces' translation columns weighted (in f64).
+    let rest = rest_features(&representation, prep)?;
+    let transform = |row: &mut [f64]| {
+        row.iter_mut().zip(&rest).for_each(|(v, o)| *v -= o);
+        scale_rows(row, n_cols, &translation_columns, false);
+    };
+    // Large data: the features in f32; otherwise in f64, the exact path.
+    let held = if compact(&representation, prep) {
         ctx.progress.stage("representation", prep.train.len() as u64);
-        let rest = rest_features(&representation, prep)?;
-        let transform = |row: &mut [f64]| {
-            row.iter_mut().zip(&rest).for_each(|(v, o)| *v -= o);
-            scale_rows(row, n_cols, &translation_columns, false);
-        };
         let progress = &mut *ctx.progress;
-        let x = super::training_features_f32(&representation, prep, &transform, &mut |done| {
+        Held::F32(super::training_features_f32(&representation, prep, &transform, &mut |done| {
             progress.step(done as u64, "frames")
-        })?;
-        (None, Some(x), Some(rest), t.elapsed().as_secs_f64())
+        })?)
     } else {
         ctx.progress.stage("representation", 0);
-        let (mut x, rest_row) = training_features(&representation, prep, true)?;
-        scale_rows(&mut x.data, n_cols, &translation_columns, false);
-        (Some(x), None, rest_row, t.elapsed().as_secs_f64())
+        let mut x = super::training_features(&representation, prep)?;
+        x.data.chunks_exact_mut(n_cols).for_each(transform);
+        Held::F64(x)
     };
-    let data = match (&features, &compact_x) {
-        (Some(x), _) => DataRef::F64(DataMatrix::from_features(x)?),
-        (None, Some(x)) => DataRef::F32(x),
-        (None, None) => unreachable!("one of the two is built above"),
+    let representation_seconds = t.elapsed().as_secs_f64();
+    let data = match &held {
+        Held::F64(x) => DataRef::F64(DataMatrix::from_features(x)?),
+        Held::F32(x) => DataRef::F32(x),
     };
     let sc = m.solver_config()?;
     sc.validate().map_err(method_key)?;
@@ -435,9 +424,7 @@ pub fn fit_splocs(m: &SplocsMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -
     let mut model = fit.model;
     // Back to the representation's units (the weights W are unchanged).
     scale_model(&mut model, &translation_columns, true);
-    if let Some(r) = rest_row {
-        model.offset = r;
-    }
+    model.offset = rest;
     let artifact = artifact_of(MethodKind::Splocs, representation, m.consistency, prep, model);
     Ok(Fitted {
         model: Box::new(artifact),

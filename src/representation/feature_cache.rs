@@ -161,13 +161,13 @@ impl FeatureFile {
             return Err(bad("not a meshdeco feature cache of this version".into()));
         }
         let mut tail = [0u8; 8];
-        read_at(&file, &mut tail, len - 8).map_err(|e| Error::io(path, e))?;
+        crate::artifact::read_exact_at(&file, &mut tail, len - 8).map_err(|e| Error::io(path, e))?;
         let header_at = u64::from_le_bytes(tail);
         if !(data_offset..len - 8).contains(&header_at) || len - 8 - header_at > (64 << 20) {
             return Err(bad(format!("header offset {header_at} is outside the file ({len} bytes)")));
         }
         let mut json = vec![0u8; (len - 8 - header_at) as usize];
-        read_at(&file, &mut json, header_at).map_err(|e| Error::io(path, e))?;
+        crate::artifact::read_exact_at(&file, &mut json, header_at).map_err(|e| Error::io(path, e))?;
         let header: Header = serde_json::from_slice(&json).map_err(|e| bad(format!("header: {e}")))?;
         if header.key != key {
             return Err(bad(format!("holds key {}, expected {key}", header.key)));
@@ -217,7 +217,8 @@ impl FeatureFile {
         }
         let size = h.n_elements * h.width * 8;
         bytes.resize(size, 0);
-        read_at(&self.file, bytes, self.data_offset + (f * size) as u64).map_err(|e| Error::io(&self.path, e))?;
+        crate::artifact::read_exact_at(&self.file, bytes, self.data_offset + (f * size) as u64)
+            .map_err(|e| Error::io(&self.path, e))?;
         if crc32fast::hash(bytes) != h.frame_crc32[f] {
             return Err(Error::Invalid(format!(
                 "{}: frame {f} fails its checksum (the cache file changed after it was written; delete it to recompute)",
@@ -254,19 +255,6 @@ impl FeatureFile {
         }
         Ok(out)
     }
-}
-
-#[cfg(unix)]
-fn read_at(file: &File, buf: &mut [u8], offset: u64) -> std::io::Result<()> {
-    std::os::unix::fs::FileExt::read_exact_at(file, buf, offset)
-}
-
-#[cfg(not(unix))]
-fn read_at(file: &File, buf: &mut [u8], offset: u64) -> std::io::Result<()> {
-    use std::io::{Seek, SeekFrom};
-    let mut f = file.try_clone()?;
-    f.seek(SeekFrom::Start(offset))?;
-    f.read_exact(buf)
 }
 
 /// What [`open_or_build`] found or made.
