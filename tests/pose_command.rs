@@ -196,3 +196,63 @@ fn drag_bench_on_numpy_test_frames() {
     assert!(o.status.success(), "encode t.npz:frames: {}", String::from_utf8_lossy(&o.stderr));
     std::fs::remove_dir_all(&d).unwrap();
 }
+
+/// The landing correction (`--spread`): a vertex the training data never moves cannot be moved
+/// by SPLOCS's components, so with `--spread 0` the drag misses by (almost) all of it; with the
+/// default it lands, and only vertices within the radius along the surface differ from the
+/// model's shape. A radius outside 0..1 is refused naming the flag.
+#[test]
+fn spread_lands_a_drag_the_components_cannot_make() {
+    let d = tmp("spread");
+    let dir = train(&d, "splocs", "kind = \"splocs\"\ncomponents = 3");
+    let seq = synthetic::load("synthetic:bumps").unwrap();
+    let rest = &seq.frames[0];
+    let still = (0..rest.len())
+        .min_by(|&a, &b| {
+            let m = |v: usize| seq.frames.iter().map(|f| mesh::dist(f[v], rest[v])).fold(0.0, f64::max);
+            m(a).total_cmp(&m(b)).then(a.cmp(&b))
+        })
+        .unwrap();
+    let model = load_model(&dir).unwrap();
+    let w0 = model.start_weights(None).unwrap();
+    let start = model.decode(std::slice::from_ref(&w0)).unwrap().remove(0);
+    let p = start[still];
+    let amount = 0.03;
+    let t: Vec3 = [p[0], p[1], p[2] + amount];
+    let cons = d.join("c.json");
+    std::fs::write(&cons, format!("{{\"{still}\": [{}, {}, {}]}}", t[0], t[1], t[2])).unwrap();
+    let pose = |spread: &str, out: &str| {
+        meshdeco(&["pose", dir.to_str().unwrap(), "-c", "c.json", "--out", out, "--spread", spread], &d)
+    };
+    let o = pose("0", "model.obj");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let o = pose("0.1", "landed.obj");
+    let stdout = String::from_utf8_lossy(&o.stdout).into_owned();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(stdout.contains("landing correction (--spread 0.1)"), "{stdout}");
+    let own = mesh::load_mesh(&d.join("model.obj")).unwrap().positions;
+    let landed = mesh::load_mesh(&d.join("landed.obj")).unwrap().positions;
+    let miss = mesh::dist(own[still], t) / amount;
+    assert!(miss > 0.5, "the components moved the still vertex: {:.1}% of the drag left", 100.0 * miss);
+    let err = mesh::dist(landed[still], t) / amount;
+    assert!(err < 1e-4, "landed {:.4}% of the drag away", 100.0 * err);
+    let (lo, hi) = model.rest().bounding_box();
+    let radius = 0.1 * mesh::dist(lo, hi);
+    let mut near_moved = 0;
+    for v in 0..own.len() {
+        let moved = mesh::dist(own[v], landed[v]);
+        // Along the surface is never shorter than straight through space.
+        if mesh::dist(model.rest().positions[v], model.rest().positions[still]) >= radius {
+            assert!(moved < 1e-6, "vertex {v} beyond the radius moved by {moved}");
+        } else if moved > 1e-6 {
+            near_moved += 1;
+        }
+        assert!(moved <= 1.0001 * amount, "vertex {v} moved {moved}, more than the drag");
+    }
+    assert!(near_moved >= 5, "the correction should carry the pin's neighbours ({near_moved})");
+    let o = pose("2", "bad.obj");
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--spread 2"), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(!d.join("bad.obj").exists());
+    std::fs::remove_dir_all(&d).unwrap();
+}

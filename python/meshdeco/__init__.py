@@ -271,6 +271,7 @@ class Model:
         beta: Optional[float] = None,
         max_iterations: Optional[int] = None,
         prior: Optional[str] = None,
+        spread: Optional[float] = None,
     ) -> Pose:
         """Poses the model: moves constrained vertices to targets, the rest following the model.
 
@@ -279,11 +280,15 @@ class Model:
         e.g. the rest shape) or a shape ``(N, 3)`` in data units whose encoding is the start.
 
         Options (``None``: the library's default, :func:`meshdeco pose`'s): ``gamma`` ≥ 0,
-        dimensionless pull towards the start (default 0.001); ``beta`` ≥ 0, boundary consistency
-        between regions (region PCA; default 1e-6); ``max_iterations`` 1..1000, Gauss–Newton
+        dimensionless pull towards the start (default 1); ``beta`` ≥ 0, boundary consistency
+        between regions (region PCA; default 1e-3); ``max_iterations`` 1..1000, Gauss–Newton
         iterations (autoencoder; default 30); ``prior``: ``"shape"`` (the pull measures the
-        shape's change, default) or ``"weights"`` (the papers' ‖w − w0‖²). A model reads only
-        the options of :meth:`pose_parameters`.
+        shape's change, default) or ``"weights"`` (the papers' ‖w − w0‖²); ``spread`` 0..1, the
+        landing correction's radius as a fraction of the bounding-box diagonal (default 0.2; 0:
+        the model's own shape): what the model's shape leaves between a pin and its target is
+        added as a smooth displacement that fades to zero that far along the surface, so every
+        pin lands (``weights`` stay the model's). A model reads only the options of
+        :meth:`pose_parameters` (and every model reads ``spread``).
 
         Returns :class:`Pose` ``(positions (N, 3), weights (K,), start (N, 3))``, data units.
         """
@@ -302,7 +307,7 @@ class Model:
         s = None
         if start is not None:
             s = _floats("start", start, (self.n_vertices, 3), f"({self.n_vertices}, 3)")
-        for name, value in (("gamma", gamma), ("beta", beta)):
+        for name, value in (("gamma", gamma), ("beta", beta), ("spread", spread)):
             if value is not None and not isinstance(value, (int, float, np.floating, np.integer)):
                 raise ArgumentTypeError(f"{name}: {type(value).__name__} is not a number")
         if max_iterations is not None and (
@@ -318,6 +323,7 @@ class Model:
             None if beta is None else float(beta),
             None if max_iterations is None else int(max_iterations),
             prior,
+            None if spread is None else float(spread),
         )
         return Pose(positions, weights, st)
 

@@ -84,6 +84,7 @@ class Model:
         beta: Optional[float] = None,
         max_iterations: Optional[int] = None,
         prior: Optional[Literal["shape", "weights"]] = None,
+        spread: Optional[float] = None,
     ) -> Pose:
         """{vertex: (x, y, z)} targets in data units → Pose((N, 3), (K,), (N, 3))."""
     def pose_parameters(self) -> list[str]: ...

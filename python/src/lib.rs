@@ -332,8 +332,9 @@ impl NativeModel {
     }
 
     /// Poses: `targets_json` is `{"vertex": [x, y, z], …}` (data units); `start` an `N × 3`
-    /// shape whose encoding is the start, or the model's default.
-    #[pyo3(signature = (targets_json, start=None, gamma=None, beta=None, max_iterations=None, prior=None))]
+    /// shape whose encoding is the start, or the model's default; `spread` the landing
+    /// correction's radius (fraction of the bounding-box diagonal, 0: the model's shape only).
+    #[pyo3(signature = (targets_json, start=None, gamma=None, beta=None, max_iterations=None, prior=None, spread=None))]
     #[allow(clippy::too_many_arguments)]
     fn pose<'py>(
         &self,
@@ -344,6 +345,7 @@ impl NativeModel {
         beta: Option<f64>,
         max_iterations: Option<usize>,
         prior: Option<&str>,
+        spread: Option<f64>,
     ) -> PyResult<(Points<'py>, Bound<'py, PyArray1<f64>>, Points<'py>)> {
         let value: serde_json::Value =
             serde_json::from_str(targets_json).map_err(|e| arg_err("targets", format!("not JSON: {e}")))?;
@@ -376,10 +378,14 @@ impl NativeModel {
             options.prior = PosePrior::parse(p)
                 .ok_or_else(|| arg_err("prior", format!("`{p}`: expected \"shape\" or \"weights\"")))?;
         }
+        if let Some(s) = spread {
+            options.spread = s;
+        }
         options.validate().map_err(lib_err)?;
         let r = self.with(py, move |m| {
             let w0 = m.start_weights(start.as_deref())?;
-            m.pose(&constraints.vertices, &constraints.targets, &w0, &options)
+            let spreader = meshdeco::model::spreader(m);
+            meshdeco::model::landed_pose(m, &spreader, &constraints.vertices, &constraints.targets, &w0, &options)
         })?;
         Ok((points_to_py(py, &r.positions), PyArray1::from_vec(py, r.weights), points_to_py(py, &r.start)))
     }

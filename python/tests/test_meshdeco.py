@@ -183,6 +183,14 @@ def test_pose(tube_model):
     moved = np.linalg.norm(p.positions[v] - rest[v])
     assert moved > 0.0
     assert np.linalg.norm(p.positions[v] - target) < np.linalg.norm(rest[v] - target)
+    # The landing correction (default) puts the pin on its target; spread=0 is the model's own
+    # shape (its weights decode to it), and the correction leaves the weights alone.
+    assert np.linalg.norm(p.positions[v] - target) < 1e-6
+    own = m.pose({v: target}, spread=0)
+    assert np.array_equal(own.weights, p.weights)
+    assert np.allclose(m.decode(own.weights), own.positions, atol=1e-9)
+    with pytest.raises(meshdeco.InvalidInput, match="spread"):
+        m.pose({v: target}, spread=2.0)
     p2 = m.pose({np.int64(v): tuple(target)}, start=rest, gamma=0.01, prior="weights")
     assert p2.positions.shape == (1466, 3)
     assert "gamma" in m.pose_parameters()

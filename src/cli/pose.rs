@@ -38,12 +38,12 @@ pub struct PoseArgs {
     pub out: PathBuf,
     /// γ: pull towards the start, dimensionless (Eq. 8/10 regulariser, scaled by the mean
     /// squared response of one weight at the constrained vertices, measured as --prior says;
-    /// also the autoencoder's). Smaller lands the pins more exactly.
+    /// also the autoencoder's). Smaller asks more of the model's components (and, with --spread 0, lands the pins more exactly); larger leaves more to the landing correction.
     #[arg(long, default_value_t = PoseOptions::default().gamma)]
     pub gamma: f64,
     /// β: boundary consistency between regions (region PCA only; squared vertex differences, as
     /// given). With few training shapes β = 1 couples the regions so strongly that a drag
-    /// spreads like holistic PCA; the default 1e-6 keeps a drag in the dragged vertex's region.
+    /// spreads like holistic PCA; the default 1e-3 keeps a one-pin drag the most local (docs/posing-drag-bench.md).
     #[arg(long, default_value_t = PoseOptions::default().beta)]
     pub beta: f64,
     /// Gauss-Newton iterations at most (autoencoder only).
@@ -53,6 +53,13 @@ pub struct PoseArgs {
     /// what it must and little else) or `weights` (the paper's ‖w − w0‖²).
     #[arg(long, default_value = "shape", value_parser = parse_prior)]
     pub prior: PosePrior,
+    /// Landing correction radius, a fraction of the rest mesh's bounding-box diagonal (0: off).
+    /// What the model's shape leaves between a pin and its target is added as a smooth
+    /// displacement that fades to zero this far along the surface from every pin, so every pin
+    /// lands even where the model's components cannot reach (the written weights are the
+    /// model's; the mesh is the landed shape).
+    #[arg(long, default_value_t = PoseOptions::default().spread)]
+    pub spread: f64,
     /// Radius (fraction of the rest mesh's bounding-box diagonal) of the ball around each
     /// constrained vertex in which the reported displacement-energy share is measured.
     #[arg(long, default_value_t = 0.2)]
@@ -77,6 +84,13 @@ fn check_flags(a: &PoseArgs) -> Result<()> {
     }
     if !(1..=PoseOptions::MAX_ITERATIONS).contains(&a.max_iterations) {
         bail!("--max-iterations {}: must be from 1 to {}", a.max_iterations, PoseOptions::MAX_ITERATIONS);
+    }
+    if !(a.spread.is_finite() && (0.0..=PoseOptions::MAX_SPREAD).contains(&a.spread)) {
+        bail!(
+            "--spread {}: must be from 0 (off) to {} (a fraction of the bounding-box diagonal)",
+            a.spread,
+            PoseOptions::MAX_SPREAD
+        );
     }
     Ok(())
 }
@@ -110,18 +124,27 @@ pub fn run(a: PoseArgs) -> Result<()> {
         max_iterations: a.max_iterations,
         prior: a.prior,
         time_limit: None,
+        spread: a.spread,
     };
     opts.validate()?;
     let w0 = model.start_weights(from.as_deref())?;
     let Constraints { vertices, targets } = cons;
     check_targets(&rest, &vertices, &targets).with_context(|| format!("{}", a.constraints.display()))?;
     let t0 = Instant::now();
-    let res = model.pose(&vertices, &targets, &w0, &opts)?;
+    let spreader = meshdeco::model::spreader(model.as_ref());
+    let res = meshdeco::model::landed_pose(model.as_ref(), &spreader, &vertices, &targets, &w0, &opts)?;
     let secs = t0.elapsed().as_secs_f64();
     if res.positions.iter().flatten().any(|x| !x.is_finite()) {
         bail!("posing {} produced non-finite coordinates; nothing written", a.model.display());
     }
     outln!("{} model, {} constraint(s), solved in {:.1} ms", model.kind().name(), vertices.len(), 1e3 * secs);
+    if opts.spread > 0.0 {
+        let most = res.positions.iter().zip(&res.model_positions).map(|(p, q)| mesh::dist(*p, *q)).fold(0.0, f64::max);
+        outln!(
+            "landing correction (--spread {}): largest {most:.6} data units (what the model's components could not make)",
+            opts.spread
+        );
+    }
     let (lo, hi) = rest.bounding_box();
     let diag = mesh::dist(lo, hi);
     for (&v, t) in vertices.iter().zip(&targets) {
@@ -194,6 +217,9 @@ pub struct DragBenchArgs {
     /// `shape` or `weights` (see `meshdeco pose --help`).
     #[arg(long, default_value = "shape", value_parser = parse_prior)]
     pub prior: PosePrior,
+    /// Landing correction radius override (see `meshdeco pose --help`; 0: the model's shape only).
+    #[arg(long)]
+    pub spread: Option<f64>,
     /// Also write every drag and the medians as JSON here.
     #[arg(long)]
     pub json: Option<PathBuf>,
@@ -216,11 +242,12 @@ pub fn drag_bench(a: DragBenchArgs) -> Result<()> {
         max_iterations: a.max_iterations.unwrap_or(d.max_iterations),
         prior: a.prior,
         time_limit: None,
+        spread: a.spread.unwrap_or(d.spread),
     };
     let cfg = DragBenchConfig { drags: a.drags, pins, seed: a.seed, options };
     let (rows, summary) = drag_bench(model.as_ref(), &seq, &cfg)?;
     outln!(
-        "{} model {}, {} test frames of {}; pose options γ {} β {} iterations {} prior {}",
+        "{} model {}, {} test frames of {}; pose options γ {} β {} iterations {} prior {} spread {}",
         model.kind().name(),
         a.model.display(),
         seq.n_frames(),
@@ -228,7 +255,8 @@ pub fn drag_bench(a: DragBenchArgs) -> Result<()> {
         options.gamma,
         options.beta,
         options.max_iterations,
-        options.prior.name()
+        options.prior.name(),
+        options.spread
     );
     outln!(
         "| pins | drags | landing % of drag | max motion ÷ drag | moved > ½ drag | test frame's own | posed Erms | neutral Erms | improved | pose ms |"

@@ -3,7 +3,8 @@
 //! A drag: from the model's neutral shape P0 (the decoding of [`Model::start_weights`]`(None)`),
 //! pick `pins` distinct random vertices and move each to its position in a *test* frame T
 //! (aligned as the model aligns: for centroid alignment T is translated so that its centroid is
-//! P0's), pose ([`Model::pose`] with the given [`PoseOptions`]) and measure, with P the posed
+//! P0's), pose ([`crate::model::landed_pose`] with the given [`PoseOptions`]: the model's pose and,
+//! with `spread` > 0, the landing correction) and measure, with P the posed
 //! shape, `d_a = ‖T_a − P0_a‖` the drag of pin a and `d̄` the mean drag (data units):
 //!
 //! - **landing**: mean over the pins of `‖P_a − T_a‖ / d_a`, in % of the drag;
@@ -123,6 +124,7 @@ pub fn drag_bench(
     let (lo, hi) = rest.bounding_box();
     let diag = crate::mesh::dist(lo, hi);
     let alignment = model.alignment();
+    let spreader = crate::model::spreader(model);
     let mut rng = Rng::new(cfg.seed);
     let mut all = Vec::new();
     let mut summaries = Vec::new();
@@ -151,7 +153,7 @@ pub fn drag_bench(
             }
             let targets: Vec<Vec3> = vertices.iter().map(|&v| t[v]).collect();
             let t0 = std::time::Instant::now();
-            let r = model.pose(&vertices, &targets, &w0, &cfg.options)?;
+            let r = crate::model::landed_pose(model, &spreader, &vertices, &targets, &w0, &cfg.options)?;
             let seconds = t0.elapsed().as_secs_f64();
             let p = r.positions;
             let landing = vertices

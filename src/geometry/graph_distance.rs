@@ -88,6 +88,38 @@ impl EdgeGraph {
         d
     }
 
+    /// Edge-path distances from `source` to every vertex within `limit` (length units),
+    /// as (vertex, distance) pairs in the order they are settled (nearest first; `source` first).
+    /// The search stops at `limit`: its heap work is proportional to the vertices within reach.
+    ///
+    /// # Panics
+    /// If `source` is ≥ N.
+    pub fn distances_within(&self, source: usize, limit: f64) -> Vec<(usize, f64)> {
+        let n = self.n_vertices();
+        assert!(source < n, "dijkstra: source {source} out of range ({n} vertices)");
+        let mut best = vec![f64::INFINITY; n];
+        let mut done = Vec::new();
+        let mut heap: BinaryHeap<Reverse<(u64, usize)>> = BinaryHeap::new();
+        best[source] = 0.0;
+        heap.push(Reverse((0f64.to_bits(), source)));
+        while let Some(Reverse((key, v))) = heap.pop() {
+            let dv = f64::from_bits(key);
+            if dv > best[v] {
+                continue; // stale entry
+            }
+            done.push((v, dv));
+            for k in self.offsets[v]..self.offsets[v + 1] {
+                let u = self.targets[k];
+                let nd = dv + self.lengths[k];
+                if nd < limit && nd < best[u] {
+                    best[u] = nd;
+                    heap.push(Reverse((nd.to_bits(), u)));
+                }
+            }
+        }
+        done
+    }
+
     /// Like [`EdgeGraph::distances`], writing into `out` (N values, overwritten).
     ///
     /// # Panics
@@ -192,6 +224,23 @@ mod tests {
         let both = dijkstra(&t, &g.positions, &[0, 120]);
         for i in 0..d.len() {
             assert_eq!(both[i], d[i].min(d2[i]));
+        }
+    }
+
+    #[test]
+    fn distances_within_a_limit_are_the_full_distances_below_it() {
+        let s = icosphere(3);
+        let g = EdgeGraph::new(&s.positions, &s.faces);
+        let full = g.distances(&[5]);
+        let near = g.distances_within(5, 0.7);
+        assert_eq!(near[0], (5, 0.0));
+        let want: Vec<usize> = (0..full.len()).filter(|&v| full[v] < 0.7).collect();
+        let mut got: Vec<usize> = near.iter().map(|p| p.0).collect();
+        assert!(near.windows(2).all(|w| w[0].1 <= w[1].1), "nearest first");
+        got.sort();
+        assert_eq!(got, want);
+        for &(v, d) in &near {
+            assert_eq!(d, full[v]);
         }
     }
 

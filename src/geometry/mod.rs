@@ -6,6 +6,7 @@ pub mod graph_distance;
 pub mod heat_geodesics;
 pub mod intrinsic_delaunay;
 pub mod mass_matrix;
+pub mod pin_spread;
 pub mod rigid_align;
 pub mod sparse_cholesky;
 pub mod touching_pieces;

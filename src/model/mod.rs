@@ -29,7 +29,7 @@ use crate::mesh::{MeshSequence, TriMesh, Vec3};
 use crate::metrics::erms::{Alignment, erms};
 use crate::representation::RepresentationKind;
 
-pub use pose::{Constraints, PoseOptions, PosePrior, PoseResult};
+pub use pose::{Constraints, PoseOptions, PosePrior, PoseResult, landed_pose, spreader};
 
 /// One component of a trained model, as shown to a person.
 #[derive(Debug, Clone, PartialEq)]

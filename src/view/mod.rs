@@ -68,6 +68,8 @@ type Job = Box<dyn FnOnce(&Session) -> Response + Send>;
 /// What the model thread owns.
 struct Session {
     model: Box<dyn Model>,
+    /// The rest mesh's pin spreader (the landing correction of `/api/pose`).
+    spreader: crate::geometry::pin_spread::PinSpread,
     frames: Option<MeshSequence>,
     data_name: String,
 }
@@ -159,7 +161,8 @@ fn open_session(opts: &ViewOptions) -> Result<Session> {
         }
         None => (None, String::new()),
     };
-    Ok(Session { model, frames, data_name })
+    let spreader = model::spreader(model.as_ref());
+    Ok(Session { model, spreader, frames, data_name })
 }
 
 fn f32_bytes(values: impl IntoIterator<Item = f64>) -> Vec<u8> {
@@ -506,7 +509,8 @@ fn decode(req: &Request, shared: &Shared, jobs: &Sender<Job>) -> ApiResult<Respo
 }
 
 /// `POST /api/pose`: `{"constraints": [{"vertex": v, "target": [x, y, z]}, …], "start": [K
-/// weights] (optional), "gamma", "beta", "max_iterations" (optional)}`.
+/// weights] (optional), "gamma", "beta", "max_iterations", "prior", "spread" (optional)}`: the
+/// landed shape ([`model::landed_pose`]) with the model's weights and dials.
 fn pose(req: &Request, shared: &Shared, jobs: &Sender<Job>) -> ApiResult<Response> {
     let body = parse_json(&req.body)?;
     let n = shared.rest.n_vertices();
@@ -552,6 +556,7 @@ fn pose(req: &Request, shared: &Shared, jobs: &Sender<Job>) -> ApiResult<Respons
         max_iterations: iterations as usize,
         prior,
         time_limit: Some(POSE_TIME_LIMIT),
+        spread: param("spread", d.spread)?,
     };
     options.validate().map_err(|e| bad(e.to_string()))?;
     let seq = shared.pose_seq.clone();
@@ -566,9 +571,15 @@ fn pose(req: &Request, shared: &Shared, jobs: &Sender<Job>) -> ApiResult<Respons
                 Some(w) => w,
                 None => m.start_weights(None).map_err(|e| bad(e.to_string()))?,
             };
-            let r = m.pose(&vertices, &targets, &w0, &options).map_err(|e| bad(e.to_string()))?;
-            let (w, d, p) = evaluate(m, Coords::Weights(r.weights))?;
-            Ok(Response::binary(shape_bytes(&w, &d, &p)))
+            let r = model::landed_pose(m, &s.spreader, &vertices, &targets, &w0, &options)
+                .map_err(|e| bad(e.to_string()))?;
+            let d = m.dials(&r.weights).map_err(|e| bad(e.to_string()))?;
+            if let Some(i) =
+                r.positions.iter().position(|q| q.iter().any(|x| !x.is_finite() || x.abs() > f32::MAX as f64))
+            {
+                return Err(bad(format!("this pose gives a non-finite position at vertex {i}; drag less far")));
+            }
+            Ok(Response::binary(shape_bytes(&r.weights, &d, &r.positions)))
         })();
         result(r)
     }))

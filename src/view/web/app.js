@@ -433,7 +433,7 @@ function showPins() {
   if (!S.pins.size) box.textContent = 'no pins: drag a point of the surface';
 }
 function poseParams() {
-  return { gamma: Math.pow(10, parseFloat($('gamma').value)), beta: Math.pow(10, parseFloat($('beta').value)) };
+  return { gamma: Math.pow(10, parseFloat($('gamma').value)), beta: Math.pow(10, parseFloat($('beta').value)), spread: parseFloat($('spread').value) };
 }
 // While the pointer moves, solvers with iterations (the autoencoder's Gauss–Newton) run at most
 // DRAG_ITERATIONS, warm-started from the previous solve; the release solves once more in full.
@@ -444,7 +444,11 @@ function requestPose(t0, final) {
   if (S.drag) cons.push({ vertex: S.drag.v, target: S.drag.target });
   if (!cons.length) return;
   const p = poseParams();
-  const body = { constraints: cons, start: Array.from(S.weights), gamma: p.gamma, beta: p.beta, prior: S.prior };
+  // The pull is towards the shape the drag began from (S.dragBase), not towards the last answer
+  // of the same drag: otherwise each move pulls only towards the previous one and a long drag
+  // drifts as if the pull were off.
+  const base = S.dragBase || S.weights;
+  const body = { constraints: cons, start: Array.from(base), gamma: p.gamma, beta: p.beta, prior: S.prior, spread: p.spread };
   if (!final) body.max_iterations = DRAG_ITERATIONS;
   submit({ url: '/api/pose', body, kind: final ? 'release' : 'drag', t0 });
 }
@@ -467,6 +471,7 @@ canvas.addEventListener('pointerdown', (e) => {
       const p = vtx(v), { view } = matrices();
       const fwd = [-view[2], -view[6], -view[10]]; // camera looks along −z of view space
       S.drag = { v, start: p, target: p, normal: fwd };
+      S.dragBase = Float64Array.from(S.weights);
       ptr = { mode: 'pose', x: e.clientX, y: e.clientY };
       redraw(); return;
     }
@@ -500,6 +505,7 @@ function endPointer() {
     S.lastDrag = { v: S.drag.v, start: S.drag.start, target: S.drag.target };
     S.drag = null; redraw();
     if (moved) requestPose(performance.now(), true);
+    S.dragBase = null;
   }
   ptr = null;
 }
@@ -536,12 +542,16 @@ async function start() {
   $('title').textContent = `${S.desc.model} — ${S.desc.kind}`;
   $('info').textContent = `${S.desc.representation} representation, ${S.n} vertices, ${S.desc.n_faces} faces, ${S.k} weights; start: ${S.desc.start.description}`;
   $('ranges').textContent = `(ranges: ${S.desc.ranges_from})`;
-  // Pose options: the model's defaults, or ?gamma=…&beta=…&prior=shape|weights in the page's URL.
+  // Pose options: the model's defaults, or ?gamma=…&beta=…&prior=shape|weights&spread=… in the page's URL.
   const Q = new URLSearchParams(location.search), g = S.desc.pose_defaults;
   $('gamma').value = Math.log10(+(Q.get('gamma') || g.gamma)); $('beta').value = Math.log10(+(Q.get('beta') || g.beta));
   S.prior = Q.get('prior') || g.prior;
-  const pv = () => { const p = poseParams(); $('gamma-v').textContent = p.gamma.toPrecision(2); $('beta-v').textContent = p.beta.toPrecision(2); };
-  $('gamma').oninput = pv; $('beta').oninput = pv; pv();
+  $('spread').value = +(Q.get('spread') ?? g.spread);
+  const pv = () => {
+    const p = poseParams(); $('gamma-v').textContent = p.gamma.toPrecision(2); $('beta-v').textContent = p.beta.toPrecision(2);
+    $('spread-v').textContent = p.spread > 0 ? p.spread.toFixed(2) : 'off';
+  };
+  $('gamma').oninput = pv; $('beta').oninput = pv; $('spread').oninput = pv; pv();
   if (!S.desc.pose_parameters.includes('beta')) $('beta-row').style.display = 'none';
   initGL(); frameCamera(); buildComponents(); showPins(); colours();
   // Start shape: the decoding of the start weights.
