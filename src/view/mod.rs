@@ -49,7 +49,7 @@ pub const MAX_PINS: usize = 100;
 pub const MAX_POSE_ITERATIONS: usize = 100;
 /// Time an iterative pose (the autoencoder's) may hold the model thread; it then answers with
 /// the best shape so far, so that a slider's decode waits at most about this long.
-pub const POSE_TIME_LIMIT: std::time::Duration = std::time::Duration::from_millis(300);
+pub const POSE_TIME_LIMIT: std::time::Duration = std::time::Duration::from_millis(200);
 
 /// What `meshdeco view` serves.
 #[derive(Debug, Clone)]
