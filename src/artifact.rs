@@ -421,6 +421,18 @@ mod tests {
         assert!(a.insert("x", vec![3], vec![1.0]).is_err());
     }
 
+    /// The bound ±MAX_MODEL_VALUE itself is stored, the next number beyond it is refused naming
+    /// the array and element (issue 33: mutation testing found `>` → `>=` unnoticed).
+    #[test]
+    fn stores_values_up_to_the_bound_and_refuses_beyond() {
+        let mut a = ArrayStore::new();
+        a.insert("edge", vec![2], vec![MAX_MODEL_VALUE, -MAX_MODEL_VALUE]).unwrap();
+        assert_eq!(a.get("edge").unwrap().1, &[MAX_MODEL_VALUE, -MAX_MODEL_VALUE]);
+        let beyond = MAX_MODEL_VALUE.next_up();
+        let e = a.insert("far", vec![2], vec![0.0, -beyond]).unwrap_err().to_string();
+        assert!(e.contains("array `far`") && e.contains("element 1"), "{e}");
+    }
+
     #[test]
     fn truncated_bin_is_a_clear_error() {
         let d = tmpdir("trunc");
