@@ -421,6 +421,18 @@ mod tests {
         assert!(a.insert("x", vec![3], vec![1.0]).is_err());
     }
 
+    /// `names` lists every stored array once, in name order (region PCA asks it whether a model
+    /// has `train_weights`; issue 33: an empty or constant list went unnoticed).
+    #[test]
+    fn names_lists_the_stored_arrays() {
+        let mut a = ArrayStore::new();
+        assert_eq!(a.names().count(), 0);
+        a.insert("mean", vec![1], vec![0.0]).unwrap();
+        a.insert("components", vec![2], vec![1.0, 2.0]).unwrap();
+        a.insert("mean", vec![1], vec![3.0]).unwrap();
+        assert_eq!(a.names().collect::<Vec<_>>(), ["components", "mean"]);
+    }
+
     /// The bound ±MAX_MODEL_VALUE itself is stored, the next number beyond it is refused naming
     /// the array and element (issue 33: mutation testing found `>` → `>=` unnoticed).
     #[test]

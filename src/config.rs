@@ -7,6 +7,8 @@
 //! path = "../shared/data/scape"   # directory, glob, or synthetic:<name>
 //! train = "1-36"                  # 1-based frame ranges in natural order ("1-36,40", "every:10"); default all
 //! test = "37-71"                  # same syntax, or "rest" (every frame not in train); default none
+//! # validation = "auto:10%"      # held out of the training frames, reported beside train and test:
+//! #                                frames ("31-36", in train) or auto:P% (seeded draw, auto:P%:SEED)
 //! rest = "first"                  # first | mean | <mesh file>
 //! align = "none"                  # none | rigid
 //! unit_box = false                # scale into the unit box (SPLOCS's convention); outputs keep data units
@@ -161,6 +163,94 @@ impl FrameSelection {
     }
 }
 
+/// Frames held out of the training split to choose settings on (`data.validation`): the model
+/// never fits them; `train` and `eval` report their Erms beside the training and test Erms.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub enum Validation {
+    /// These frames (1-based config syntax); each must be a training frame.
+    Frames(FrameSelection),
+    /// `percent` % of the training frames (at least one), drawn with `seed`; never the first
+    /// training frame (with `rest = "first"` it is the rest shape).
+    Share { percent: f64, seed: u64 },
+}
+
+impl Validation {
+    /// Parses `"auto:P%"`, `"auto:P%:SEED"` or a frame selection (`"31-36"`, `"every:10"`).
+    pub fn parse(s: &str) -> Result<Self> {
+        const KEY: &str = "data.validation";
+        let t = s.trim();
+        if let Some(rest) = t.strip_prefix("auto:") {
+            let (p, seed) = match rest.split_once(':') {
+                Some((p, seed)) => (p, seed),
+                None => (rest, "0"),
+            };
+            let bad = || Error::config(KEY, format!("`{s}`: expected auto:P% (0 < P < 100) or auto:P%:SEED"));
+            let percent: f64 = p.trim().strip_suffix('%').ok_or_else(bad)?.trim().parse().map_err(|_| bad())?;
+            let seed: u64 = seed.trim().parse().map_err(|_| bad())?;
+            if !(percent > 0.0 && percent < 100.0) {
+                return Err(bad());
+            }
+            return Ok(Validation::Share { percent, seed });
+        }
+        match FrameSelection::parse(KEY, t)? {
+            FrameSelection::Rest | FrameSelection::All => {
+                Err(Error::config(KEY, format!("`{s}`: expected frames out of data.train (\"31-36\") or auto:P%")))
+            }
+            f => Ok(Validation::Frames(f)),
+        }
+    }
+
+    /// The validation frames (sorted, 0-based) out of `train` (sorted, 0-based) of a sequence
+    /// of `n_frames`, and the training frames left to fit. Errors name `data.validation`.
+    pub fn resolve(&self, n_frames: usize, train: &[usize]) -> Result<(Vec<usize>, Vec<usize>)> {
+        const KEY: &str = "data.validation";
+        let held: Vec<usize> = match self {
+            Validation::Frames(f) => {
+                let v = f.resolve(KEY, n_frames, None)?;
+                if let Some(&x) = v.iter().find(|x| !train.contains(x)) {
+                    return Err(Error::config(
+                        KEY,
+                        format!(
+                            "frame {} is not a training frame (validation frames are held out of data.train)",
+                            x + 1
+                        ),
+                    ));
+                }
+                v
+            }
+            Validation::Share { percent, seed } => {
+                let pool = &train[1.min(train.len())..];
+                let k = ((percent / 100.0 * train.len() as f64).round() as usize).max(1);
+                if k > pool.len() {
+                    return Err(Error::config(
+                        KEY,
+                        format!("{percent}% of {} training frames leaves none to train on", train.len()),
+                    ));
+                }
+                let mut rng = crate::rng::Rng::new(*seed);
+                let mut v: Vec<usize> = rng.sample_distinct(pool.len(), k).into_iter().map(|i| pool[i]).collect();
+                v.sort_unstable();
+                v
+            }
+        };
+        let fit: Vec<usize> = train.iter().copied().filter(|t| !held.contains(t)).collect();
+        if fit.is_empty() {
+            return Err(Error::config(KEY, "holds out every training frame; none is left to train on"));
+        }
+        Ok((held, fit))
+    }
+}
+
+impl std::fmt::Display for Validation {
+    /// The config syntax that parses back to the same value.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Validation::Frames(s) => write!(f, "{s}"),
+            Validation::Share { percent, seed } => write!(f, "auto:{percent}%:{seed}"),
+        }
+    }
+}
+
 /// Which shape the deformations are measured against.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub enum RestShape {
@@ -182,6 +272,8 @@ pub struct DataConfig {
     pub path: String,
     pub train: FrameSelection,
     pub test: Option<FrameSelection>,
+    /// Frames held out of `train` to report a validation Erms (`data.validation`).
+    pub validation: Option<Validation>,
     pub rest: RestShape,
     pub align: Align,
     pub unit_box: bool,
@@ -221,6 +313,7 @@ struct RawData {
     path: String,
     train: Option<String>,
     test: Option<String>,
+    validation: Option<String>,
     rest: Option<String>,
     align: Option<String>,
     unit_box: Option<bool>,
@@ -291,6 +384,7 @@ impl Config {
             return Err(Error::config("data.train", "`rest` is only valid for data.test"));
         }
         let test = d.test.as_deref().map(|s| FrameSelection::parse("data.test", s)).transpose()?;
+        let validation = d.validation.as_deref().map(Validation::parse).transpose()?;
         let rest = match d.rest.as_deref().unwrap_or("first") {
             "first" => RestShape::First,
             "mean" => RestShape::Mean,
@@ -305,6 +399,7 @@ impl Config {
             path: d.path,
             train,
             test,
+            validation,
             rest,
             align,
             unit_box: d.unit_box.unwrap_or(false),
@@ -491,6 +586,9 @@ impl DataConfig {
         t.insert("train".into(), self.train.to_string().into());
         if let Some(test) = &self.test {
             t.insert("test".into(), test.to_string().into());
+        }
+        if let Some(v) = &self.validation {
+            t.insert("validation".into(), v.to_string().into());
         }
         t.insert("rest".into(), self.rest.to_string().into());
         t.insert("align".into(), (if self.align == Align::Rigid { "rigid" } else { "none" }).into());

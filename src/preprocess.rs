@@ -78,6 +78,9 @@ pub struct Prepared {
     pub train: Vec<usize>,
     /// 0-based indices of the test frames (empty without a test split).
     pub test: Vec<usize>,
+    /// 0-based indices of the validation frames (`data.validation`; empty without one): held
+    /// out of `train`, which no longer holds them.
+    pub validation: Vec<usize>,
     /// Scaling applied (identity unless `unit_box = true`).
     pub unit_box: UnitBox,
     /// Where the methods cache the training frames' features (`data.cache`).
@@ -320,7 +323,8 @@ pub fn prepare_with(cfg: &DataConfig, limits: MemoryLimits) -> Result<Prepared> 
 }
 
 /// The train/test split of `f` frames (a warning when they overlap).
-fn split(cfg: &DataConfig, f: usize) -> Result<(Vec<usize>, Vec<usize>)> {
+/// (training frames to fit, test frames, validation frames), 0-based.
+fn split(cfg: &DataConfig, f: usize) -> Result<(Vec<usize>, Vec<usize>, Vec<usize>)> {
     let train = cfg.train.resolve("data.train", f, None)?;
     let test = match &cfg.test {
         Some(t) => t.resolve("data.test", f, Some(&train))?,
@@ -335,7 +339,11 @@ fn split(cfg: &DataConfig, f: usize) -> Result<(Vec<usize>, Vec<usize>)> {
             if overlap.len() > 10 { ", …" } else { "" }
         );
     }
-    Ok((train, test))
+    let (validation, train) = match &cfg.validation {
+        Some(v) => v.resolve(f, &train)?,
+        None => (Vec::new(), train),
+    };
+    Ok((train, test, validation))
 }
 
 /// [`prepare_sequence`] for frames read on demand: one pass reads (and so checks) every frame
@@ -349,7 +357,7 @@ fn prepare_streamed(
     let names = file.names();
     // Not yet aligned or scaled: the rest shape is taken from the frames as stored.
     let mut raw = StreamedFrames { file, faces, names, alignment: None, unit_box: None };
-    let (train, test) = split(cfg, raw.file.n_frames())?;
+    let (train, test, validation) = split(cfg, raw.file.n_frames())?;
     let rest_positions = rest_shape(&raw, &cfg.rest, &train)?;
     // Every frame is read once here: a bad value fails now, not half way through training.
     let rigid = cfg.align == Align::Rigid;
@@ -394,6 +402,7 @@ fn prepare_streamed(
         rest,
         train,
         test,
+        validation,
         unit_box,
         cache: cfg.cache.clone(),
         limits,
@@ -407,7 +416,7 @@ pub fn prepare_sequence(seq: MeshSequence, cfg: &DataConfig) -> Result<Prepared>
 
 /// [`prepare_sequence`] with the given [`MemoryLimits`] (what the linear fits read).
 fn prepare_sequence_with(mut seq: MeshSequence, cfg: &DataConfig, limits: MemoryLimits) -> Result<Prepared> {
-    let (train, test) = split(cfg, seq.n_frames())?;
+    let (train, test, validation) = split(cfg, seq.n_frames())?;
     let rest_positions = rest_shape(&seq, &cfg.rest, &train)?;
     if cfg.align == Align::Rigid {
         align_rigid(&mut seq, &rest_positions);
@@ -427,6 +436,7 @@ fn prepare_sequence_with(mut seq: MeshSequence, cfg: &DataConfig, limits: Memory
         rest,
         train,
         test,
+        validation,
         unit_box,
         cache: cfg.cache.clone(),
         limits,
@@ -494,6 +504,7 @@ mod tests {
             path: path.into(),
             train: FrameSelection::All,
             test: None,
+            validation: None,
             rest: RestShape::First,
             align: Align::None,
             unit_box: false,

@@ -27,6 +27,13 @@ pub struct Metrics {
     /// plain one-pass codes (`test_erms` has the residual passes). Absent otherwise.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub test_erms_one_pass: Option<f64>,
+    /// Erms over the validation frames (`data.validation`: held out of the training frames,
+    /// encoded as test frames are); absent without a validation split.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub validation_erms: Option<f64>,
+    /// Number of validation frames (0 without a validation split).
+    #[serde(default)]
+    pub validation_frames: usize,
     /// How results were aligned to the ground truth before measuring: `none` or `centroid`
     /// (representations that drop translation are centroid-aligned).
     pub erms_alignment: String,

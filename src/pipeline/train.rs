@@ -157,6 +157,18 @@ fn fit_measure_write(
             }
         }
     }
+    // Validation frames: held out of the fit, encoded as the test frames are.
+    let validation_erms = if prep.validation.is_empty() {
+        None
+    } else {
+        let v = MeshSequence {
+            faces: prep.sequence.faces().to_vec(),
+            frames: frames_in_data_units(prep, &prep.validation)?,
+            names: Vec::new(),
+        };
+        let codes = model.encode(&v)?;
+        Some(erms(&v.frames, &model.decode(&codes)?, alignment)?)
+    };
     let shares: Vec<f64> = stats.locality.iter().map(|l| l.energy_share).collect();
     let sizes: Vec<f64> = stats.locality.iter().map(|l| l.support_size as f64).collect();
     let metrics = Metrics {
@@ -167,6 +179,8 @@ fn fit_measure_write(
         test_erms,
         test_erms_fitted,
         test_erms_one_pass,
+        validation_erms,
+        validation_frames: prep.validation.len(),
         erms_alignment: alignment.to_string(),
         train_seconds: stats.train_seconds,
         representation_seconds: stats.representation_seconds,

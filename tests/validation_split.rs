@@ -1,0 +1,77 @@
+//! `data.validation` (issue 31): frames held out of the training split are not fitted and are
+//! reported beside the training and test Erms; the held-out frames are resolved once, the same
+//! for the same seed, and bad values fail naming the key.
+
+use meshdeco::config::{Config, Validation};
+use meshdeco::pipeline::{Silent, TrainOptions, train};
+
+fn cfg(validation: &str) -> Result<Config, meshdeco::Error> {
+    Config::from_toml(&format!(
+        "name = \"v\"\n[data]\npath = \"synthetic:bumps\"\ntrain = \"1-30\"\ntest = \"31-40\"\n{validation}\n[method]\nkind = \"pca\"\ncomponents = 3\n"
+    ))
+}
+
+#[test]
+fn validation_frames_are_held_out_and_reported() {
+    let d = std::env::temp_dir().join(format!("meshdeco-validation-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    let run = |v: &str, out: &str| {
+        let c = cfg(v).unwrap();
+        train(&c, &d.join(out), &TrainOptions::default(), &mut Silent).unwrap().metrics
+    };
+    let held = run("validation = \"25-30\"", "held");
+    assert_eq!(held.train_frames, 24);
+    assert_eq!(held.validation_frames, 6);
+    let v = held.validation_erms.expect("validation Erms");
+    assert!(v.is_finite() && v >= 0.0);
+    // The model fitted without frames 25-30 is the model trained on 1-24: same training Erms,
+    // and its validation Erms is its error on 25-30 (the test Erms of a 1-24 / 25-30 split).
+    let c = Config::from_toml(
+        "name = \"v\"\n[data]\npath = \"synthetic:bumps\"\ntrain = \"1-24\"\ntest = \"25-30\"\n[method]\nkind = \"pca\"\ncomponents = 3\n",
+    )
+    .unwrap();
+    let plain = train(&c, &d.join("plain"), &TrainOptions::default(), &mut Silent).unwrap().metrics;
+    assert_eq!(held.train_erms, plain.train_erms);
+    assert_eq!(Some(v), plain.test_erms);
+    // The resolved config.toml names the split; metrics.json carries the number.
+    let text = std::fs::read_to_string(d.join("held/config.toml")).unwrap();
+    assert!(text.contains("validation = \"25-30\""), "{text}");
+    let json = std::fs::read_to_string(d.join("held/metrics.json")).unwrap();
+    assert!(json.contains("\"validation_erms\""), "{json}");
+    // auto:P%: 10 % of 30 frames = 3, the same for the same seed, never frame 1 (the rest).
+    let a = run("validation = \"auto:10%:7\"", "auto");
+    assert_eq!((a.train_frames, a.validation_frames), (27, 3));
+    let share = Validation::parse("auto:10%:7").unwrap();
+    let train_idx: Vec<usize> = (0..30).collect();
+    let (v1, fit1) = share.resolve(40, &train_idx).unwrap();
+    let (v2, _) = share.resolve(40, &train_idx).unwrap();
+    assert_eq!(v1, v2);
+    assert_eq!(v1.len(), 3);
+    assert!(!v1.contains(&0) && fit1.len() == 27 && v1.iter().all(|x| !fit1.contains(x)));
+    let (v3, _) = Validation::parse("auto:10%:8").unwrap().resolve(40, &train_idx).unwrap();
+    assert_ne!(v1, v3, "another seed draws other frames");
+    std::fs::remove_dir_all(&d).unwrap();
+}
+
+#[test]
+fn bad_validation_values_name_the_key() {
+    for (v, want) in [
+        ("validation = \"auto:0%\"", "auto:P%"),
+        ("validation = \"auto:10\"", "auto:P%"),
+        ("validation = \"rest\"", "out of data.train"),
+        ("validation = \"auto:10%:x\"", "auto:P%"),
+    ] {
+        let e = cfg(v).unwrap_err().to_string();
+        assert!(e.contains("data.validation") && e.contains(want), "{v}: {e}");
+    }
+    // Frames outside data.train, or all of them, fail when the data are split.
+    let d = std::env::temp_dir().join(format!("meshdeco-validation-bad-{}", std::process::id()));
+    for (v, want) in
+        [("validation = \"31\"", "frame 31 is not a training frame"), ("validation = \"1-30\"", "none is left")]
+    {
+        let c = cfg(v).unwrap();
+        let e = train(&c, &d, &TrainOptions::default(), &mut Silent).err().expect("the split fails").to_string();
+        assert!(e.contains("data.validation") && e.contains(want), "{v}: {e}");
+        assert!(!d.exists(), "no artefact after a failed split");
+    }
+}
