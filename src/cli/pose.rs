@@ -139,7 +139,9 @@ pub fn run(a: PoseArgs) -> Result<()> {
     }
     outln!("{} model, {} constraint(s), solved in {:.1} ms", model.kind().name(), vertices.len(), 1e3 * secs);
     if opts.spread > 0.0 {
-        let most = res.positions.iter().zip(&res.model_positions).map(|(p, q)| mesh::dist(*p, *q)).fold(0.0, f64::max);
+        // The model's own shape is the decoding of its weights.
+        let own = model.decode(std::slice::from_ref(&res.weights))?.remove(0);
+        let most = res.positions.iter().zip(&own).map(|(p, q)| mesh::dist(*p, *q)).fold(0.0, f64::max);
         outln!(
             "landing correction (--spread {}): largest {most:.6} data units (what the model's components could not make)",
             opts.spread

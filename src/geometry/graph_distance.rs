@@ -95,28 +95,9 @@ impl EdgeGraph {
     /// # Panics
     /// If `source` is ≥ N.
     pub fn distances_within(&self, source: usize, limit: f64) -> Vec<(usize, f64)> {
-        let n = self.n_vertices();
-        assert!(source < n, "dijkstra: source {source} out of range ({n} vertices)");
-        let mut best = vec![f64::INFINITY; n];
+        let mut best = vec![f64::INFINITY; self.n_vertices()];
         let mut done = Vec::new();
-        let mut heap: BinaryHeap<Reverse<(u64, usize)>> = BinaryHeap::new();
-        best[source] = 0.0;
-        heap.push(Reverse((0f64.to_bits(), source)));
-        while let Some(Reverse((key, v))) = heap.pop() {
-            let dv = f64::from_bits(key);
-            if dv > best[v] {
-                continue; // stale entry
-            }
-            done.push((v, dv));
-            for k in self.offsets[v]..self.offsets[v + 1] {
-                let u = self.targets[k];
-                let nd = dv + self.lengths[k];
-                if nd < limit && nd < best[u] {
-                    best[u] = nd;
-                    heap.push(Reverse((nd.to_bits(), u)));
-                }
-            }
-        }
+        self.search(&[source], limit, &mut best, |v, d| done.push((v, d)));
         done
     }
 
@@ -125,9 +106,15 @@ impl EdgeGraph {
     /// # Panics
     /// If a source index is ≥ N or `out.len() != N`.
     pub fn distances_into(&self, sources: &[usize], out: &mut [f64]) {
+        out.fill(f64::INFINITY);
+        self.search(sources, f64::INFINITY, out, |_, _| {});
+    }
+
+    /// Dijkstra from `sources` on `out` (pre-filled with +∞), relaxing only to distances below
+    /// `limit`; `settled(v, d)` is called once per vertex as it is settled, nearest first.
+    fn search(&self, sources: &[usize], limit: f64, out: &mut [f64], mut settled: impl FnMut(usize, f64)) {
         let n = self.n_vertices();
         assert_eq!(out.len(), n, "one output value per vertex");
-        out.fill(f64::INFINITY);
         // Non-negative f64 values order like their bit patterns: a heap of u64 keys.
         let mut heap: BinaryHeap<Reverse<(u64, usize)>> = BinaryHeap::with_capacity(n / 4 + sources.len() + 16);
         for &s in sources {
@@ -140,10 +127,11 @@ impl EdgeGraph {
             if dv > out[v] {
                 continue; // stale entry
             }
+            settled(v, dv);
             for k in self.offsets[v]..self.offsets[v + 1] {
                 let u = self.targets[k];
                 let nd = dv + self.lengths[k];
-                if nd < out[u] {
+                if nd < limit && nd < out[u] {
                     out[u] = nd;
                     heap.push(Reverse((nd.to_bits(), u)));
                 }

@@ -29,7 +29,8 @@ use faer::linalg::solvers::Solve;
 
 use crate::error::{Error, Result};
 use crate::geometry::graph_distance::EdgeGraph;
-use crate::mesh::Vec3;
+use crate::math::vec3::norm;
+use crate::mesh::{Vec3, bounding_box, dist};
 
 /// A pin's radius is at least this many times its residual's length (module docs).
 pub const FOLD_FREE: f64 = 3.0;
@@ -53,17 +54,8 @@ pub struct PinSpread {
 impl PinSpread {
     /// The graph of `faces` over `positions` (the rest mesh, data units).
     pub fn new(positions: &[Vec3], faces: &[[usize; 3]]) -> Self {
-        let mut lo = [f64::INFINITY; 3];
-        let mut hi = [f64::NEG_INFINITY; 3];
-        for p in positions {
-            for k in 0..3 {
-                lo[k] = lo[k].min(p[k]);
-                hi[k] = hi[k].max(p[k]);
-            }
-        }
-        let diagonal =
-            if positions.is_empty() { 0.0 } else { (0..3).map(|k| (hi[k] - lo[k]).powi(2)).sum::<f64>().sqrt() };
-        PinSpread { graph: EdgeGraph::new(positions, faces), diagonal }
+        let (lo, hi) = bounding_box(positions);
+        PinSpread { graph: EdgeGraph::new(positions, faces), diagonal: dist(lo, hi) }
     }
 
     /// Bounding-box diagonal of the rest mesh (data units): the unit of a relative radius.
@@ -91,10 +83,7 @@ impl PinSpread {
             return Err(Error::Invalid(format!("pin {p} out of range ({n} vertices)")));
         }
         let m = pins.len();
-        let radii: Vec<f64> = residuals
-            .iter()
-            .map(|r| radius.max(FOLD_FREE * (r[0] * r[0] + r[1] * r[1] + r[2] * r[2]).sqrt()))
-            .collect();
+        let radii: Vec<f64> = residuals.iter().map(|&r| radius.max(FOLD_FREE * norm(r))).collect();
         if radii.iter().any(|r| !r.is_finite()) {
             return Err(Error::Invalid("a pin's residual is not finite".into()));
         }

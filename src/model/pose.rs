@@ -8,6 +8,7 @@ use serde_json::Value;
 
 use crate::error::{Error, Result};
 use crate::geometry::pin_spread::PinSpread;
+use crate::math::vec3::{add, sub};
 use crate::mesh::Vec3;
 pub use crate::methods::posing::PosePrior;
 
@@ -113,8 +114,8 @@ impl PoseOptions {
 /// the model's shape leaves between each pin and its target is spread over the pin's
 /// surroundings by `spreader` (built once per model from its rest mesh: [`spreader`]), zero
 /// farther than `spread` × the rest's bounding-box diagonal along the surface from every pin.
-/// [`PoseResult::positions`] are then the landed shape and [`PoseResult::model_positions`] the
-/// model's own (the decoding of [`PoseResult::weights`]); with `spread` 0 both are the model's.
+/// [`PoseResult::positions`] are then the landed shape, while [`PoseResult::weights`] stay the
+/// model's (their decoding is the model's own shape); with `spread` 0 both agree.
 pub fn landed_pose(
     model: &dyn super::Model,
     spreader: &PinSpread,
@@ -132,13 +133,10 @@ pub fn landed_pose(
                 r.positions.len()
             )));
         }
-        let residuals: Vec<Vec3> =
-            vertices.iter().zip(targets).map(|(&v, t)| std::array::from_fn(|k| t[k] - r.positions[v][k])).collect();
+        let residuals: Vec<Vec3> = vertices.iter().zip(targets).map(|(&v, &t)| sub(t, r.positions[v])).collect();
         let d = spreader.field(vertices, &residuals, options.spread * spreader.diagonal())?;
-        for (p, dv) in r.positions.iter_mut().zip(&d) {
-            for k in 0..3 {
-                p[k] += dv[k];
-            }
+        for (p, &dv) in r.positions.iter_mut().zip(&d) {
+            *p = add(*p, dv);
         }
     }
     Ok(r)
@@ -157,8 +155,6 @@ pub struct PoseResult {
     pub start: Vec<Vec3>,
     /// Posed positions (N, data units): the model's shape, landed by [`landed_pose`] when it spreads.
     pub positions: Vec<Vec3>,
-    /// The model's own posed shape (N, data units): the decoding of `weights`.
-    pub model_positions: Vec<Vec3>,
     /// Posed weights / coefficients / latent code.
     pub weights: Vec<f64>,
 }

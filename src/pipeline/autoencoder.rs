@@ -496,7 +496,7 @@ impl Model for AeArtifact {
             },
         )?
         .solve(targets, w0)?;
-        Ok(PoseResult { start, model_positions: positions.clone(), positions, weights })
+        Ok(PoseResult { start, positions, weights })
     }
     fn point_fit<'a>(&'a self, vertices: &[usize], gamma: f64) -> Result<Option<Box<dyn PointFit + 'a>>> {
         let fitter =

@@ -589,7 +589,7 @@ impl Model for LinearArtifact {
         let config = PoseConfig { gamma: options.gamma, beta: options.beta };
         let weights = LinearPoser::with_metric(&self.model, vertices, &config, metric)?.solve(&t, w0)?;
         let positions = self.synthesize(&weights)?;
-        Ok(PoseResult { start, model_positions: positions.clone(), positions, weights })
+        Ok(PoseResult { start, positions, weights })
     }
     /// The support of the component with the largest magnitude at `v` (vertices above 10⁻³ of
     /// that component's largest magnitude).

@@ -361,7 +361,7 @@ impl Model for RegionArtifact {
         let config = PoseConfig { gamma: options.gamma, beta: options.beta };
         let weights = RegionPoser::with_metric(&self.model, vertices, &config, metric)?.solve(&t, w0)?;
         let positions = self.decode(std::slice::from_ref(&weights))?.remove(0);
-        Ok(PoseResult { start, model_positions: positions.clone(), positions, weights })
+        Ok(PoseResult { start, positions, weights })
     }
     /// The grown region(s) containing `v` (several when `v` is a shared boundary vertex).
     fn locality_set(&self, v: usize) -> Option<(String, Vec<usize>)> {

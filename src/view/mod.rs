@@ -446,10 +446,17 @@ fn evaluate(m: &dyn Model, c: Coords) -> ApiResult<(Vec<f64>, Vec<f64>, Vec<Vec3
         }
     };
     let p = m.decode(std::slice::from_ref(&w)).map_err(e)?.remove(0);
-    if let Some(i) = p.iter().position(|q| q.iter().any(|x| !x.is_finite() || x.abs() > f32::MAX as f64)) {
-        return Err(bad(format!("these weights decode to a non-finite position at vertex {i}; pick smaller values")));
-    }
+    check_drawable(&p, "these weights decode to", "pick smaller values")?;
     Ok((w, d, p))
+}
+
+/// Errors (400) when a position is not finite or beyond `f32` (the page's positions): "`what` a
+/// non-finite position at vertex i; `advice`".
+fn check_drawable(p: &[Vec3], what: &str, advice: &str) -> ApiResult<()> {
+    match p.iter().position(|q| q.iter().any(|x| !x.is_finite() || x.abs() > f32::MAX as f64)) {
+        Some(i) => Err(bad(format!("{what} a non-finite position at vertex {i}; {advice}"))),
+        None => Ok(()),
+    }
 }
 
 fn result(r: ApiResult<Response>) -> Response {
@@ -574,11 +581,7 @@ fn pose(req: &Request, shared: &Shared, jobs: &Sender<Job>) -> ApiResult<Respons
             let r = model::landed_pose(m, &s.spreader, &vertices, &targets, &w0, &options)
                 .map_err(|e| bad(e.to_string()))?;
             let d = m.dials(&r.weights).map_err(|e| bad(e.to_string()))?;
-            if let Some(i) =
-                r.positions.iter().position(|q| q.iter().any(|x| !x.is_finite() || x.abs() > f32::MAX as f64))
-            {
-                return Err(bad(format!("this pose gives a non-finite position at vertex {i}; drag less far")));
-            }
+            check_drawable(&r.positions, "this pose gives", "drag less far")?;
             Ok(Response::binary(shape_bytes(&r.weights, &d, &r.positions)))
         })();
         result(r)
