@@ -227,7 +227,7 @@ fn residual_encoder_passes_lower_the_unseen_shapes_error_and_are_reported() {
     assert!(e1 < e0 && e2 <= e1 * 1.001, "feature error by passes: {e0} {e1} {e2}");
     assert!(two < one, "two passes {two} vs one pass {one}");
     // 0 passes is the plain encoder; the one-pass Erms in metrics.json is that encoder's.
-    let plain = art.encode_frames_with_passes(&test, 0).unwrap();
+    let plain = art.encode_frames_with(&test, 0, 0).unwrap();
     let rec = art.decode_codes(&plain).unwrap();
     let e = meshdeco::metrics::erms::erms(&test.frames, &rec, meshdeco::metrics::erms::Alignment::Centroid).unwrap();
     assert!((e - one).abs() <= 1e-9 * one, "one-pass Erms {e} vs metrics.json {one}");

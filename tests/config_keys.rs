@@ -67,6 +67,7 @@ fn every_autoencoder_network_field_is_a_method_key() {
         ("vertex_warmup", "vertex_warmup = 0.5", json!(0.5)),
         ("vertex_clip", "vertex_clip = 2.0", json!(2.0)),
         ("encoder_passes", "encoder_passes = 2", json!(2)),
+        ("encoder_steps", "encoder_steps = 3", json!(3)),
     ];
     let default = serde_json::to_value(AutoencoderConfig::default()).unwrap();
     check_keys(&default, &cases, |line| {

@@ -291,3 +291,61 @@ fn interrupted_autoencoder_cell_resumes_from_its_checkpoint() {
     let _ = std::fs::remove_dir_all(&d);
     let _ = std::fs::remove_dir_all(&whole);
 }
+
+/// `sweep.select = "validation"` (issue 31): per dataset the report marks the cell of lowest
+/// validation Erms — the argmin of the `validation_erms` column, whatever the test column says —
+/// and `selection.csv` names it; without a validation split in every dataset, or with another
+/// value, the config is refused naming the key.
+#[test]
+fn eval_selects_on_validation_and_marks_the_choice() {
+    let text = r#"
+name = "select"
+[[dataset]]
+name = "tube"
+path = "synthetic:tube"
+align = "none"
+train = "every:2"
+validation = "auto:30%"
+test = "rest"
+ordered = true
+
+[[method]]
+label = "pca"
+kind = "pca"
+
+[sweep]
+components = [1, 2, 4]
+select = "validation"
+"#;
+    let cfg = EvalConfig::from_toml(text).unwrap();
+    let out = tmp("select");
+    run_silent(&cfg, &out, &EvalOptions::default()).unwrap();
+    let csv = read(&out.join("results.csv"));
+    let header: Vec<&str> = csv.lines().next().unwrap().split(',').collect();
+    let col = |name: &str| header.iter().position(|c| *c == name).unwrap();
+    let (kc, vc) = (col("K"), col("validation_erms"));
+    let rows: Vec<(String, f64)> = csv
+        .lines()
+        .skip(1)
+        .map(|l| {
+            let f: Vec<&str> = l.split(',').collect();
+            (f[kc].to_string(), f[vc].parse::<f64>().expect("every cell has a validation Erms"))
+        })
+        .collect();
+    assert_eq!(rows.len(), 3);
+    let best = rows.iter().min_by(|a, b| a.1.total_cmp(&b.1)).unwrap();
+    let selection = read(&out.join("selection.csv"));
+    let line: Vec<&str> = selection.lines().nth(1).expect("one chosen cell").split(',').collect();
+    assert_eq!((line[0], line[1], line[2]), ("tube", "pca", best.0.as_str()), "{selection}");
+    let report = read(&out.join("report.md"));
+    assert_eq!(report.matches("(chosen on validation)").count(), 1, "{report}");
+    assert!(report.contains("lowest *validation* Erms"));
+    let _ = std::fs::remove_dir_all(&out);
+
+    let no_validation = text.replace("validation = \"auto:30%\"\n", "");
+    let e = EvalConfig::from_toml(&no_validation).unwrap_err().to_string();
+    assert!(e.contains("dataset.tube.validation"), "{e}");
+    let e =
+        EvalConfig::from_toml(&text.replace("select = \"validation\"", "select = \"test\"")).unwrap_err().to_string();
+    assert!(e.contains("sweep.select") && e.contains("test"), "{e}");
+}

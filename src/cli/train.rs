@@ -62,6 +62,7 @@ fn print_summary(name: &str, m: &Metrics) {
             .map(|v| format!(", validation Erms {v:.4} ({} frames held out)", m.validation_frames))
             .unwrap_or_default()
             + &m.test_erms.map(|t| format!(", test Erms {t:.4}")).unwrap_or_default()
+            + &m.test_erms_network.map(|t| format!(" (network only: {t:.4})")).unwrap_or_default()
             + &m.test_erms_one_pass.map(|t| format!(" (one encoder pass: {t:.4})")).unwrap_or_default()
             + &m.test_erms_fitted.map(|t| format!(" (codes fitted to the shapes: {t:.4})")).unwrap_or_default(),
         m.erms_alignment,

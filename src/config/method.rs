@@ -404,6 +404,9 @@ pub struct AutoencoderMethod {
     /// Residual passes of the encoder at inference (0: the paper's one pass).
     #[serde(skip_serializing_if = "network_default::encoder_passes")]
     pub encoder_passes: usize,
+    /// Feature-space Levenberg–Marquardt steps of the encoder at inference (0: none).
+    #[serde(skip_serializing_if = "network_default::encoder_steps")]
+    pub encoder_steps: usize,
 }
 
 fn is_zero(n: &usize) -> bool {
@@ -436,6 +439,7 @@ mod network_default {
         vertex_warmup: f64,
         vertex_clip: f64,
         encoder_passes: usize,
+        encoder_steps: usize,
     );
 }
 
@@ -494,6 +498,7 @@ network_keys!(
     vertex_warmup,
     vertex_clip,
     encoder_passes,
+    encoder_steps,
 );
 
 /// The autoencoder method's keys that are not the network's.

@@ -17,6 +17,8 @@
 //! components = [50]                    #   optional: this method's own K list instead of the sweep
 //! [sweep]
 //! components = [5, 10, 20, 30, 50]     # K of every method without its own list
+//! select = "validation"                # optional: per dataset, mark the cell of lowest
+//!                                      #   validation Erms (every dataset needs `validation`)
 //! [control_points]                     # optional: reconstruction from sparse control points
 //! counts = [5, 10, 20, 50, 100, 200]   #   numbers n of control points
 //! trials = 5                           #   random start vertices per n (default 5)
@@ -86,6 +88,9 @@ pub struct EvalConfig {
     pub methods: Vec<EvalMethod>,
     /// The sweep's K list (may be empty when every method has its own).
     pub sweep: Vec<usize>,
+    /// `sweep.select = "validation"`: the report marks, per dataset, the cell of lowest
+    /// validation Erms (chosen without the test numbers).
+    pub select_on_validation: bool,
     pub control_points: Option<ControlPointsConfig>,
 }
 
@@ -258,17 +263,33 @@ impl EvalConfig {
             None => return Err(Error::config("method", "at least one [[method]] is required")),
         }
 
-        let sweep = match root.remove("sweep") {
-            None => Vec::new(),
+        let (sweep, select_on_validation) = match root.remove("sweep") {
+            None => (Vec::new(), false),
             Some(v) => {
                 let mut t = as_table("sweep", v)?;
                 let k = t.remove("components").map(|v| usize_list("sweep.components", v)).transpose()?;
+                let select = match t.remove("select") {
+                    None => false,
+                    Some(toml::Value::String(s)) if s == "validation" => true,
+                    Some(v) => {
+                        return Err(Error::config(
+                            "sweep.select",
+                            format!("{v} is not \"validation\" (the only choice)"),
+                        ));
+                    }
+                };
                 if let Some(key) = t.keys().next() {
-                    return Err(Error::config(format!("sweep.{key}"), "unknown key (allowed: components)"));
+                    return Err(Error::config(format!("sweep.{key}"), "unknown key (allowed: components, select)"));
                 }
-                k.unwrap_or_default()
+                (k.unwrap_or_default(), select)
             }
         };
+        if select_on_validation && let Some(d) = datasets.iter().find(|d| d.data.validation.is_none()) {
+            return Err(Error::config(
+                format!("dataset.{}.validation", d.name),
+                "is required by sweep.select = \"validation\" (frames held out of train to choose on)",
+            ));
+        }
         if sweep.is_empty()
             && let Some(m) = methods.iter().find(|m| m.components.is_none())
         {
@@ -365,7 +386,7 @@ impl EvalConfig {
                 "unknown key (allowed: name, [[dataset]], [[method]], [sweep], [control_points])",
             ));
         }
-        Ok(EvalConfig { name, datasets, methods, sweep, control_points })
+        Ok(EvalConfig { name, datasets, methods, sweep, select_on_validation, control_points })
     }
 
     /// K values of a method: its own list or the sweep.

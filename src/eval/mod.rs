@@ -121,7 +121,22 @@ pub struct CellResult {
     /// (`metrics.json`'s `test_erms_one_pass`; `test_erms` has the residual passes).
     #[serde(default)]
     pub test_erms_one_pass: Option<f64>,
+    /// Autoencoder whose encoder takes vertex steps only: test Erms of the network's own codes
+    /// (`metrics.json`'s `test_erms_network`; `test_erms` has the steps).
+    #[serde(default)]
+    pub test_erms_network: Option<f64>,
+    /// Erms over the validation frames (`data.validation`), encoded as the test frames are.
+    #[serde(default)]
+    pub validation_erms: Option<f64>,
+    /// Version of the autoencoder's encoding the numbers were measured with
+    /// ([`ENCODER_VERSION`]); a cached autoencoder cell of an older one is measured again.
+    #[serde(default)]
+    pub encoder_version: u32,
 }
+
+/// Version of the autoencoder's encoding in [`CellResult`]: 2 since its vertex steps
+/// (`encoder_steps`); cells cached before (0) are measured again.
+pub const ENCODER_VERSION: u32 = 2;
 
 /// A cell whose training or measuring failed: recorded, shown in the tables and the report,
 /// retried by the next run; the cells after it still run.
@@ -280,6 +295,12 @@ fn measure(cell: &Cell, cfg: &EvalConfig, ds: &DatasetData, trained: &TrainOutco
             .test_erms_one_pass
             .map(|x| check_finite("one-pass test Erms", &name, x))
             .transpose()?,
+        test_erms_network: metrics
+            .test_erms_network
+            .map(|x| check_finite("network-only test Erms", &name, x))
+            .transpose()?,
+        validation_erms: metrics.validation_erms.map(|x| check_finite("validation Erms", &name, x)).transpose()?,
+        encoder_version: ENCODER_VERSION,
         train_frames: ds.prep.train.len(),
         test_frames: ds.test.len(),
         sted_skipped_edges: sted.skipped_edges,
@@ -296,7 +317,9 @@ fn read_cached(dir: &Path, text: &str) -> Option<CellResult> {
     if !path.is_file() {
         return None;
     }
-    artifact::read_json::<CellResult>(&path).ok().filter(|r| r.config_text == text)
+    artifact::read_json::<CellResult>(&path)
+        .ok()
+        .filter(|r| r.config_text == text && (r.kind != "autoencoder" || r.encoder_version == ENCODER_VERSION))
 }
 
 fn stopped(opts: &EvalOptions) -> bool {

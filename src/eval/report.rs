@@ -12,7 +12,7 @@ use crate::artifact::write_atomic;
 use crate::error::Result;
 
 /// Header of `results.csv`.
-pub const RESULTS_HEADER: &str = "dataset,method,representation,K,train_erms,test_erms,alignment,sted_spatial,sted_temporal,in_support_share,support_size,support_regions,seconds,test_erms_fitted,sted_spatial_fitted,sted_temporal_fitted,test_erms_one_pass";
+pub const RESULTS_HEADER: &str = "dataset,method,representation,K,train_erms,test_erms,alignment,sted_spatial,sted_temporal,in_support_share,support_size,support_regions,seconds,test_erms_fitted,sted_spatial_fitted,sted_temporal_fitted,test_erms_one_pass,test_erms_network,validation_erms";
 
 /// Header of `control_points.csv`.
 pub const CONTROL_POINTS_HEADER: &str = "dataset,method,K,n,erms_mean,erms_min,erms_max,trials";
@@ -27,7 +27,7 @@ pub fn results_csv(results: &[CellResult]) -> String {
     for r in results {
         let _ = writeln!(
             s,
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
             r.dataset,
             r.method,
             r.representation,
@@ -44,10 +44,32 @@ pub fn results_csv(results: &[CellResult]) -> String {
             opt(r.test_erms_fitted),
             opt(r.sted_spatial_fitted),
             opt(r.sted_temporal_fitted),
-            opt(r.test_erms_one_pass)
+            opt(r.test_erms_one_pass),
+            opt(r.test_erms_network),
+            opt(r.validation_erms)
         );
     }
     s
+}
+
+/// Per dataset of `cfg` (in order), the index into `results` of its cell of lowest validation
+/// Erms, when `cfg` selects on validation (`None` for a dataset without a measured cell).
+pub fn chosen_on_validation(cfg: &EvalConfig, results: &[CellResult]) -> Vec<Option<usize>> {
+    if !cfg.select_on_validation {
+        return vec![None; cfg.datasets.len()];
+    }
+    cfg.datasets
+        .iter()
+        .map(|d| {
+            results
+                .iter()
+                .enumerate()
+                .filter(|(_, r)| r.dataset == d.name)
+                .filter_map(|(i, r)| r.validation_erms.map(|v| (i, v)))
+                .min_by(|a, b| a.1.total_cmp(&b.1))
+                .map(|(i, _)| i)
+        })
+        .collect()
 }
 
 /// `control_points.csv` text.
@@ -118,16 +140,35 @@ pub fn write_all(
          temporal part for ordered sequences (c = 0.5). Locality: medians over components of the in-support \
          energy share, the support size (elements above 1 % of the peak) and the number of connected support \
          regions. Seconds: fit time. Autoencoder rows: `test Erms`, `STED s`, `STED t` are the network \
-         encoder's codes (with its residual passes where `encoder_passes` > 0; `test Erms, one pass`: \
-         without them); the `fitted` columns are codes fitted through the decoder to every vertex (the \
+         encoder's codes (with its residual passes where `encoder_passes` > 0 and its vertex steps where \
+         `encoder_steps` > 0; `test Erms, network only`: without the steps; `test Erms, one pass`: the \
+         network's one pass); the `fitted` columns are codes fitted through the decoder to every vertex (the \
          counterpart of the linear methods' least-squares weights).\n\n",
     );
+    let chosen = chosen_on_validation(cfg, results);
+    if cfg.select_on_validation {
+        md.push_str(
+            "**Selection** (`sweep.select = \"validation\"`): per dataset, the cell of lowest *validation* Erms \
+             (frames held out of the training split, `data.validation`) is marked **chosen**; the test columns \
+             were not used to choose and are reported for it unchanged.\n\n",
+        );
+        let p = out.join("selection.csv");
+        let mut csv = String::from("dataset,method,K,validation_erms,test_erms\n");
+        for r in chosen.iter().flatten().map(|&i| &results[i]) {
+            let _ = writeln!(csv, "{},{},{},{},{}", r.dataset, r.method, r.k, opt(r.validation_erms), r.test_erms);
+        }
+        write_atomic(&p, csv.as_bytes())?;
+        files.push(p);
+    } else {
+        let _ = std::fs::remove_file(out.join("selection.csv"));
+    }
     if !failed.is_empty() {
         let _ =
             writeln!(md, "**{} cell(s) failed** (marked in the tables; errors in `failed_cells.csv`).\n", failed.len());
     }
-    for d in &cfg.datasets {
+    for (di, d) in cfg.datasets.iter().enumerate() {
         let rows: Vec<&CellResult> = results.iter().filter(|r| r.dataset == d.name).collect();
+        let chosen_row = chosen[di].map(|i| &results[i]);
         let _ = writeln!(
             md,
             "## {}\n\n`{}`, train `{}`, test `{}`{}\n",
@@ -138,18 +179,24 @@ pub fn write_all(
             if d.ordered { ", ordered sequence" } else { ", unordered shapes" }
         );
         md.push_str(
-            "| method | representation | K | train Erms | test Erms | test Erms, one pass | test Erms, fitted codes | alignment | STED s | STED t | STED s, fitted | STED t, fitted | in-support share | support size | regions | seconds |\n\
-             |---|---|---:|---:|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|\n",
+            "| method | representation | K | train Erms | validation Erms | test Erms | test Erms, network only | test Erms, one pass | test Erms, fitted codes | alignment | STED s | STED t | STED s, fitted | STED t, fitted | in-support share | support size | regions | seconds |\n\
+             |---|---|---:|---:|---:|---:|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|\n",
         );
         for r in &rows {
             let _ = writeln!(
                 md,
-                "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
-                r.method,
+                "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
+                if chosen_row.is_some_and(|c| std::ptr::eq(c, *r)) {
+                    format!("**{}** (chosen on validation)", r.method)
+                } else {
+                    r.method.clone()
+                },
                 r.representation,
                 r.k,
                 f(r.train_erms, 3),
+                fo(r.validation_erms, 3),
                 f(r.test_erms, 3),
+                fo(r.test_erms_network, 3),
                 fo(r.test_erms_one_pass, 3),
                 fo(r.test_erms_fitted, 3),
                 r.alignment,
@@ -166,7 +213,7 @@ pub fn write_all(
         for r in failed.iter().filter(|r| r.dataset == d.name) {
             let _ = writeln!(
                 md,
-                "| {} | — | {} | **failed** | {} | | | | | | | | | | | |",
+                "| {} | — | {} | **failed** | {} | | | | | | | | | | | | | |",
                 r.method,
                 r.k,
                 r.error.replace('|', "\\|").replace('\n', " ")

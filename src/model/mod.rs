@@ -115,8 +115,16 @@ pub trait Model {
         "least-squares weights".into()
     }
     /// The encoder's plain one-pass encoding, where [`Model::encode`] does more (the
-    /// autoencoder with `encoder_passes > 0`); `None` otherwise. Reported beside it.
+    /// autoencoder with `encoder_passes > 0` or `encoder_steps > 0`); `None` otherwise.
+    /// Reported beside it.
     fn encode_one_pass(&self, frames: &MeshSequence) -> Result<Option<Vec<Vec<f64>>>> {
+        let _ = frames;
+        Ok(None)
+    }
+    /// The network's own encoding, where [`Model::encode`] also takes feature-space steps
+    /// after it (the autoencoder with `encoder_steps > 0`); `None` otherwise. Reported beside
+    /// it ("network only").
+    fn encode_network(&self, frames: &MeshSequence) -> Result<Option<Vec<Vec<f64>>>> {
         let _ = frames;
         Ok(None)
     }

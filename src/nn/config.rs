@@ -98,6 +98,11 @@ pub struct AutoencoderConfig {
     /// misses, with the network's own encoder and decoder (no fitting, no vertices; each pass
     /// costs one decode and one encode). Training does not use it.
     pub encoder_passes: usize,
+    /// Gauss–Newton steps on the reconstructed vertices after the encoder and its passes (the
+    /// pipeline's `ae_vertex_steps`: the decoder's exact Jacobian and the ACAP decoding's
+    /// linearisation, each step moving the code towards the decoding closest to the shape in
+    /// centroid-aligned vertex error). 0: the network's code alone. Training does not use it.
+    pub encoder_steps: usize,
 }
 
 /// How a training step computes the loss and the gradients.
@@ -193,6 +198,7 @@ impl Default for AutoencoderConfig {
             vertex_warmup: 0.0,
             vertex_clip: 0.0,
             encoder_passes: 0,
+            encoder_steps: 1,
             encoder: EncoderKind::Tied,
         }
     }
@@ -265,6 +271,9 @@ impl AutoencoderConfig {
         nonneg("lambda_vertex", self.lambda_vertex)?;
         nonneg("vertex_clip", self.vertex_clip)?;
         nonneg("input_noise", self.input_noise)?;
+        if self.encoder_steps > 50 {
+            return Err(bad("encoder_steps", format!("{} must be in 0..=50", self.encoder_steps)));
+        }
         if self.encoder_passes > 16 {
             return Err(bad("encoder_passes", format!("{} must be in 0..=16", self.encoder_passes)));
         }
@@ -336,6 +345,8 @@ impl AutoencoderConfig {
         // Inference only.
         a.encoder_passes = 0;
         b.encoder_passes = 0;
+        a.encoder_steps = 0;
+        b.encoder_steps = 0;
         // Both engines compute the same step; a run may switch between them.
         (a.engine, a.device) = (Engine::Hand, ComputeDevice::Cpu);
         (b.engine, b.device) = (Engine::Hand, ComputeDevice::Cpu);

@@ -7,6 +7,8 @@
 use std::path::Path;
 use std::sync::OnceLock;
 
+use super::latent_fit::DecoderVjp;
+
 use burn::module::Module;
 use burn::store::ModuleRecord;
 use burn::tensor::Bytes;
@@ -64,6 +66,8 @@ pub struct Autoencoder {
     neighbors: NeighborIndex,
     weights: Weights,
     module: OnceLock<AutoencoderModule>,
+    /// The decoder's Jacobian products (built on first use: a copy of the parameters).
+    decoder: OnceLock<DecoderVjp>,
 }
 
 /// One latent dimension of the component analysis (see [`Autoencoder::analyze_components`]):
@@ -158,7 +162,7 @@ impl Autoencoder {
         }
         weights.check_layers()?;
         weights.check_components()?;
-        Ok(Autoencoder { config, neighbors, weights, module: OnceLock::new() })
+        Ok(Autoencoder { config, neighbors, weights, module: OnceLock::new(), decoder: OnceLock::new() })
     }
 
     /// Hyperparameters.
@@ -252,6 +256,16 @@ impl Autoencoder {
     /// `features`: F × N × 9 → output F codes of K values.
     pub fn encode(&self, features: &Features) -> Result<Vec<Vec<f64>>> {
         self.encode_with_passes(features, self.config.encoder_passes)
+    }
+
+    /// The decoder's Jacobian products ([`DecoderVjp`]: decode, vector–Jacobian products, the
+    /// exact Jacobian), built on first use (a copy of the parameters) and kept.
+    pub fn decoder_vjp(&self) -> Result<&DecoderVjp> {
+        if let Some(d) = self.decoder.get() {
+            return Ok(d);
+        }
+        let d = DecoderVjp::new(self)?;
+        Ok(self.decoder.get_or_init(|| d))
     }
 
     /// Latent codes with `passes` residual passes: `z₀ = E(x)`, then `passes` times

@@ -29,6 +29,7 @@ use serde::{Deserialize, Serialize};
 use super::ae_fit::{AeFitEncoder, POINT_FIT_ITERATIONS};
 use super::ae_pose::{AePoseConfig, AePoser};
 use super::ae_vertex_loss::AcapVertexLoss;
+use super::ae_vertex_steps::{VertexSteps, vertex_steps_apply};
 use super::geodesic_support::GeodesicSupport;
 use super::linear::{rest_from_arrays, rest_to_arrays};
 use super::pose::single_frame;
@@ -187,14 +188,17 @@ impl AeArtifact {
         Ok(AeArtifact { header, rest, representation, model, train_codes })
     }
 
-    /// Codes (K each) of frames given in data units: the encoder with the model's residual
-    /// passes (`encoder_passes`).
+    /// Codes (each [`AeArtifact::n_dims`] numbers) of frames given in data units: the encoder
+    /// with the model's residual passes (`encoder_passes`), then its feature-space steps
+    /// (`encoder_steps`).
     pub fn encode_frames(&self, frames: &MeshSequence) -> Result<Vec<Vec<f64>>> {
-        self.encode_frames_with_passes(frames, self.model.config().encoder_passes)
+        let c = self.model.config();
+        self.encode_frames_with(frames, c.encoder_passes, c.encoder_steps)
     }
 
-    /// [`Self::encode_frames`] with `passes` residual passes (0: the network's one pass).
-    pub fn encode_frames_with_passes(&self, frames: &MeshSequence, passes: usize) -> Result<Vec<Vec<f64>>> {
+    /// [`Self::encode_frames`] with `passes` residual passes (0: the network's one pass) and
+    /// `steps` feature-space steps (0: the network's code).
+    pub fn encode_frames_with(&self, frames: &MeshSequence, passes: usize, steps: usize) -> Result<Vec<Vec<f64>>> {
         let mut scaled = frames.clone();
         for p in scaled.frames.iter_mut().flatten() {
             *p = self.header.unit_box.apply(*p);
@@ -202,6 +206,12 @@ impl AeArtifact {
         let (own, translations) = self.representation.split_pieces(self.representation.encode(&scaled)?)?;
         let xs = self.header.scaling.apply(&own)?;
         let mut codes = self.model.encode_with_passes(&xs, passes)?;
+        if steps > 0 && vertex_steps_apply(self) {
+            let stepper = VertexSteps::new(self, self.model.decoder_vjp()?, steps)?;
+            for (z, target) in codes.iter_mut().zip(&scaled.frames) {
+                *z = stepper.refine(z, target)?.0;
+            }
+        }
         append_translations(&self.representation, &mut codes, &translations);
         Ok(codes)
     }
@@ -451,16 +461,32 @@ impl Model for AeArtifact {
         self.encode_frames(frames)
     }
     fn encoder_description(&self) -> String {
-        match self.model.config().encoder_passes {
-            0 => "the network encoder, one pass".into(),
-            p => format!("the network encoder and {p} residual passes z ← z + E(x) − E(D(z)), no fitting"),
+        let c = self.model.config();
+        let network = match c.encoder_passes {
+            0 => "the network encoder, one pass".to_string(),
+            p => format!("the network encoder and {p} residual passes z ← z + E(x) − E(D(z))"),
+        };
+        match c.encoder_steps {
+            0 => format!("{network}, no fitting"),
+            s if vertex_steps_apply(self) => {
+                format!("{network}, then up to {s} Gauss–Newton steps on the reconstructed vertices")
+            }
+            _ => format!("{network}, no fitting (encoder_steps apply to meshes in one piece)"),
         }
     }
     fn encode_one_pass(&self, frames: &MeshSequence) -> Result<Option<Vec<Vec<f64>>>> {
-        if self.model.config().encoder_passes == 0 {
+        let c = self.model.config();
+        if c.encoder_passes == 0 && (c.encoder_steps == 0 || !vertex_steps_apply(self)) {
             return Ok(None);
         }
-        Ok(Some(self.encode_frames_with_passes(frames, 0)?))
+        Ok(Some(self.encode_frames_with(frames, 0, 0)?))
+    }
+    fn encode_network(&self, frames: &MeshSequence) -> Result<Option<Vec<Vec<f64>>>> {
+        let c = self.model.config();
+        if c.encoder_steps == 0 || !vertex_steps_apply(self) {
+            return Ok(None);
+        }
+        Ok(Some(self.encode_frames_with(frames, c.encoder_passes, 0)?))
     }
     fn refine(
         &self,
@@ -475,7 +501,9 @@ impl Model for AeArtifact {
     fn start_weights(&self, from: Option<&[Vec3]>) -> Result<Vec<f64>> {
         let rest = self.rest_in_data_units();
         let p = from.unwrap_or(&rest.positions);
-        Ok(self.encode_frames(&single_frame(&rest, p)?)?.remove(0))
+        // The network's code (no vertex steps): posing starts where it always has.
+        let c = self.model.config();
+        Ok(self.encode_frames_with(&single_frame(&rest, p)?, c.encoder_passes, 0)?.remove(0))
     }
     fn start_description(&self) -> &'static str {
         "the code of the rest mesh"

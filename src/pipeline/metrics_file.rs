@@ -16,7 +16,8 @@ pub struct Metrics {
     /// Erms (1000 · RMS vertex error, data units) over the training frames.
     pub train_erms: f64,
     /// Erms over the test frames (`null` without a test split). Linear models encode a test
-    /// frame by least-squares weights; the autoencoder by its encoder's forward pass.
+    /// frame by least-squares weights; the autoencoder by its encoder (the network, its residual
+    /// passes and its vertex steps: `encoder_passes`, `encoder_steps`).
     pub test_erms: Option<f64>,
     /// Autoencoder only: Erms over the test frames with codes fitted to every vertex
     /// ([`crate::pipeline::ae_fit::AeFitEncoder`], started from the encoder's code), the
@@ -27,6 +28,11 @@ pub struct Metrics {
     /// plain one-pass codes (`test_erms` has the residual passes). Absent otherwise.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub test_erms_one_pass: Option<f64>,
+    /// Autoencoder whose encoder takes vertex steps (`encoder_steps > 0`) only: Erms over the
+    /// test frames with the network's own codes (its encoder and residual passes, no steps;
+    /// `test_erms` has the steps). Absent otherwise.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub test_erms_network: Option<f64>,
     /// Erms over the validation frames (`data.validation`: held out of the training frames,
     /// encoded as test frames are); absent without a validation split.
     #[serde(default, skip_serializing_if = "Option::is_none")]

@@ -5,6 +5,7 @@
 pub mod ae_fit;
 pub mod ae_pose;
 pub mod ae_vertex_loss;
+pub mod ae_vertex_steps;
 pub mod autoencoder;
 pub mod geodesic_support;
 pub mod linear;

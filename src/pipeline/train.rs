@@ -139,6 +139,7 @@ fn fit_measure_write(
     let (mut test_erms, mut test_erms_fitted, mut test_reconstruction) = (None, None, Vec::new());
     let mut test_reconstruction_fitted = Vec::new();
     let mut test_erms_one_pass = None;
+    let mut test_erms_network = None;
     if !prep.test.is_empty() {
         let test = MeshSequence { faces, frames: frames_in_data_units(prep, &prep.test)?, names: Vec::new() };
         let codes = model.encode(&test)?;
@@ -146,6 +147,9 @@ fn fit_measure_write(
         test_erms = Some(erms(&test.frames, &test_reconstruction, alignment)?);
         if let Some(plain) = model.encode_one_pass(&test)? {
             test_erms_one_pass = Some(erms(&test.frames, &model.decode(&plain)?, alignment)?);
+        }
+        if let Some(network) = model.encode_network(&test)? {
+            test_erms_network = Some(erms(&test.frames, &model.decode(&network)?, alignment)?);
         }
         if stats.refine_test {
             progress.stage("fitting test codes", test.n_frames() as u64);
@@ -179,6 +183,7 @@ fn fit_measure_write(
         test_erms,
         test_erms_fitted,
         test_erms_one_pass,
+        test_erms_network,
         validation_erms,
         validation_frames: prep.validation.len(),
         erms_alignment: alignment.to_string(),

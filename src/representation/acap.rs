@@ -473,6 +473,16 @@ impl Acap {
         }
     }
 
+    /// The linear part of [`Acap::decode_transforms`] (an affine map) for several sets of
+    /// transforms (N each) in one solve with the decoder's factor: per set the positions
+    /// p(T) − p(0) up to one translation per connected piece (centre them to compare).
+    pub fn decode_transforms_linear_many(&self, sets: &[Vec<Mat3>]) -> Result<Vec<Vec<Vec3>>> {
+        match &self.decoder {
+            Decoder::FitInverse(f) => f.solve_linear_many(sets),
+            Decoder::Edge(r) => r.solve_linear_many(sets),
+        }
+    }
+
     /// [`Acap::encode_frame`] for many frames, in parallel (rayon).
     pub fn encode_sequence(&self, frames: &[Vec<Vec3>], consistency: Consistency) -> Result<Vec<AcapFrame>> {
         frames.par_iter().map(|f| self.encode_frame(f, consistency)).collect()

@@ -159,12 +159,22 @@ impl FitInverse {
     /// Positions (N) whose encoder gradients best match `transforms` (N), centred on the
     /// reference centroid.
     pub fn solve(&self, transforms: &[Mat3]) -> Result<Vec<Vec3>> {
+        self.system.solve_from(|rhs| self.rhs(transforms, rhs))
+    }
+
+    /// The linear part of [`Self::solve`] for several sets of transforms at once (one solve with
+    /// 3 right-hand sides per set), each up to a translation per component.
+    pub fn solve_linear_many(&self, sets: &[Vec<Mat3>]) -> Result<Vec<Vec<Vec3>>> {
+        self.system.solve_linear_sets(sets, |t, rhs| self.rhs(t, rhs))
+    }
+
+    /// The right-hand side (3 × reduced rows, column-major, added to `rhs`) of `transforms`.
+    fn rhs(&self, transforms: &[Mat3], rhs: &mut [f64]) -> Result<()> {
         let n = self.g_sum.len();
         if transforms.len() != n {
             return Err(Error::Invalid(format!("fit inverse: {} transforms for {n} vertices", transforms.len())));
         }
         let mrows = self.system.n_reduced();
-        let mut rhs = vec![0.0; 3 * mrows];
         for i in 0..n {
             let (s, e) = (self.ring_offsets[i], self.ring_offsets[i + 1]);
             if s == e {
@@ -205,7 +215,7 @@ impl FitInverse {
                 }
             }
         }
-        self.system.solve(&mut rhs)
+        Ok(())
     }
 }
 

@@ -179,6 +179,66 @@ impl PinnedSystem {
         Ok(rhs)
     }
 
+    /// [`Self::solve`] of the right-hand side `rhs_of` writes (into zeros).
+    pub(crate) fn solve_from(&self, rhs_of: impl FnOnce(&mut [f64]) -> Result<()>) -> Result<Vec<Vec3>> {
+        let mut rhs = vec![0.0; 3 * self.n_reduced()];
+        rhs_of(&mut rhs)?;
+        self.solve(&mut rhs)
+    }
+
+    /// [`Self::solve_linear_many`] of one right-hand side per set of transforms, as `rhs_of`
+    /// writes it (into zeros).
+    pub(crate) fn solve_linear_sets(
+        &self,
+        sets: &[Vec<Mat3>],
+        rhs_of: impl Fn(&[Mat3], &mut [f64]) -> Result<()>,
+    ) -> Result<Vec<Vec<Vec3>>> {
+        let m = self.n_reduced();
+        let mut rhs = vec![0.0; 3 * m * sets.len()];
+        for (t, block) in sets.iter().zip(rhs.chunks_exact_mut(3 * m.max(1))) {
+            rhs_of(t, block)?;
+        }
+        self.solve_linear_many(&mut rhs, sets.len())
+    }
+
+    /// Solves for `sets` × 3 right-hand sides given column-major in `rhs` (3·`sets` ×
+    /// [`Self::n_reduced`], overwritten) in one solve and returns per set the N positions with
+    /// the pinned vertices at the origin: the solution of [`Self::solve`] up to one translation
+    /// per component (none is applied: for the linear part of an affine decoding, where the
+    /// caller centres).
+    pub(crate) fn solve_linear_many(&self, rhs: &mut [f64], sets: usize) -> Result<Vec<Vec<Vec3>>> {
+        let n = self.reduced.len();
+        let m = self.n_reduced();
+        if rhs.len() != 3 * m * sets {
+            return Err(Error::Invalid(format!("reconstruction: {} right-hand values for {sets} sets", rhs.len())));
+        }
+        if let Some(symbolic) = &self.symbolic {
+            if rhs.iter().any(|v| !v.is_finite()) {
+                return Err(Error::Numerical("reconstruction: non-finite right-hand side (bad features?)".into()));
+            }
+            let llt = LltRef::new(symbolic, &self.values);
+            let mut mem = MemBuffer::new(symbolic.solve_in_place_scratch::<f64>(3 * sets, Par::Seq));
+            llt.solve_in_place_with_conj(
+                Conj::No,
+                MatMut::from_column_major_slice_mut(rhs, m, 3 * sets),
+                Par::Seq,
+                MemStack::new(&mut mem),
+            );
+        }
+        Ok(rhs
+            .chunks_exact(3 * m.max(1))
+            .take(sets)
+            .map(|b| {
+                (0..n)
+                    .map(|v| {
+                        let r = self.reduced[v];
+                        if r == usize::MAX || m == 0 { [0.0; 3] } else { [b[r], b[m + r], b[2 * m + r]] }
+                    })
+                    .collect()
+            })
+            .collect())
+    }
+
     /// Solves for three right-hand sides given column-major in `rhs` (3 × [`Self::n_reduced`],
     /// overwritten) and returns the N positions, each component centred on its reference
     /// centroid.
@@ -257,12 +317,23 @@ impl AcapReconstruction {
     /// Positions (N) from per-vertex deformation gradients `transforms` (N, row-major 3×3,
     /// applied to reference edge vectors), each component centred on its reference centroid.
     pub fn solve(&self, transforms: &[Mat3]) -> Result<Vec<Vec3>> {
+        self.system.solve_from(|rhs| self.rhs(transforms, rhs))
+    }
+
+    /// The linear part of [`Self::solve`] for several sets of transforms at once (one solve with
+    /// 3 right-hand sides per set), each up to a translation per component (see
+    /// [`PinnedSystem::solve_linear_many`]).
+    pub fn solve_linear_many(&self, sets: &[Vec<Mat3>]) -> Result<Vec<Vec<Vec3>>> {
+        self.system.solve_linear_sets(sets, |t, rhs| self.rhs(t, rhs))
+    }
+
+    /// The right-hand side (3 × reduced rows, column-major, added to `rhs`) of `transforms`.
+    fn rhs(&self, transforms: &[Mat3], rhs: &mut [f64]) -> Result<()> {
         let n = self.rest.len();
         if transforms.len() != n {
             return Err(Error::Invalid(format!("reconstruction: {} transforms for {n} vertices", transforms.len())));
         }
         let m = self.system.n_reduced();
-        let mut rhs = vec![0.0; 3 * m];
         for (&[i, j], &c) in self.edges.iter().zip(&self.weights) {
             let (ti, tj) = (&transforms[i], &transforms[j]);
             let e = [
@@ -283,7 +354,7 @@ impl AcapReconstruction {
                 }
             }
         }
-        self.system.solve(&mut rhs)
+        Ok(())
     }
 }
 
