@@ -133,6 +133,14 @@ fn vertex_steps_bring_the_encoder_to_the_fitted_codes_on_unseen_shapes() {
     for w in by_steps.windows(2) {
         assert!(w[1] <= w[0] * (1.0 + 1e-6), "a step raised the error: {by_steps:?}");
     }
+    // With residual passes the step starts from the better of the codes with and without them:
+    // never above either.
+    let erms_of = |passes: usize, steps: usize| {
+        let z = art.encode_frames_with(&test, passes, steps).unwrap();
+        erms(&test.frames, &art.decode_codes(&z).unwrap(), Alignment::Centroid).unwrap()
+    };
+    let (stepped, passes_only, one_pass) = (erms_of(2, 1), erms_of(2, 0), erms_of(0, 0));
+    assert!(stepped <= passes_only.min(one_pass) * (1.0 + 1e-9), "{stepped} vs {passes_only} / {one_pass}");
     // 0 steps is the network's code, bit for bit; the network-only Erms is that code's.
     let z0 = art.encode_frames_with(&test, 0, 0).unwrap();
     let net = art.model.encode_with_passes(

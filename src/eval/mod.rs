@@ -134,9 +134,10 @@ pub struct CellResult {
     pub encoder_version: u32,
 }
 
-/// Version of the autoencoder's encoding in [`CellResult`]: 2 since its vertex steps
-/// (`encoder_steps`); cells cached before (0) are measured again.
-pub const ENCODER_VERSION: u32 = 2;
+/// Version of the autoencoder's encoding in [`CellResult`]: 2 with its vertex steps
+/// (`encoder_steps`), 3 since they start from the better of the network's codes with and without
+/// the residual passes; cells cached with another version are measured again.
+pub const ENCODER_VERSION: u32 = 3;
 
 /// A cell whose training or measuring failed: recorded, shown in the tables and the report,
 /// retried by the next run; the cells after it still run.

@@ -106,6 +106,31 @@ impl<'a> VertexSteps<'a> {
         Ok(centred(&self.acap.decode_transforms(&self.transforms(&xh))?))
     }
 
+    /// [`Self::refine`] from whichever of `starts` (codes of K numbers, at least one)
+    /// reconstructs `target` with the lowest centroid-aligned error (one decode and one solve
+    /// each): the network's code with and without its residual passes, which on a shape far
+    /// from the training set can make it worse.
+    pub fn refine_best(&self, starts: &[&[f64]], target: &[Vec3]) -> Result<(Vec<f64>, StepReport)> {
+        let goal = centred(target);
+        let mut best: Option<(f64, &[f64])> = None;
+        for &z in starts {
+            let p = self.centred_shape(z)?;
+            if p.len() != goal.len() {
+                return Err(Error::Invalid(format!(
+                    "encoder steps: {} target vertices, the model has {}",
+                    target.len(),
+                    p.len() / 3
+                )));
+            }
+            let e: f64 = p.iter().zip(&goal).map(|(a, b)| (a - b) * (a - b)).sum();
+            if best.is_none_or(|(b, _)| e < b) {
+                best = Some((e, z));
+            }
+        }
+        let (_, z0) = best.ok_or_else(|| Error::Invalid("encoder steps: no start code".into()))?;
+        self.refine(z0, target)
+    }
+
     /// The code after at most `steps` Gauss–Newton steps from `z0` towards `target` (N
     /// positions in the model's space, i.e. after the unit box), and what happened.
     pub fn refine(&self, z0: &[f64], target: &[Vec3]) -> Result<(Vec<f64>, StepReport)> {

@@ -207,9 +207,13 @@ impl AeArtifact {
         let xs = self.header.scaling.apply(&own)?;
         let mut codes = self.model.encode_with_passes(&xs, passes)?;
         if steps > 0 && vertex_steps_apply(self) {
+            // The steps start from the better of the codes with and without the passes.
+            let one_pass = if passes > 0 { self.model.encode_with_passes(&xs, 0)? } else { Vec::new() };
             let stepper = VertexSteps::new(self, self.model.decoder_vjp()?, steps)?;
-            for (z, target) in codes.iter_mut().zip(&scaled.frames) {
-                *z = stepper.refine(z, target)?.0;
+            for (f, (z, target)) in codes.iter_mut().zip(&scaled.frames).enumerate() {
+                let starts: Vec<&[f64]> =
+                    std::iter::once(z.as_slice()).chain(one_pass.get(f).map(Vec::as_slice)).collect();
+                *z = stepper.refine_best(&starts, target)?.0;
             }
         }
         append_translations(&self.representation, &mut codes, &translations);
