@@ -404,7 +404,7 @@ pub struct AutoencoderMethod {
     /// Residual passes of the encoder at inference (0: the paper's one pass).
     #[serde(skip_serializing_if = "network_default::encoder_passes")]
     pub encoder_passes: usize,
-    /// Feature-space Levenberg–Marquardt steps of the encoder at inference (0: none).
+    /// Gauss–Newton steps of the encoder on the reconstructed vertices at inference (0: none).
     #[serde(skip_serializing_if = "network_default::encoder_steps")]
     pub encoder_steps: usize,
 }

@@ -121,8 +121,7 @@ pub trait Model {
         let _ = frames;
         Ok(None)
     }
-    /// The network's own encoding, where [`Model::encode`] also takes feature-space steps
-    /// after it (the autoencoder with `encoder_steps > 0`); `None` otherwise. Reported beside
+    /// The network's own encoding, where [`Model::encode`] also takes vertex steps after it (the autoencoder with `encoder_steps > 0`); `None` otherwise. Reported beside
     /// it ("network only").
     fn encode_network(&self, frames: &MeshSequence) -> Result<Option<Vec<Vec<f64>>>> {
         let _ = frames;

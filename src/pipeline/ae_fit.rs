@@ -53,6 +53,46 @@ pub const FD_STEP: f64 = 1e-2;
 /// Relative objective decrease below which the fit stops.
 const TOLERANCE: f64 = 1e-6;
 
+/// One Levenberg–Marquardt step of the fits: solves (JᵀJ + λI + μ·diag(JᵀJ)) δ = `g` and offers
+/// z + δ to `trial`, which returns its objective (and what the caller keeps of it) or `None` to
+/// reject it. μ grows ×10 while the matrix is not positive definite or the objective is not a
+/// finite value below `e0`, and shrinks to max(0.3μ, 10⁻⁹) on success; `None` once μ exceeds
+/// `mu_max`. Returns the accepted code, its objective and the trial's payload.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn damped_step<T>(
+    jtj: &DMatrix<f64>,
+    g: &DVector<f64>,
+    lam: f64,
+    z: &[f64],
+    e0: f64,
+    mu: &mut f64,
+    mu_max: f64,
+    mut trial: impl FnMut(&[f64]) -> Result<Option<(f64, T)>>,
+) -> Result<Option<(Vec<f64>, f64, T)>> {
+    let k = z.len();
+    while *mu <= mu_max {
+        let mut a = jtj.clone();
+        for j in 0..k {
+            a[(j, j)] += lam + *mu * (jtj[(j, j)] + 1e-12);
+        }
+        let Some(chol) = a.cholesky() else {
+            *mu *= 10.0;
+            continue;
+        };
+        let step = chol.solve(g);
+        let zn: Vec<f64> = z.iter().zip(step.iter()).map(|(a, b)| a + b).collect();
+        if let Some((en, kept)) = trial(&zn)?
+            && en.is_finite()
+            && en < e0
+        {
+            *mu = (*mu * 0.3).max(1e-9);
+            return Ok(Some((zn, en, kept)));
+        }
+        *mu *= 10.0;
+    }
+    Ok(None)
+}
+
 /// Fits latent codes to whole shapes (see the module docs). Build once per model.
 pub struct AeFitEncoder<'a> {
     artifact: &'a AeArtifact,
@@ -159,29 +199,12 @@ impl<'a> AeFitEncoder<'a> {
             let dz = DVector::from_fn(k, |j, _| z0[j] - z[j]);
             let g = jac.transpose() * r + lam * dz;
             let e0 = objective(&p[0], &z, lam);
-            let mut improved = None;
-            while mu <= 1e8 {
-                let mut a = jtj.clone();
-                for j in 0..k {
-                    a[(j, j)] += lam + mu * (jtj[(j, j)] + 1e-12);
-                }
-                let Some(chol) = a.cholesky() else {
-                    mu *= 10.0;
-                    continue;
-                };
-                let step = chol.solve(&g);
-                let zn: Vec<f64> = z.iter().zip(step.iter()).map(|(a, b)| a + b).collect();
-                let (mut trial, pn) = self.decode(std::slice::from_ref(&zn))?;
-                let en = objective(&pn[0], &zn, lam);
-                if en.is_finite() && en < e0 {
-                    improved = Some((zn, trial.swap_remove(0), en));
-                    mu = (mu * 0.3).max(1e-9);
-                    break;
-                }
-                mu *= 10.0;
-            }
+            let improved = damped_step(&jtj, &g, lam, &z, e0, &mut mu, 1e8, |zn| {
+                let (mut trial, pn) = self.decode(&[zn.to_vec()])?;
+                Ok(Some((objective(&pn[0], zn, lam), trial.swap_remove(0))))
+            })?;
             match improved {
-                Some((zn, shape_n, en)) => {
+                Some((zn, en, shape_n)) => {
                     z = zn;
                     decoded = shape_n;
                     if e0 - en <= TOLERANCE * e0 {

@@ -36,6 +36,7 @@ use faer::{Accum, MatMut, MatRef, Par};
 use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
 
+use super::ae_fit::damped_step;
 use super::autoencoder::AeArtifact;
 use crate::error::{Error, Result};
 use crate::math::mat3::Mat3;
@@ -122,7 +123,7 @@ impl<'a> VertexSteps<'a> {
                     p.len() / 3
                 )));
             }
-            let e: f64 = p.iter().zip(&goal).map(|(a, b)| (a - b) * (a - b)).sum();
+            let e = squared_distance(&p, &goal);
             if best.is_none_or(|(b, _)| e < b) {
                 best = Some((e, z));
             }
@@ -144,7 +145,7 @@ impl<'a> VertexSteps<'a> {
             )));
         }
         let goal = centred(target);
-        let error = |p: &[f64]| p.iter().zip(&goal).map(|(a, b)| (a - b) * (a - b)).sum::<f64>();
+        let error = |p: &[f64]| squared_distance(p, &goal);
         let mut z = z0.to_vec();
         let mut lambda: Option<f64> = None;
         let mut mu = 1e-3;
@@ -230,33 +231,21 @@ impl<'a> VertexSteps<'a> {
                     -col.iter().zip(pc.iter().zip(&goal)).map(|(j, (a, b))| j * (a - b)).sum::<f64>()
                         - lam * (zc[kk] - z0[kk])
                 });
-                let mut accepted = None;
-                while mu <= 1e6 {
-                    let mut a = jtj.clone();
-                    for i in 0..k {
-                        a[(i, i)] += lam + mu * (jtj[(i, i)] + 1e-12);
-                    }
-                    let Some(chol) = a.cholesky() else {
-                        mu *= 10.0;
-                        continue;
-                    };
-                    let step = chol.solve(&g);
-                    let zn: Vec<f64> = zc.iter().zip(step.iter()).map(|(a, b)| a + b).collect();
-                    if zn.iter().all(|v| v.is_finite())
-                        && let Ok(pn) = self.centred_shape(&zn)
-                    {
-                        let en = error(&pn) + pull(&zn);
-                        if en.is_finite() && en < *e0 {
-                            mu = (mu * 0.3).max(1e-9);
-                            accepted = Some((zn, pn, en));
-                            break;
-                        }
-                    }
-                    mu *= 10.0;
-                }
-                let Some(next) = accepted else { break };
-                converged = e0 - next.2 <= TOLERANCE * e0;
-                here = next;
+                // A code the decoder cannot take (not finite) is a rejected step, not an error.
+                let accepted = damped_step(&jtj, &g, lam, zc, *e0, &mut mu, 1e6, |zn| {
+                    Ok(
+                        if zn.iter().all(|v| v.is_finite())
+                            && let Ok(pn) = self.centred_shape(zn)
+                        {
+                            Some((error(&pn) + pull(zn), pn))
+                        } else {
+                            None
+                        },
+                    )
+                })?;
+                let Some((zn, en, pn)) = accepted else { break };
+                converged = e0 - en <= TOLERANCE * e0;
+                here = (zn, pn, en);
                 improved = true;
                 if converged {
                     break;
@@ -274,6 +263,11 @@ impl<'a> VertexSteps<'a> {
         let start_error = start_error.unwrap_or(f64::NAN);
         Ok((z, StepReport { start_error, error: current_error, steps }))
     }
+}
+
+/// Σ (a_i − b_i)².
+fn squared_distance(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum()
 }
 
 /// Positions (N) centred on their mean, flattened (3N, vertex-major).

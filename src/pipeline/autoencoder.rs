@@ -189,15 +189,15 @@ impl AeArtifact {
     }
 
     /// Codes (each [`AeArtifact::n_dims`] numbers) of frames given in data units: the encoder
-    /// with the model's residual passes (`encoder_passes`), then its feature-space steps
-    /// (`encoder_steps`).
+    /// with the model's residual passes (`encoder_passes`), then its vertex steps
+    /// (`encoder_steps`, [`super::ae_vertex_steps`]).
     pub fn encode_frames(&self, frames: &MeshSequence) -> Result<Vec<Vec<f64>>> {
         let c = self.model.config();
         self.encode_frames_with(frames, c.encoder_passes, c.encoder_steps)
     }
 
     /// [`Self::encode_frames`] with `passes` residual passes (0: the network's one pass) and
-    /// `steps` feature-space steps (0: the network's code).
+    /// `steps` vertex steps (0: the network's code).
     pub fn encode_frames_with(&self, frames: &MeshSequence, passes: usize, steps: usize) -> Result<Vec<Vec<f64>>> {
         let mut scaled = frames.clone();
         for p in scaled.frames.iter_mut().flatten() {

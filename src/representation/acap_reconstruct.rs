@@ -145,7 +145,7 @@ impl PinnedSystem {
         self.reduced[v]
     }
 
-    /// Adjoint of [`Self::solve`]: for a gradient `grad` (N × 3) with respect to the returned
+    /// Adjoint of [`Self::solve_from`]: for a gradient `grad` (N × 3) with respect to the returned
     /// positions, the gradient with respect to the right-hand side (3 × [`Self::n_reduced`],
     /// column-major). The centring is a symmetric projection and the reduced matrix is
     /// symmetric, so this is one solve with the same factor.
@@ -174,16 +174,34 @@ impl PinnedSystem {
             if rhs.iter().any(|v| !v.is_finite()) {
                 return Err(Error::Numerical("reconstruction adjoint: non-finite gradient".into()));
             }
-            solve3(symbolic, &self.values, &mut rhs[..3 * m], m);
+            solve_columns(symbolic, &self.values, &mut rhs[..3 * m], m, 3);
         }
         Ok(rhs)
     }
 
-    /// [`Self::solve`] of the right-hand side `rhs_of` writes (into zeros).
+    /// Solves for the three right-hand sides `rhs_of` writes (column-major, 3 ×
+    /// [`Self::n_reduced`], into zeros) and returns the N positions, each component centred on
+    /// its reference centroid.
     pub(crate) fn solve_from(&self, rhs_of: impl FnOnce(&mut [f64]) -> Result<()>) -> Result<Vec<Vec3>> {
         let mut rhs = vec![0.0; 3 * self.n_reduced()];
         rhs_of(&mut rhs)?;
-        self.solve(&mut rhs)
+        let mut p = self.solve_linear_many(&mut rhs, 1)?.remove(0);
+        // Move each component's centroid onto the reference's.
+        let n = p.len();
+        let mut sums = vec![[0.0; 3]; self.centroids.len()];
+        for v in 0..n {
+            for k in 0..3 {
+                sums[self.component[v]][k] += p[v][k];
+            }
+        }
+        for v in 0..n {
+            let c = self.component[v];
+            let (target, cnt) = self.centroids[c];
+            for k in 0..3 {
+                p[v][k] += target[k] - sums[c][k] / cnt as f64;
+            }
+        }
+        Ok(p)
     }
 
     /// [`Self::solve_linear_many`] of one right-hand side per set of transforms, as `rhs_of`
@@ -203,9 +221,9 @@ impl PinnedSystem {
 
     /// Solves for `sets` × 3 right-hand sides given column-major in `rhs` (3·`sets` ×
     /// [`Self::n_reduced`], overwritten) in one solve and returns per set the N positions with
-    /// the pinned vertices at the origin: the solution of [`Self::solve`] up to one translation
-    /// per component (none is applied: for the linear part of an affine decoding, where the
-    /// caller centres).
+    /// the pinned vertices at the origin: the solution of [`Self::solve_from`] up to one
+    /// translation per component (none is applied: for the linear part of an affine decoding,
+    /// where the caller centres).
     pub(crate) fn solve_linear_many(&self, rhs: &mut [f64], sets: usize) -> Result<Vec<Vec<Vec3>>> {
         let n = self.reduced.len();
         let m = self.n_reduced();
@@ -216,14 +234,7 @@ impl PinnedSystem {
             if rhs.iter().any(|v| !v.is_finite()) {
                 return Err(Error::Numerical("reconstruction: non-finite right-hand side (bad features?)".into()));
             }
-            let llt = LltRef::new(symbolic, &self.values);
-            let mut mem = MemBuffer::new(symbolic.solve_in_place_scratch::<f64>(3 * sets, Par::Seq));
-            llt.solve_in_place_with_conj(
-                Conj::No,
-                MatMut::from_column_major_slice_mut(rhs, m, 3 * sets),
-                Par::Seq,
-                MemStack::new(&mut mem),
-            );
+            solve_columns(symbolic, &self.values, rhs, m, 3 * sets);
         }
         Ok(rhs
             .chunks_exact(3 * m.max(1))
@@ -237,42 +248,6 @@ impl PinnedSystem {
                     .collect()
             })
             .collect())
-    }
-
-    /// Solves for three right-hand sides given column-major in `rhs` (3 × [`Self::n_reduced`],
-    /// overwritten) and returns the N positions, each component centred on its reference
-    /// centroid.
-    pub(crate) fn solve(&self, rhs: &mut [f64]) -> Result<Vec<Vec3>> {
-        let n = self.reduced.len();
-        let mut p = vec![[0.0; 3]; n];
-        if let Some(symbolic) = &self.symbolic {
-            let m = symbolic.nrows();
-            if rhs.iter().any(|v| !v.is_finite()) {
-                return Err(Error::Numerical("reconstruction: non-finite right-hand side (bad features?)".into()));
-            }
-            solve3(symbolic, &self.values, &mut rhs[..3 * m], m);
-            for (v, pv) in p.iter_mut().enumerate() {
-                let r = self.reduced[v];
-                if r != usize::MAX {
-                    *pv = [rhs[r], rhs[m + r], rhs[2 * m + r]];
-                }
-            }
-        }
-        // Move each component's centroid onto the reference's.
-        let mut sums = vec![[0.0; 3]; self.centroids.len()];
-        for v in 0..n {
-            for k in 0..3 {
-                sums[self.component[v]][k] += p[v][k];
-            }
-        }
-        for v in 0..n {
-            let c = self.component[v];
-            let (target, cnt) = self.centroids[c];
-            for k in 0..3 {
-                p[v][k] += target[k] - sums[c][k] / cnt as f64;
-            }
-        }
-        Ok(p)
     }
 }
 
@@ -405,14 +380,14 @@ pub fn reconstruct(rest: &[Vec3], edges: &[[usize; 2]], weights: &[f64], transfo
     AcapReconstruction::new(rest, edges, weights)?.solve(transforms)
 }
 
-/// Solves the factorised system for three right-hand sides stored column-major in `rhs`
-/// (`3 × m`, overwritten with the solution).
-fn solve3(symbolic: &SymbolicCholesky<usize>, values: &[f64], rhs: &mut [f64], m: usize) {
+/// Solves the factorised system for `cols` right-hand sides stored column-major in `rhs`
+/// (`cols × m`, overwritten with the solution).
+fn solve_columns(symbolic: &SymbolicCholesky<usize>, values: &[f64], rhs: &mut [f64], m: usize, cols: usize) {
     let llt = LltRef::new(symbolic, values);
-    let mut mem = MemBuffer::new(symbolic.solve_in_place_scratch::<f64>(3, Par::Seq));
+    let mut mem = MemBuffer::new(symbolic.solve_in_place_scratch::<f64>(cols, Par::Seq));
     llt.solve_in_place_with_conj(
         Conj::No,
-        MatMut::from_column_major_slice_mut(rhs, m, 3),
+        MatMut::from_column_major_slice_mut(rhs, m, cols),
         Par::Seq,
         MemStack::new(&mut mem),
     );
