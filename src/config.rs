@@ -40,16 +40,17 @@
 //! | `fixed_centers` | splocs | [] | painted vertex sets fixing the first components' centres (lists of vertex indices, or file paths) |
 //! | `geodesic_m` | splocs, autoencoder | 10 / 1 | heat-method time factor m (t = m·h²) |
 //! | `iterations` | autoencoder | 2000 | training iterations |
-//! | `learning_rate` | autoencoder | 1e-3 | Adam step size (of the first step) |
-//! | `beta1`, `beta2` | autoencoder | 0.9, 0.999 | Adam's moment decay rates, each in [0, 1) |
-//! | `learning_rate_final` | autoencoder | none (constant rate) | step size of the last step, reached by a cosine decay from `learning_rate` |
+//! | `learning_rate` | autoencoder | 1e-2 (paper 1e-3) | Adam step size (of the first step) |
+//! | `learning_rate_norm` | autoencoder | 75 (paper: 0, never) | features of larger root-mean-square norm per shape train with every step size × this / norm |
+//! | `beta1`, `beta2` | autoencoder | 0.9, 0.99 (paper 0.999) | Adam's moment decay rates, each in [0, 1) |
+//! | `learning_rate_final` | autoencoder | 1e-4 (paper: constant rate) | step size of the last step, reached by a cosine decay from `learning_rate` |
 //! | `batch_size` | autoencoder | full batch | shapes per step |
 //! | `layers` | autoencoder | 1 | convolution layers L |
-//! | `lambda1`, `lambda2` | autoencoder | 0.5, 0.5 | weights of the sparsity and max-weight terms |
+//! | `lambda1`, `lambda2` | autoencoder | 4 (paper 0.5), 0.5 | weights of the sparsity and max-weight terms |
 //! | `theta` | autoencoder | 5.0 | hinge threshold of the max-weight term |
 //! | `fit_test` | autoencoder | true | also report `test_erms_fitted`: test Erms with codes fitted to every vertex (starting from the encoder's code; `meshdeco encode --fit`) |
 //! | `checkpoint_every` | autoencoder | 200 | iterations between checkpoints |
-//! | `scaling` | autoencoder | `per-dimension` | feature scaling to [−0.95, 0.95]: `per-dimension` (the paper) \| `grouped` (the reference code: one range for the 3 rotation dims, one for the 6 stretch dims) \| `global` (one range for all 9, so rotation and stretch errors weigh alike) |
+//! | `scaling` | autoencoder | `global` (paper `per-dimension`) | feature scaling to [−0.95, 0.95]: `per-dimension` (the paper) \| `grouped` (the reference code: one range for the 3 rotation dims, one for the 6 stretch dims) \| `global` (one range for all 9, so rotation and stretch errors weigh alike) |
 //! | `engine` | autoencoder | `hand` | `hand` (hand-written CPU step, fast) \| `graph` (Burn autodiff graph on `device`) |
 //! | `device` | autoencoder | `cpu` | `cpu` \| `wgpu` (needs `engine = "graph"` and a build with `--features wgpu`) |
 //! | `consistency` | autoencoder, pca, splocs | `global` | ACAP rotation consistency: `bfs` \| `global` |

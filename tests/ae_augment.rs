@@ -314,13 +314,29 @@ fn least_squares_encoder_gradients_match_finite_differences() {
 }
 
 #[test]
-fn new_keys_are_checked_by_name_and_default_to_the_paper() {
+fn new_keys_are_checked_by_name_and_default_to_the_recommended_setting() {
     use meshdeco::config::{Config, MethodConfig};
     let base = "[data]\npath = \"synthetic:tube\"\n[method]\nkind = \"autoencoder\"\n";
     let c = Config::from_toml(base).unwrap();
     let MethodConfig::Autoencoder(m) = &c.method else { panic!("kind") };
     let n = m.network_config();
-    assert_eq!((n.augment, n.validation, n.lambda_orthogonal), (0, 0, 0.0), "all off by default");
+    // A config file's default is meshdeco's recommended setting (issue 31): three synthetic
+    // shapes and the decorrelation term on; validation off.
+    assert_eq!((n.augment, n.validation, n.lambda_orthogonal), (3, 0, 10.0), "the recommended setting");
+    assert_eq!(n, meshdeco::nn::config::AutoencoderConfig::recommended());
+    let c = Config::from_toml(&format!(
+        "{base}augment = 0
+lambda_orthogonal = 0.0
+"
+    ))
+    .unwrap();
+    let MethodConfig::Autoencoder(m0) = &c.method else { panic!("kind") };
+    assert_eq!((m0.network_config().augment, m0.network_config().lambda_orthogonal), (0, 0.0), "switched off");
+    // Written out and read back, an explicit 0 stays 0 (not the default 3).
+    let text = meshdeco::config::resolved_toml(&c.name, &c.data, c.method.to_table().unwrap(), &c.output);
+    let back = Config::from_toml(&text).unwrap();
+    let MethodConfig::Autoencoder(m1) = &back.method else { panic!("kind") };
+    assert_eq!(m1.network_config().augment, 0, "{text}");
     assert_eq!(n.encoder, meshdeco::nn::config::EncoderKind::Tied);
     for (body, needle) in [
         ("augment_radius = [0.3, 0.1]", "method.augment_radius"),

@@ -2,6 +2,8 @@
 //! value is the centroid-aligned squared vertex error of the ACAP reconstructions, and its
 //! gradient matches finite differences; a trainer refuses the key without the loss.
 
+mod common;
+
 use meshdeco::mesh::TriMesh;
 use meshdeco::nn::OutputLoss;
 use meshdeco::pipeline::ae_vertex_loss::AcapVertexLoss;
@@ -122,7 +124,9 @@ fn the_vertex_term_lowers_the_training_shapes_vertex_error_on_the_tube() {
         Config::from_toml(&format!(
             "name = \"tube-ae\"\n[data]\npath = \"synthetic:tube\"\ntrain = \"every:3\"\ntest = \"rest\"\n\
              [method]\nkind = \"autoencoder\"\ncomponents = 2\niterations = 400\nlearning_rate = 0.005\nseed = 1\n\
-             fit_test = false\n{extra}"
+             learning_rate_final = 0.005\nfit_test = false\n{}{extra}",
+            // Measured with the paper's settings (the default λ1 = 4 empties K = 2 on the tube).
+            common::PAPER_AE_KEYS
         ))
         .unwrap()
     };

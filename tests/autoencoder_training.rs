@@ -260,6 +260,44 @@ fn resume_config() -> AutoencoderConfig {
     }
 }
 
+/// `learning_rate_norm`: a training set whose features are larger than it trains as if every
+/// step size (first and last) were multiplied by `learning_rate_norm / norm`, and one whose
+/// features are smaller trains as without it.
+#[test]
+fn learning_rate_norm_scales_every_step_size_by_the_features_norm() {
+    let (nb, dist, data) = planted_problem();
+    let norm = meshdeco::nn::training::feature_norm(&data).unwrap();
+    let mut sum = 0.0;
+    for s in 0..data.n_shapes() {
+        sum += data.shape(s).unwrap().iter().map(|&x| f64::from(x) * f64::from(x)).sum::<f64>();
+    }
+    let expected = (sum / data.n_shapes() as f64).sqrt();
+    assert!((norm - expected).abs() <= 1e-9 * expected, "feature norm {norm} vs {expected}");
+    let base = AutoencoderConfig { iterations: 12, checkpoint_every: 0, ..resume_config() };
+    let run = |cfg: AutoencoderConfig| {
+        let mut t = Trainer::new(cfg, &data, &nb, &dist).unwrap();
+        let scale = t.learning_rate_scale();
+        t.run(&RunOptions::default(), |_| {}).unwrap();
+        (scale, params(&t))
+    };
+    let (s_scaled, scaled) = run(AutoencoderConfig { learning_rate_norm: norm / 4.0, ..base.clone() });
+    assert!((s_scaled - 0.25).abs() < 1e-12, "scale {s_scaled}");
+    let (s_plain, by_hand) = run(AutoencoderConfig {
+        learning_rate: base.learning_rate * 0.25,
+        learning_rate_final: base.learning_rate_final.map(|f| f * 0.25),
+        learning_rate_norm: 0.0,
+        ..base.clone()
+    });
+    assert_eq!(s_plain, 1.0);
+    let diff = |a: &[f32], b: &[f32]| a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0f32, f32::max);
+    assert!(diff(&scaled, &by_hand) <= 1e-6, "scaled run vs quarter rates: {}", diff(&scaled, &by_hand));
+    let (s_small, small) = run(AutoencoderConfig { learning_rate_norm: norm * 2.0, ..base.clone() });
+    assert_eq!(s_small, 1.0);
+    let (_, unscaled) = run(AutoencoderConfig { learning_rate_norm: 0.0, ..base });
+    assert_eq!(small, unscaled, "features below learning_rate_norm: the run is the unscaled one");
+    assert!(diff(&scaled, &unscaled) > 1e-4, "the scaled run must differ: {}", diff(&scaled, &unscaled));
+}
+
 #[test]
 fn resume_reproduces_the_uninterrupted_run() {
     let (nb, dist, data) = planted_problem();

@@ -22,10 +22,13 @@ fn ok(o: &std::process::Output) -> String {
     String::from_utf8_lossy(&o.stdout).into_owned()
 }
 
+/// A constant step size (`learning_rate_final` = `learning_rate`): the resume test extends a
+/// 20-iteration run to 40, and a decaying rate's schedule depends on `iterations`.
 fn ae_config(name: &str, iterations: usize, k: usize) -> String {
     format!(
         "name = \"{name}\"\n[data]\npath = \"synthetic:bumps\"\ntrain = \"1-20\"\ntest = \"rest\"\n[method]\nkind = \"autoencoder\"\n\
-         components = {k}\nlayers = 1\niterations = {iterations}\ncheckpoint_every = 10\nlearning_rate = 0.005\nseed = 1\n"
+         components = {k}\nlayers = 1\niterations = {iterations}\ncheckpoint_every = 10\nlearning_rate = 0.005\n\
+         learning_rate_final = 0.005\nseed = 1\n"
     )
 }
 

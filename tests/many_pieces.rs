@@ -110,5 +110,8 @@ fn autoencoder_decoder_makes_its_training_frames() {
         fit("autoencoder", "none", "kind = \"autoencoder\"\ncomponents = 30\niterations = 600\nseed = 0");
     let fitted = fitted.expect("the autoencoder fits codes through its decoder");
     assert!(fitted <= 0.10 * rest_erms, "fitted codes {fitted:.3} above 10 % of the rest shape's {rest_erms:.3}");
-    assert!(fitted <= 0.5 * train_erms, "fitted codes {fitted:.3} not below half the encoder's {train_erms:.3}");
+    // The default encoder takes a vertex step towards the fitted codes, so fitting from its code
+    // only improves it.
+    assert!(fitted <= train_erms, "fitted codes {fitted:.3} above the encoder's {train_erms:.3}");
+    assert!(train_erms <= 0.10 * rest_erms, "encoder {train_erms:.3} above 10 % of the rest shape's {rest_erms:.3}");
 }

@@ -340,6 +340,8 @@ pub struct AutoencoderMethod {
     pub learning_rate: f64,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub learning_rate_final: Option<f64>,
+    /// Feature norm above which the step sizes are scaled down by this / norm (0: never).
+    pub learning_rate_norm: f64,
     pub beta1: f64,
     pub beta2: f64,
     /// Adam ε (default 1e-8).
@@ -365,7 +367,6 @@ pub struct AutoencoderMethod {
     /// Also report `test_erms_fitted`.
     pub fit_test: bool,
     /// Synthetic shapes per training step (augmentation in feature space; 0: none).
-    #[serde(skip_serializing_if = "network_default::augment")]
     pub augment: usize,
     /// `local` | `blend` | `mixed` (default `local`).
     #[serde(skip_serializing_if = "network_default::augment_mix")]
@@ -387,7 +388,6 @@ pub struct AutoencoderMethod {
     #[serde(skip_serializing_if = "network_default::encoder")]
     pub encoder: EncoderKind,
     /// Weight of the decorrelation term on the rows of C (0: none).
-    #[serde(skip_serializing_if = "network_default::lambda_orthogonal")]
     pub lambda_orthogonal: f64,
     /// Weight of the vertex term (0: none).
     #[serde(skip_serializing_if = "network_default::lambda_vertex")]
@@ -402,7 +402,6 @@ pub struct AutoencoderMethod {
     #[serde(skip_serializing_if = "network_default::vertex_clip")]
     pub vertex_clip: f64,
     /// Residual passes of the encoder at inference (0: the paper's one pass).
-    #[serde(skip_serializing_if = "network_default::encoder_passes")]
     pub encoder_passes: usize,
     /// Gauss–Newton steps of the encoder on the reconstructed vertices at inference (0: none).
     #[serde(skip_serializing_if = "network_default::encoder_steps")]
@@ -413,32 +412,30 @@ fn is_zero(n: &usize) -> bool {
     *n == 0
 }
 
-/// `skip_serializing_if` predicates: the value equals [`AutoencoderConfig::default`]'s.
+/// `skip_serializing_if` predicates: the value equals [`AutoencoderConfig::recommended`]'s (the
+/// default of a config file's keys).
 mod network_default {
     use crate::nn::config::AutoencoderConfig;
     macro_rules! is_default {
         ($($field:ident: $t:ty),* $(,)?) => {$(
             pub fn $field(v: &$t) -> bool {
-                *v == AutoencoderConfig::default().$field
+                *v == AutoencoderConfig::recommended().$field
             }
         )*};
     }
     is_default!(
         epsilon: f64,
         init_std: f64,
-        augment: usize,
         augment_mix: crate::nn::augment::AugmentMix,
         augment_radius: [f64; 2],
         input_noise: f64,
         validation: usize,
         validate_every: usize,
         encoder: crate::nn::config::EncoderKind,
-        lambda_orthogonal: f64,
         lambda_vertex: f64,
         vertex_batch: usize,
         vertex_warmup: f64,
         vertex_clip: f64,
-        encoder_passes: usize,
         encoder_steps: usize,
     );
 }
@@ -473,6 +470,7 @@ network_keys!(
     init_std,
     learning_rate,
     learning_rate_final,
+    learning_rate_norm,
     beta1,
     beta2,
     epsilon,
@@ -512,10 +510,10 @@ struct AutoencoderOwnKeys {
 impl Default for AutoencoderMethod {
     fn default() -> Self {
         AutoencoderMethod::from_network(
-            AutoencoderConfig::default(),
+            AutoencoderConfig::recommended(),
             AutoencoderOwnKeys {
                 geodesic_m: AE_GEODESIC_M,
-                scaling: ScalingName::PerDimension,
+                scaling: ScalingName::Global,
                 consistency: ConsistencyName::Global,
                 fit_test: true,
             },

@@ -58,7 +58,9 @@ pub struct EvalMethod {
     pub method: MethodConfig,
     /// Own K list (opt-out of the sweep), if given.
     pub components: Option<Vec<usize>>,
-    /// The method table as written (without `label` and `components`).
+    /// The datasets it runs on (`datasets = ["scape", …]`); `None`: every dataset.
+    pub datasets: Option<Vec<String>>,
+    /// The method table as written (without `label`, `components` and `datasets`).
     pub table: toml::Table,
 }
 
@@ -251,12 +253,43 @@ impl EvalConfig {
                     }
                     let components =
                         t.remove("components").map(|v| usize_list(&format!("{prefix}.components"), v)).transpose()?;
+                    let only = match t.remove("datasets") {
+                        None => None,
+                        Some(toml::Value::Array(a)) if !a.is_empty() => {
+                            let mut names = Vec::new();
+                            for v in a {
+                                match v {
+                                    toml::Value::String(n) if datasets.iter().any(|d| d.name == n) => names.push(n),
+                                    other => {
+                                        return Err(Error::config(
+                                            format!("{prefix}.datasets"),
+                                            format!("{other} is not the name of a [[dataset]]"),
+                                        ));
+                                    }
+                                }
+                            }
+                            Some(names)
+                        }
+                        Some(other) => {
+                            return Err(Error::config(
+                                format!("{prefix}.datasets"),
+                                format!("`{other}` must be a non-empty list of dataset names"),
+                            ));
+                        }
+                    };
                     let mut probe = t.clone();
                     probe.insert("components".into(), (components.as_ref().map_or(1, |c| c[0]) as i64).into());
                     let data = &datasets[0].table;
                     let c = Config::from_toml(&train_config_text("probe", data, &probe))
                         .map_err(|e| rekey(e, "method", &prefix))?;
-                    methods.push(EvalMethod { label, kind: c.kind(), method: c.method, components, table: t });
+                    methods.push(EvalMethod {
+                        label,
+                        kind: c.kind(),
+                        method: c.method,
+                        components,
+                        datasets: only,
+                        table: t,
+                    });
                 }
             }
             Some(_) => return Err(Error::config("method", "must be an array of tables ([[method]])")),
@@ -400,6 +433,9 @@ impl EvalConfig {
         let mut out = Vec::new();
         for (di, d) in self.datasets.iter().enumerate() {
             for (mi, m) in self.methods.iter().enumerate() {
+                if m.datasets.as_ref().is_some_and(|only| !only.contains(&d.name)) {
+                    continue;
+                }
                 for &k in self.ks(mi) {
                     let mut t = m.table.clone();
                     t.insert("components".into(), (k as i64).into());
@@ -465,6 +501,23 @@ counts = [10, 5]
         assert_ne!(cells[0].config_text, cells[1].config_text);
     }
 
+    /// `datasets = [...]` runs a method on the named datasets only (e.g. PCA at each one's
+    /// largest K).
+    #[test]
+    fn a_method_runs_on_its_datasets_only() {
+        let two = GOOD.replace(
+            "[[method]]\nlabel = \"pca\"",
+            "[[dataset]]\nname = \"pieces\"\npath = \"synthetic:pieces\"\ntrain = \"every:2\"\ntest = \"rest\"\n\n[[method]]\nlabel = \"pca\"\ndatasets = [\"pieces\"]",
+        );
+        let c = EvalConfig::from_toml(&two).unwrap();
+        assert_eq!(c.methods[0].datasets, Some(vec!["pieces".to_string()]));
+        let cells: Vec<(usize, usize, usize)> = c.cells().unwrap().iter().map(|c| (c.dataset, c.method, c.k)).collect();
+        // tube: the autoencoder only; pieces: PCA at every K, then the autoencoder.
+        assert_eq!(cells, vec![(0, 1, 4), (1, 0, 2), (1, 0, 4), (1, 0, 6), (1, 1, 4)]);
+        // The key does not reach the method's own config.
+        assert!(!c.methods[0].table.contains_key("datasets"));
+    }
+
     #[test]
     fn errors_name_the_key() {
         let cases = [
@@ -481,6 +534,8 @@ counts = [10, 5]
             (GOOD.replace("train = \"every:2\"", "train = \"9-3\""), "dataset.tube.train"),
             (GOOD.replace("kind = \"pca\"", "kind = \"pca\"\nlayers = 2"), "method.pca.layers"),
             (GOOD.replace("name = \"t\"", "name = \"t\"\nmethods = 1"), "methods"),
+            (GOOD.replace("label = \"ae\"", "label = \"ae\"\ndatasets = [\"tbue\"]"), "method.ae.datasets"),
+            (GOOD.replace("label = \"ae\"", "label = \"ae\"\ndatasets = []"), "method.ae.datasets"),
         ];
         for (text, needle) in cases {
             let e = EvalConfig::from_toml(&text).unwrap_err().to_string();

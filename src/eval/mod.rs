@@ -129,15 +129,17 @@ pub struct CellResult {
     #[serde(default)]
     pub validation_erms: Option<f64>,
     /// Version of the autoencoder's encoding the numbers were measured with
-    /// ([`ENCODER_VERSION`]); a cached autoencoder cell of an older one is measured again.
+    /// ([`ENCODER_VERSION`]); a cached autoencoder cell of an older one is trained and measured again.
     #[serde(default)]
     pub encoder_version: u32,
 }
 
-/// Version of the autoencoder's encoding in [`CellResult`]: 2 with its vertex steps
-/// (`encoder_steps`), 3 since they start from the better of the network's codes with and without
-/// the residual passes; cells cached with another version are measured again.
-pub const ENCODER_VERSION: u32 = 3;
+/// Version of the autoencoder's training defaults and encoding in [`CellResult`]: 2 with its
+/// vertex steps (`encoder_steps`), 3 since they start from the better of the network's codes with
+/// and without the residual passes, 4 since the keys a cell leaves out mean
+/// [`crate::nn::config::AutoencoderConfig::recommended`] (before: the paper's settings); cells
+/// cached with another version are trained and measured again.
+pub const ENCODER_VERSION: u32 = 4;
 
 /// A cell whose training or measuring failed: recorded, shown in the tables and the report,
 /// retried by the next run; the cells after it still run.

@@ -195,6 +195,24 @@ pub struct Trainer<'a> {
     vertex_lanes: Vec<usize>,
     /// The shuffled order of the current epoch (mini-batches): (epoch, order).
     epoch_order: Option<(usize, Vec<usize>)>,
+    /// Factor on every step size from the training features' size
+    /// ([`AutoencoderConfig::learning_rate_scale`] of [`feature_norm`]).
+    lr_scale: f64,
+    /// [`feature_norm`] of the training data.
+    feature_norm: f64,
+}
+
+/// Root-mean-square over the training shapes of each shape's Euclidean norm of its scaled
+/// features (at most 256 evenly spaced shapes are read for a streamed set).
+pub fn feature_norm(data: &TrainingData) -> Result<f64> {
+    let n = data.n_shapes();
+    let take = if data.is_streamed() { n.min(256) } else { n };
+    let mut sum = 0.0f64;
+    for i in 0..take {
+        let s = if take == n { i } else { i * n / take };
+        sum += data.shape(s)?.iter().map(|&x| f64::from(x) * f64::from(x)).sum::<f64>();
+    }
+    Ok(if take == 0 { 0.0 } else { (sum / take as f64).sqrt() })
 }
 
 fn adam(cfg: &AutoencoderConfig) -> ModuleOptimizer {
@@ -301,6 +319,8 @@ impl<'a> Trainer<'a> {
         } else {
             None
         };
+        let norm = feature_norm(data)?;
+        let lr_scale = config.learning_rate_scale(norm);
         let weights = Weights {
             layers: layer_weights(&layers),
             k: config.components,
@@ -339,7 +359,20 @@ impl<'a> Trainer<'a> {
             output_loss: None,
             vertex_lanes: Vec::new(),
             epoch_order: None,
+            lr_scale,
+            feature_norm: norm,
         })
+    }
+
+    /// Factor on every step size for this training set (1 unless its features are larger than
+    /// [`AutoencoderConfig::learning_rate_norm`]).
+    pub fn learning_rate_scale(&self) -> f64 {
+        self.lr_scale
+    }
+
+    /// The training features' size ([`feature_norm`]), which sets [`Self::learning_rate_scale`].
+    pub fn feature_norm(&self) -> f64 {
+        self.feature_norm
     }
 
     /// Gives the run the vertex term's loss (`lambda_vertex > 0` needs one; it is weighted by
@@ -711,7 +744,7 @@ impl<'a> Trainer<'a> {
             }
         }
         drop(components);
-        let lr = self.config.learning_rate_at(self.iteration);
+        let lr = self.config.learning_rate_at(self.iteration) * self.lr_scale;
         let layers = self.optimizer.step(lr, layers, grads);
         self.set_layers(layers);
         self.update_components(lr);
@@ -737,7 +770,7 @@ impl<'a> Trainer<'a> {
     /// as it updates ([`engine::update_components`]).
     fn apply_gradients(&mut self, stream: bool) {
         let dev = self.device.clone().inner();
-        let lr = self.config.learning_rate_at(self.iteration);
+        let lr = self.config.learning_rate_at(self.iteration) * self.lr_scale;
         let layers = self.layers.take().expect("layers present between steps");
         let mut gp = GradientsParams::new();
         let t9x9 = |a: &[[f64; 9]; 9]| -> Tensor<2> {

@@ -735,7 +735,17 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
         .open(&log_path)
         .map_err(|e| Error::io(&log_path, e))?;
     let progress = &mut *ctx.progress;
-    progress.stage("training", ae_cfg.iterations as u64);
+    let (feature_norm, scale) = (trainer.feature_norm(), trainer.learning_rate_scale());
+    let trainer_scale = scale;
+    let stage = if scale < 1.0 {
+        format!(
+            "training (step sizes × {scale:.3}: the features are larger than learning_rate_norm {})",
+            ae_cfg.learning_rate_norm
+        )
+    } else {
+        "training".to_string()
+    };
+    progress.stage(&stage, ae_cfg.iterations as u64);
     progress.step(trainer.iteration() as u64, "");
     let t_train = Instant::now();
     let mut log_error: Option<std::io::Error> = None;
@@ -828,6 +838,7 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
             converged: None,
             locality,
             refine_test: m.fit_test,
+            feature_norm: Some((feature_norm, trainer_scale)),
         },
         method: MethodConfig::Autoencoder(m.clone()),
     })

@@ -436,6 +436,7 @@ pub fn fit_splocs(m: &SplocsMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -
             converged: Some(fit.converged),
             locality: fit.locality,
             refine_test: false,
+            feature_norm: None,
         },
         method: MethodConfig::Splocs(m.clone()),
     })

@@ -63,6 +63,12 @@ pub struct Metrics {
     pub median_support_size: Option<f64>,
     /// Per-component locality, in component order.
     pub locality: Vec<ComponentLocality>,
+    /// Autoencoder only: root-mean-square norm per training shape of the scaled training
+    /// features, and the factor it put on every step size (`learning_rate_norm`; 1: none).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub feature_norm: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub learning_rate_scale: Option<f64>,
 }
 
 /// Median of a slice (mean of the two middle values for even lengths); `None` when empty.

@@ -45,6 +45,9 @@ pub struct FitStats {
     pub locality: Vec<ComponentLocality>,
     /// Measure the test split also with refined encodings ([`Model::refine`]).
     pub refine_test: bool,
+    /// Autoencoder: the training features' root-mean-square norm per shape and the factor it
+    /// put on every step size (`learning_rate_norm`).
+    pub feature_norm: Option<(f64, f64)>,
 }
 
 /// A fitted model with its statistics and the resolved method config (every default written

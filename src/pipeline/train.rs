@@ -197,6 +197,8 @@ fn fit_measure_write(
         median_energy_share: median(&shares),
         median_support_size: median(&sizes),
         locality: stats.locality,
+        feature_norm: stats.feature_norm.map(|(n, _)| n),
+        learning_rate_scale: stats.feature_norm.map(|(_, s)| s),
     };
 
     crate::timing::record("measure", t.elapsed().as_secs_f64());
