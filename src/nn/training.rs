@@ -195,10 +195,7 @@ pub struct Trainer<'a> {
     vertex_lanes: Vec<usize>,
     /// The shuffled order of the current epoch (mini-batches): (epoch, order).
     epoch_order: Option<(usize, Vec<usize>)>,
-    /// Factor on every step size from the training features' size
-    /// ([`AutoencoderConfig::learning_rate_scale`] of [`feature_norm`]).
-    lr_scale: f64,
-    /// [`feature_norm`] of the training data.
+    /// [`feature_norm`] of the training data (sets [`Self::learning_rate_scale`]).
     feature_norm: f64,
 }
 
@@ -320,7 +317,6 @@ impl<'a> Trainer<'a> {
             None
         };
         let norm = feature_norm(data)?;
-        let lr_scale = config.learning_rate_scale(norm);
         let weights = Weights {
             layers: layer_weights(&layers),
             k: config.components,
@@ -359,7 +355,6 @@ impl<'a> Trainer<'a> {
             output_loss: None,
             vertex_lanes: Vec::new(),
             epoch_order: None,
-            lr_scale,
             feature_norm: norm,
         })
     }
@@ -367,7 +362,13 @@ impl<'a> Trainer<'a> {
     /// Factor on every step size for this training set (1 unless its features are larger than
     /// [`AutoencoderConfig::learning_rate_norm`]).
     pub fn learning_rate_scale(&self) -> f64 {
-        self.lr_scale
+        self.config.learning_rate_scale(self.feature_norm)
+    }
+
+    /// Adam step size of the current step: the schedule's rate times
+    /// [`Self::learning_rate_scale`].
+    fn step_size(&self) -> f64 {
+        self.config.learning_rate_at(self.iteration) * self.learning_rate_scale()
     }
 
     /// The training features' size ([`feature_norm`]), which sets [`Self::learning_rate_scale`].
@@ -744,7 +745,7 @@ impl<'a> Trainer<'a> {
             }
         }
         drop(components);
-        let lr = self.config.learning_rate_at(self.iteration) * self.lr_scale;
+        let lr = self.step_size();
         let layers = self.optimizer.step(lr, layers, grads);
         self.set_layers(layers);
         self.update_components(lr);
@@ -770,7 +771,7 @@ impl<'a> Trainer<'a> {
     /// as it updates ([`engine::update_components`]).
     fn apply_gradients(&mut self, stream: bool) {
         let dev = self.device.clone().inner();
-        let lr = self.config.learning_rate_at(self.iteration) * self.lr_scale;
+        let lr = self.step_size();
         let layers = self.layers.take().expect("layers present between steps");
         let mut gp = GradientsParams::new();
         let t9x9 = |a: &[[f64; 9]; 9]| -> Tensor<2> {

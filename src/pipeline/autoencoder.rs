@@ -736,7 +736,6 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
         .map_err(|e| Error::io(&log_path, e))?;
     let progress = &mut *ctx.progress;
     let (feature_norm, scale) = (trainer.feature_norm(), trainer.learning_rate_scale());
-    let trainer_scale = scale;
     let stage = if scale < 1.0 {
         format!(
             "training (step sizes × {scale:.3}: the features are larger than learning_rate_norm {})",
@@ -838,7 +837,7 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
             converged: None,
             locality,
             refine_test: m.fit_test,
-            feature_norm: Some((feature_norm, trainer_scale)),
+            feature_norm: Some((feature_norm, scale)),
         },
         method: MethodConfig::Autoencoder(m.clone()),
     })
