@@ -9,6 +9,7 @@
 //! config's `[data]` gives the test split; the model is a `meshdeco train` directory of that
 //! config.
 use meshdeco::config::Config;
+use meshdeco::mesh::FrameSource;
 use meshdeco::metrics::erms::erms;
 use meshdeco::model::Model;
 use meshdeco::pipeline::autoencoder::AeArtifact;
@@ -24,7 +25,12 @@ fn main() {
     let cfg = Config::from_file(Path::new(&args[1])).expect("config");
     let prep = meshdeco::preprocess::prepare(&cfg.data).expect("data");
     let art = AeArtifact::load(Path::new(&args[2])).expect("model");
-    let test = prep.test_sequence().expect("test frames");
+    // `AE_SPLIT=validation` encodes the config's validation frames instead of its test frames.
+    let test = if std::env::var("AE_SPLIT").is_ok_and(|v| v == "validation") {
+        prep.sequence.select_frames(&prep.validation).expect("validation frames")
+    } else {
+        prep.test_sequence().expect("test frames")
+    };
     let steps: Vec<usize> = match args.get(3) {
         Some(s) => s.split(',').map(|v| v.parse().expect("steps: comma-separated integers")).collect(),
         None => vec![0, 1, 2, 3, 5, 10],

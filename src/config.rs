@@ -42,6 +42,7 @@
 //! | `iterations` | autoencoder | 2000 | training iterations |
 //! | `learning_rate` | autoencoder | 1e-2 (paper 1e-3) | Adam step size (of the first step) |
 //! | `learning_rate_norm` | autoencoder | 75 (paper: 0, never) | features of larger root-mean-square norm per shape train with every step size × this / norm |
+//! | `stall_restarts` | autoencoder | 2 (paper: 0) | a run still at or above its first step's reconstruction error at 10 % of `iterations` (step ≥ 50) restarts with halved step sizes, at most this many times; in 0..=8 |
 //! | `beta1`, `beta2` | autoencoder | 0.9, 0.99 (paper 0.999) | Adam's moment decay rates, each in [0, 1) |
 //! | `learning_rate_final` | autoencoder | 1e-4 (paper: constant rate) | step size of the last step, reached by a cosine decay from `learning_rate` |
 //! | `batch_size` | autoencoder | full batch | shapes per step |
@@ -51,6 +52,7 @@
 //! | `fit_test` | autoencoder | true | also report `test_erms_fitted`: test Erms with codes fitted to every vertex (starting from the encoder's code; `meshdeco encode --fit`) |
 //! | `checkpoint_every` | autoencoder | 200 | iterations between checkpoints |
 //! | `scaling` | autoencoder | `global` (paper `per-dimension`) | feature scaling to [−0.95, 0.95]: `per-dimension` (the paper) \| `grouped` (the reference code: one range for the 3 rotation dims, one for the 6 stretch dims) \| `global` (one range for all 9, so rotation and stretch errors weigh alike) |
+//! | `scaling_quantile`, `scaling_fence` | autoencoder | 0.001, 1 (paper: 0, min/max) | outlier fence of the feature scaling: the q … 1 − q quantiles [a, b] of the training features (each group of `scaling`), widened by fence × (b − a) on each side, are the range mapped to [−0.95, 0.95] where they lie inside the minimum and maximum, values beyond clamped; q = 0: minimum and maximum. A few extreme features (slivers of a face stretched 70×) otherwise squeeze all others; q in [0, 0.05], fence ≥ 0 |
 //! | `engine` | autoencoder | `hand` | `hand` (hand-written CPU step, fast) \| `graph` (Burn autodiff graph on `device`) |
 //! | `device` | autoencoder | `cpu` | `cpu` \| `wgpu` (needs `engine = "graph"` and a build with `--features wgpu`) |
 //! | `consistency` | autoencoder, pca, splocs | `global` | ACAP rotation consistency: `bfs` \| `global` |
@@ -511,13 +513,16 @@ admm = { rho = 10, iterations = 10 }
             ("beta1 = -0.1", "method.beta1", "-0.1 must be in [0, 1)"),
             ("scaling = \"minmax\"", "method.scaling", "`minmax`"),
             ("learning_rate_final = 0", "method.learning_rate_final", "0"),
+            ("scaling_quantile = 0.2", "method.scaling_quantile", "0.2 must be in [0, 0.05]"),
+            ("scaling_quantile = -0.001", "method.scaling_quantile", "-0.001"),
+            ("scaling_fence = -1.0", "method.scaling_fence", "-1 must be a finite number"),
         ] {
             let e = Config::from_toml(&format!("{base}{line}\n")).unwrap_err().to_string();
             assert!(e.contains(key) && e.contains(value), "{e}");
         }
         let ok = Config::from_toml(&format!("{base}beta2 = 0.99\nscaling = \"global\"\n")).unwrap();
         let MethodConfig::Autoencoder(m) = &ok.method else { panic!("kind") };
-        assert_eq!((m.beta2, m.scaling), (0.99, ScalingName::Global));
+        assert_eq!((m.beta2, m.scaling, m.scaling_quantile, m.scaling_fence), (0.99, ScalingName::Global, 1e-3, 1.0));
         let pca = "[data]\npath = \"synthetic:tube\"\n[method]\nkind = \"pca\"\nengine = \"graph\"\n";
         assert!(Config::from_toml(pca).unwrap_err().to_string().contains("engine"));
     }

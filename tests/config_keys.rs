@@ -41,6 +41,7 @@ fn every_autoencoder_network_field_is_a_method_key() {
         ("learning_rate", "learning_rate = 0.01", json!(0.01)),
         ("learning_rate_final", "learning_rate_final = 0.0001", json!(0.0001)),
         ("learning_rate_norm", "learning_rate_norm = 40.0", json!(40.0)),
+        ("stall_restarts", "stall_restarts = 5", json!(5)),
         ("beta1", "beta1 = 0.8", json!(0.8)),
         ("beta2", "beta2 = 0.99", json!(0.99)),
         ("epsilon", "epsilon = 1e-6", json!(1e-6)),

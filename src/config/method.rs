@@ -325,7 +325,7 @@ impl RegionPcaMethod {
 /// (except `d_min`/`d_max`, written `support = [d_min, d_max]`), with its meaning documented
 /// there; [`network_keys!`] maps the two both ways, naming every field, so a new network field
 /// does not compile until it is a key. The method's own keys: `geodesic_m`, `scaling`,
-/// `consistency`, `fit_test`. Keys at their default that older configs did not have are left out
+/// `scaling_quantile`, `scaling_fence`, `consistency`, `fit_test`. Keys at their default that older configs did not have are left out
 /// of a written `config.toml` (`skip_serializing_if`); they parse back to the same value.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -342,6 +342,8 @@ pub struct AutoencoderMethod {
     pub learning_rate_final: Option<f64>,
     /// Feature norm above which the step sizes are scaled down by this / norm (0: never).
     pub learning_rate_norm: f64,
+    /// Restarts with halved step sizes of a run that stalls (0: never).
+    pub stall_restarts: usize,
     pub beta1: f64,
     pub beta2: f64,
     /// Adam ε (default 1e-8).
@@ -359,6 +361,13 @@ pub struct AutoencoderMethod {
     pub checkpoint_every: usize,
     /// `per-dimension` | `grouped` | `global`.
     pub scaling: ScalingName,
+    /// Quantile q of the outlier fence: the training features' q … 1 − q range [a, b], widened
+    /// by `scaling_fence` × (b − a) each side, is what the scaling maps to [−0.95, 0.95] where it
+    /// lies inside the minimum and maximum, values beyond clamped (0: the minimum and maximum,
+    /// the paper; in [0, 0.05]; [`crate::representation::scaling`]).
+    pub scaling_quantile: f64,
+    /// Width of the outlier fence beyond the quantile range, in multiples of it (≥ 0).
+    pub scaling_fence: f64,
     pub consistency: ConsistencyName,
     /// `hand` | `graph`.
     pub engine: Engine,
@@ -450,14 +459,32 @@ macro_rules! network_keys {
             /// The method whose network keys are `c`'s and whose own keys are `own`'s.
             fn from_network(c: AutoencoderConfig, own: AutoencoderOwnKeys) -> Self {
                 let AutoencoderConfig { d_min, d_max, $($field),* } = c;
-                let AutoencoderOwnKeys { geodesic_m, scaling, consistency, fit_test } = own;
-                AutoencoderMethod { support: [d_min, d_max], geodesic_m, scaling, consistency, fit_test, $($field),* }
+                let AutoencoderOwnKeys { geodesic_m, scaling, scaling_quantile, scaling_fence, consistency, fit_test } =
+                    own;
+                AutoencoderMethod {
+                    support: [d_min, d_max],
+                    geodesic_m,
+                    scaling,
+                    scaling_quantile,
+                    scaling_fence,
+                    consistency,
+                    fit_test,
+                    $($field),*
+                }
             }
 
             /// The network's hyperparameters.
             pub fn network_config(&self) -> AutoencoderConfig {
-                let AutoencoderMethod { support, geodesic_m: _, scaling: _, consistency: _, fit_test: _, $($field),* } =
-                    self.clone();
+                let AutoencoderMethod {
+                    support,
+                    geodesic_m: _,
+                    scaling: _,
+                    scaling_quantile: _,
+                    scaling_fence: _,
+                    consistency: _,
+                    fit_test: _,
+                    $($field),*
+                } = self.clone();
                 AutoencoderConfig { d_min: support[0], d_max: support[1], $($field),* }
             }
         }
@@ -471,6 +498,7 @@ network_keys!(
     learning_rate,
     learning_rate_final,
     learning_rate_norm,
+    stall_restarts,
     beta1,
     beta2,
     epsilon,
@@ -503,9 +531,17 @@ network_keys!(
 struct AutoencoderOwnKeys {
     geodesic_m: f64,
     scaling: ScalingName,
+    scaling_quantile: f64,
+    scaling_fence: f64,
     consistency: ConsistencyName,
     fit_test: bool,
 }
+
+/// Default `scaling_quantile` of a config file (the paper's is 0: minimum and maximum).
+pub const AE_SCALING_QUANTILE: f64 = 1e-3;
+
+/// Default `scaling_fence` of a config file.
+pub const AE_SCALING_FENCE: f64 = 1.0;
 
 impl Default for AutoencoderMethod {
     fn default() -> Self {
@@ -514,6 +550,8 @@ impl Default for AutoencoderMethod {
             AutoencoderOwnKeys {
                 geodesic_m: AE_GEODESIC_M,
                 scaling: ScalingName::Global,
+                scaling_quantile: AE_SCALING_QUANTILE,
+                scaling_fence: AE_SCALING_FENCE,
                 consistency: ConsistencyName::Global,
                 fit_test: true,
             },
@@ -683,6 +721,19 @@ impl MethodSettings for AutoencoderMethod {
             return Err(Error::config("method.checkpoint_every", "0 must be at least 1"));
         }
         self.network_config().validate().map_err(method_key)?;
+        let q = self.scaling_quantile;
+        if !(0.0..=crate::representation::scaling::MAX_QUANTILE).contains(&q) {
+            return Err(Error::config(
+                "method.scaling_quantile",
+                format!("{q} must be in [0, {}]", crate::representation::scaling::MAX_QUANTILE),
+            ));
+        }
+        if !(self.scaling_fence >= 0.0 && self.scaling_fence.is_finite()) {
+            return Err(Error::config(
+                "method.scaling_fence",
+                format!("{} must be a finite number ≥ 0", self.scaling_fence),
+            ));
+        }
         positive("method.geodesic_m", self.geodesic_m)
     }
 }

@@ -35,6 +35,15 @@ pub struct AutoencoderConfig {
     /// frames 1–10 (107) and face poses (233), which train at the scaled rate
     /// (docs/autoencoder-default-candidates.md).
     pub learning_rate_norm: f64,
+    /// Restarts of a stalled run: when the mean reconstruction error of the last
+    /// [`crate::nn::STALL_WINDOW`] steps at 10 % of `iterations` (at the earliest step 50) is still at or above
+    /// the first step's, training starts again from the same initialisation with every step size
+    /// halved, at most this many times (0: never; the paper). An early step too large for the
+    /// data can saturate the decoder's tanh for hundreds of steps (cactus, seed 2: the error rose
+    /// from 4 788 to 27 000 and stayed there for 1 000 of 2 000 steps); healthy runs on the
+    /// shared datasets are at 0.4–4 % of the first step's error by then, so the check does not
+    /// touch them.
+    pub stall_restarts: usize,
     /// Adam β1.
     pub beta1: f64,
     /// Adam β2.
@@ -113,7 +122,10 @@ pub struct AutoencoderConfig {
     /// Gauss–Newton steps on the reconstructed vertices after the encoder and its passes (the
     /// pipeline's `ae_vertex_steps`: the decoder's exact Jacobian and the ACAP decoding's
     /// linearisation, each step moving the code towards the decoding closest to the shape in
-    /// centroid-aligned vertex error). 0: the network's code alone. Training does not use it.
+    /// centroid-aligned vertex error). At most this many Jacobians: the steps stop earlier once
+    /// a step converges or its last chord step lowers the error by less than
+    /// `ae_vertex_steps::JACOBIAN_TOLERANCE` (0.5 %). 0: the network's code alone. Training does
+    /// not use it.
     pub encoder_steps: usize,
 }
 
@@ -185,6 +197,7 @@ impl Default for AutoencoderConfig {
             learning_rate: 1e-3,
             learning_rate_final: None,
             learning_rate_norm: 0.0,
+            stall_restarts: 0,
             beta1: 0.9,
             beta2: 0.999,
             epsilon: 1e-8,
@@ -223,19 +236,36 @@ impl AutoencoderConfig {
     /// docs/autoencoder-default-candidates.md): the paper's model and loss, trained with a step
     /// size 1e-2 decaying to 1e-4 (scaled down on large features: `learning_rate_norm` 75),
     /// Adam β2 0.99, sparsity λ1 4, three synthetic shapes per step (`augment`), decorrelated
-    /// components (`lambda_orthogonal` 10), and an encoder with two residual passes and one
-    /// vertex step. The method's own key `scaling` defaults to `global` with it.
+    /// components (`lambda_orthogonal` 10), and an encoder with two residual passes and up to
+    /// five vertex steps (`encoder_steps`; they stop once a step's last chord step gains less
+    /// than 0.5 %: one on SCAPE, two or three on the cactus); a run that stalls restarts with
+    /// halved step sizes (`stall_restarts` 2). The method's own keys `scaling`,
+    /// `scaling_quantile` and `scaling_fence` default to `global`, 0.001 and 1 with it.
     pub fn recommended() -> Self {
         AutoencoderConfig {
             learning_rate: 1e-2,
             learning_rate_final: Some(1e-4),
             learning_rate_norm: 75.0,
+            stall_restarts: 2,
             beta2: 0.99,
             lambda1: 4.0,
             augment: 3,
             lambda_orthogonal: 10.0,
             encoder_passes: 2,
+            encoder_steps: 5,
             ..AutoencoderConfig::default()
+        }
+    }
+
+    /// The configuration of the `restart`-th restart of a stalled run
+    /// ([`AutoencoderConfig::stall_restarts`]): `learning_rate` and `learning_rate_final` times
+    /// 2^−restart, everything else unchanged.
+    pub fn restarted(&self, restart: usize) -> Self {
+        let f = 0.5f64.powi(restart as i32);
+        AutoencoderConfig {
+            learning_rate: self.learning_rate * f,
+            learning_rate_final: self.learning_rate_final.map(|r| r * f),
+            ..self.clone()
         }
     }
 
@@ -318,6 +348,9 @@ impl AutoencoderConfig {
         nonneg("lambda_vertex", self.lambda_vertex)?;
         nonneg("vertex_clip", self.vertex_clip)?;
         nonneg("input_noise", self.input_noise)?;
+        if self.stall_restarts > 8 {
+            return Err(bad("stall_restarts", format!("{} must be in 0..=8", self.stall_restarts)));
+        }
         if self.encoder_steps > 50 {
             return Err(bad("encoder_steps", format!("{} must be in 0..=50", self.encoder_steps)));
         }
@@ -440,6 +473,11 @@ mod tests {
         r.validate().unwrap();
         assert_eq!((r.learning_rate, r.learning_rate_final, r.learning_rate_norm), (1e-2, Some(1e-4), 75.0));
         assert_eq!((r.beta2, r.lambda1, r.augment, r.lambda_orthogonal, r.encoder_passes), (0.99, 4.0, 3, 10.0, 2));
+        assert_eq!((r.encoder_steps, AutoencoderConfig::default().encoder_steps), (5, 1));
+        assert_eq!((r.stall_restarts, AutoencoderConfig::default().stall_restarts), (2, 0));
+        let h = r.restarted(2);
+        assert_eq!((h.learning_rate, h.learning_rate_final, h.beta2), (2.5e-3, Some(2.5e-5), r.beta2));
+        assert_eq!(r.restarted(0), r);
         assert_eq!(AutoencoderConfig { ..r.clone() }.iterations, AutoencoderConfig::default().iterations);
     }
 

@@ -22,7 +22,7 @@
 //! let data = TrainingData::from_features(&scaled_acap)?;                 // F × N × 9, in [−0.95, 0.95]
 //! let dist = /* impl CenterDistances: normalised geodesic distance rows */;
 //! let mut trainer = Trainer::new(config, &data, &nb, &dist)?;            // or Trainer::resume(path, …)
-//! let opts = RunOptions { checkpoint: Some(dir.join("checkpoint.mdae")), stop: Some(stop_flag) };
+//! let opts = RunOptions { checkpoint: Some(dir.join("checkpoint.mdae")), stop: Some(stop_flag), ..Default::default() };
 //! let summary = trainer.run(&opts, |r| { /* progress bar, JSONL line: serde_json::to_string(r) */ })?;
 //! let model = trainer.into_model()?;
 //! model.save(&dir)?;                                          // autoencoder.bpk + autoencoder.json
@@ -73,4 +73,4 @@ pub use loss::{CenterDistances, EuclideanDistances, HopDistances, LossTerms};
 pub use model::AutoencoderModule;
 pub use neighbors::NeighborIndex;
 pub use output_loss::OutputLoss;
-pub use training::{IterationReport, RunOptions, RunSummary, StepTimings, Trainer};
+pub use training::{IterationReport, RunOptions, RunSummary, STALL_WINDOW, StepTimings, Trainer, stall_check_step};

@@ -99,6 +99,25 @@ pub struct RunOptions {
     pub checkpoint: Option<PathBuf>,
     /// Checked every step; when set, the run writes a checkpoint and returns.
     pub stop: Option<Arc<AtomicBool>>,
+    /// Step at which to check for a stalled run ([`AutoencoderConfig::stall_restarts`]): when
+    /// the mean reconstruction error of the last [`STALL_WINDOW`] steps is at or above the first
+    /// step's, the run returns at once with [`RunSummary::stalled`] set (no checkpoint of that
+    /// step is written). Runs resumed past the first step are not checked. `None`: never.
+    pub stall_check: Option<usize>,
+}
+
+/// Steps whose mean reconstruction error the stall check compares with the first step's.
+pub const STALL_WINDOW: usize = 10;
+
+/// Earliest step of a stall check: the first steps' error can rise far above the first step's
+/// in runs that train well (40 × in the first 200 steps on face poses).
+pub const STALL_EARLIEST: usize = 50;
+
+/// The step at which a run of `iterations` steps is checked for a stall: 10 % of them, at the
+/// earliest [`STALL_EARLIEST`]; none for runs that end by then.
+pub fn stall_check_step(iterations: usize) -> Option<usize> {
+    let at = (iterations / 10).max(STALL_EARLIEST);
+    (at < iterations).then_some(at)
 }
 
 /// How a run ended.
@@ -115,6 +134,8 @@ pub struct RunSummary {
     /// With validation shapes: the step whose parameters are kept and its validation error
     /// (mean squared feature error of encode–decode per shape).
     pub best: Option<(usize, f64)>,
+    /// Whether the run ended at [`RunOptions::stall_check`] because it had stalled.
+    pub stalled: bool,
 }
 
 /// Held-out shapes and the best parameters seen on them (see
@@ -881,6 +902,11 @@ impl<'a> Trainer<'a> {
         let mut steps = 0usize;
         let mut time = 0.0f64;
         let mut stopped = false;
+        let mut stalled = false;
+        // The first step's reconstruction error (known only when this run made that step) and
+        // the last STALL_WINDOW steps' (the stall check).
+        let mut first: Option<f64> = None;
+        let mut recent = std::collections::VecDeque::with_capacity(STALL_WINDOW);
         while self.iteration < total {
             if options.stop.as_ref().is_some_and(|s| s.load(Ordering::SeqCst)) {
                 stopped = true;
@@ -891,6 +917,27 @@ impl<'a> Trainer<'a> {
             let dt = t0.elapsed().as_secs_f64();
             time += dt;
             steps += 1;
+            if self.iteration == 1 {
+                first = Some(loss.reconstruction);
+            }
+            if recent.len() == STALL_WINDOW {
+                recent.pop_front();
+            }
+            recent.push_back(loss.reconstruction);
+            if let (Some(at), Some(f)) = (options.stall_check, first)
+                && self.iteration == at
+                && recent.iter().sum::<f64>() / recent.len() as f64 >= f
+            {
+                stalled = true;
+                on_iteration(&IterationReport {
+                    iteration: self.iteration,
+                    iterations: total,
+                    loss,
+                    step_seconds: dt,
+                    checkpointed: false,
+                });
+                break;
+            }
             let ve = self.config.validate_every.max(1);
             if self.iteration.is_multiple_of(ve) || self.iteration == total {
                 self.validate()?;
@@ -920,6 +967,7 @@ impl<'a> Trainer<'a> {
             last_loss: self.last_loss,
             mean_step_seconds: if steps > 0 { time / steps as f64 } else { 0.0 },
             best: self.validation.as_ref().and_then(|v| v.best.as_ref().map(|b| (b.0, b.1))),
+            stalled,
         })
     }
 

@@ -20,7 +20,7 @@
 //! fitting solve for them with the network's dimensions; each is a component confined to its
 //! piece (ranked after the network's, named `piece<p>_<axis>` in `components.csv`).
 
-use std::io::Write;
+use std::io::{Seek, Write};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -41,11 +41,14 @@ use crate::mesh::{self, MeshSequence, TriMesh, Vec3};
 use crate::methods::support_map::{ComponentLocality, SupportDistances, component_locality, support_ramp};
 use crate::model::{Component, Model, PointFit, PoseOptions, PoseResult, RefineOptions, Refined};
 use crate::nn::ComponentSummary;
-use crate::nn::{Autoencoder, CenterDistances, NeighborIndex, RunOptions, Trainer, TrainingData};
+use crate::nn::{
+    Autoencoder, AutoencoderConfig, CenterDistances, NeighborIndex, RunOptions, STALL_WINDOW, Trainer, TrainingData,
+    stall_check_step,
+};
 use crate::preprocess::{Prepared, UnitBox};
 use crate::representation::acap::Consistency;
 use crate::representation::roundtrip::Alignment;
-use crate::representation::scaling::{FeatureScaling, ScalingMode};
+use crate::representation::scaling::{FeatureScaling, RangeHistogram, ScalingMode};
 use crate::representation::{Features, Representation, RepresentationKind, RepresentationOptions};
 
 /// Checkpoint and per-iteration log file names (the artefact directory's work files).
@@ -622,6 +625,7 @@ fn training_data(
     representation: &Representation,
     prep: &Prepared,
     mode: ScalingMode,
+    (quantile, fence): (f64, f64),
     progress: &mut dyn super::Progress,
 ) -> Result<AeTrainingData> {
     use crate::representation::feature_cache::{CacheUse, Opened, open_or_build};
@@ -633,7 +637,15 @@ fn training_data(
                 let used = if built { CacheUse::Written(path) } else { CacheUse::Read(path) };
                 super::note_cache_use(&used, " (training reads them a batch at a time)");
                 let h = file.header();
-                let scaling = FeatureScaling::fit_column_ranges(&h.min(), &h.max(), mode)?;
+                let mut scaling = FeatureScaling::fit_column_ranges(&h.min(), &h.max(), mode)?;
+                if quantile > 0.0 {
+                    // One pass over the file's frames (the training frames) for the histogram.
+                    let mut hist = RangeHistogram::new(&scaling)?;
+                    for f in 0..file.n_frames() {
+                        hist.add(&file.frame(f)?)?;
+                    }
+                    scaling = hist.scaling(quantile, fence)?;
+                }
                 let data = TrainingData::from_feature_file(std::sync::Arc::new(file), scaling.clone())?;
                 return Ok((scaling, data, None, Vec::new()));
             }
@@ -647,7 +659,7 @@ fn training_data(
         super::training_features(representation, prep)?
     };
     let (mut xs, train_t) = representation.split_pieces(own)?;
-    let scaling = FeatureScaling::fit(&xs, mode)?;
+    let scaling = FeatureScaling::fit_quantile(&xs.data, xs.width, mode, quantile, fence)?;
     // Scaled in place: the unscaled features are not kept beside the scaled ones.
     scaling.apply_in_place(&mut xs.data)?;
     let data = TrainingData::from_features(&xs)?;
@@ -675,7 +687,25 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
     // The network's 9 numbers per vertex, and the pieces' translations (multi-piece meshes).
     // When the features are cached in a file (large data: `data.cache`), training reads them
     // from it a batch at a time; otherwise they are computed into memory and scaled in place.
-    let features = training_data(&representation, prep, m.scaling.mode(), &mut *ctx.progress)?;
+    let features = training_data(
+        &representation,
+        prep,
+        m.scaling.mode(),
+        (m.scaling_quantile, m.scaling_fence),
+        &mut *ctx.progress,
+    )?;
+    let sc = &features.0;
+    if !sc.clamped.is_empty() {
+        let (lo, hi) = sc
+            .min
+            .iter()
+            .zip(&sc.max)
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), (l, h)| (a.min(*l), b.max(*h)));
+        eprintln!(
+            "note: the feature scaling's outlier fence (scaling_quantile {}, scaling_fence {}) maps [{lo:.4}, {hi:.4}] to [-0.95, 0.95] and clamps the few training features beyond it",
+            m.scaling_quantile, m.scaling_fence
+        );
+    }
     if let Some((placement, _)) = representation.pieces() {
         let extra = 3 * (placement.n_pieces() - 1);
         eprintln!(
@@ -715,17 +745,30 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
     };
 
     std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
-    let mut trainer = if let Some(from) = ctx.resume {
-        Trainer::resume(from, ae_cfg.clone(), data, &neighbors, &distances)?
-    } else {
-        Trainer::new(ae_cfg.clone(), data, &neighbors, &distances)?
+    // A run that stalled and restarted with halved step sizes (`stall_restarts`) wrote its
+    // checkpoints with the restart's rates: a resume continues that restart.
+    let mut restart = 0;
+    if let Some(from) = ctx.resume {
+        let ck = crate::nn::checkpoint::Checkpoint::load(from)?.header.config;
+        if let Some(r) = (1..=ae_cfg.stall_restarts).find(|&r| ae_cfg.restarted(r).check_resumable(&ck).is_ok()) {
+            restart = r;
+        }
+    }
+    let make_trainer = |cfg: AutoencoderConfig, resume: Option<&Path>| -> Result<Trainer<'_>> {
+        let mut trainer = if let Some(from) = resume {
+            Trainer::resume(from, cfg, data, &neighbors, &distances)?
+        } else {
+            Trainer::new(cfg, data, &neighbors, &distances)?
+        };
+        if let Some(val) = held_out {
+            trainer = trainer.with_validation(val)?;
+        }
+        if let Some(v) = &vertex_loss {
+            trainer = trainer.with_output_loss(v);
+        }
+        Ok(trainer)
     };
-    if let Some(val) = held_out {
-        trainer = trainer.with_validation(val)?;
-    }
-    if let Some(v) = &vertex_loss {
-        trainer = trainer.with_output_loss(v);
-    }
+    let mut trainer = make_trainer(ae_cfg.restarted(restart), ctx.resume)?;
     let log_path = out.join(LOG_FILE);
     let mut log = std::fs::OpenOptions::new()
         .create(true)
@@ -748,7 +791,10 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
     progress.step(trainer.iteration() as u64, "");
     let t_train = Instant::now();
     let mut log_error: Option<std::io::Error> = None;
-    let summary = trainer.run(&RunOptions { checkpoint: Some(checkpoint.clone()), stop: ctx.stop.clone() }, |r| {
+    let summary = loop {
+        let stall_check = if restart < ae_cfg.stall_restarts { stall_check_step(ae_cfg.iterations) } else { None };
+        let options = RunOptions { checkpoint: Some(checkpoint.clone()), stop: ctx.stop.clone(), stall_check };
+        let summary = trainer.run(&options, |r| {
         let l = &r.loss;
         let line = format!(
             "{{\"iteration\":{},\"loss\":{},\"reconstruction\":{},\"sparsity\":{},\"hinge\":{},\"orthogonality\":{},\"vertex\":{},\"step_seconds\":{},\"checkpoint\":{}}}\n",
@@ -765,7 +811,26 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
                 l.total, l.reconstruction, l.sparsity, l.hinge
             ),
         );
-    })?;
+        })?;
+        if !summary.stalled {
+            break summary;
+        }
+        // Stalled: start again from the same initialisation with halved step sizes; the log
+        // restarts with it (no checkpoint of the stalled run was written after the check).
+        restart += 1;
+        let cfg = ae_cfg.restarted(restart);
+        progress.finish_stage();
+        eprintln!(
+            "note: training stalled (mean reconstruction error of the last {STALL_WINDOW} steps at step {} is at or \
+             above the first step's): restart {restart} of at most {} with step sizes halved (learning_rate {:e})",
+            summary.iterations_done, ae_cfg.stall_restarts, cfg.learning_rate
+        );
+        log.set_len(0).map_err(|e| Error::io(&log_path, e))?;
+        log.seek(std::io::SeekFrom::Start(0)).map_err(|e| Error::io(&log_path, e))?;
+        let _ = std::fs::remove_file(&checkpoint);
+        trainer = make_trainer(cfg, None)?;
+        progress.stage(&format!("{stage}, restart {restart}"), ae_cfg.iterations as u64);
+    };
     let train_seconds = t_train.elapsed().as_secs_f64();
     if let Some((it, err)) = summary.best {
         let line = format!("{{\"best_iteration\":{it},\"validation_error\":{err}}}\n");

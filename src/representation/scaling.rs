@@ -11,6 +11,17 @@
 //!   group; [`ScalingMode::reference_grouped`] gives the reference's groups `{0,1,2}` (rotation)
 //!   and `{3..8}` (stretch) of a 9-wide feature. Dimensions in no group form their own group.
 //!
+//! **Fenced quantile ranges** ([`FeatureScaling::fit_quantile`], the autoencoder's
+//! `scaling_quantile` and `scaling_fence` keys): with q > 0 the range of a group is the q and
+//! 1 − q quantiles [a, b] of its training values (read off a histogram of [`HISTOGRAM_BINS`] bins
+//! over the full range, rounded outwards to bin edges) widened by fence × (b − a) on each side,
+//! and never beyond the training minimum and maximum. Where it ends inside them, values beyond
+//! that end are outliers: [`FeatureScaling::apply_in_place`] clamps them to it before scaling
+//! ([`FeatureScaling::clamped`]); where it does not, nothing changes. A few extreme features
+//! (slivers of a 29 299-vertex face stretch 70×) otherwise set the range alone and squeeze every
+//! other feature into a sliver of [−0.95, 0.95]; clamped, they are the only ones the decoder
+//! (tanh outputs) cannot reproduce. [`FeatureScaling::invert_in_place`] never clamps.
+//!
 //! **Constant dimensions.** When `max_k − min_k ≤ CONSTANT_TOL·(1 + max(|min_k|, |max_k|))` there
 //! is nothing to stretch: the map is the shift `y = x − min_k` (`a_k = 1`, `c_k = min_k`), which
 //! sends the training value to 0, never divides by zero and stays exactly invertible.
@@ -27,6 +38,13 @@ pub const TARGET: f64 = 0.95;
 
 /// Relative range under which a dimension counts as constant (see the module docs).
 pub const CONSTANT_TOL: f64 = 1e-12;
+
+/// Bins of the histogram a quantile range is read from (module docs): the range's ends are
+/// exact to 1/65 536 of a group's full range.
+pub const HISTOGRAM_BINS: usize = 1 << 16;
+
+/// Largest quantile [`FeatureScaling::fit_quantile`] takes (a range of at least the middle 90 %).
+pub const MAX_QUANTILE: f64 = 0.05;
 
 /// Which dimensions share a min/max.
 #[derive(Debug, Clone, PartialEq, Eq, Default, Serialize, Deserialize)]
@@ -96,6 +114,102 @@ pub struct FeatureScaling {
     pub min: Vec<f64>,
     /// Training maximum per dimension (W).
     pub max: Vec<f64>,
+    /// Per dimension, whether its range was narrowed below the training minimum / maximum (a
+    /// fenced quantile range, module docs): [`FeatureScaling::apply_in_place`] clamps that end.
+    /// Empty: no end is (files written before the field).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub clamped: Vec<[bool; 2]>,
+}
+
+/// Histogram of each group's training values over its full range, from which
+/// [`FeatureScaling::fit_quantile`] reads quantile ranges; fed one block of width-W vectors at a
+/// time, so streamed training sets need one pass over their frames, not a copy.
+#[derive(Debug, Clone)]
+pub struct RangeHistogram {
+    full: FeatureScaling,
+    label: Vec<usize>,
+    /// Per group: [lo, hi] of the full range, and [`HISTOGRAM_BINS`] counts.
+    groups: Vec<(f64, f64, Vec<u64>)>,
+}
+
+impl RangeHistogram {
+    /// An empty histogram over the full ranges of `full` (a min/max scaling of the same data).
+    pub fn new(full: &FeatureScaling) -> Result<Self> {
+        full.validate()?;
+        let label = full.mode.labels(full.width)?;
+        let n_groups = label.iter().max().map_or(0, |m| m + 1);
+        let mut groups = vec![(0.0, 0.0, Vec::new()); n_groups];
+        for (k, &g) in label.iter().enumerate() {
+            groups[g] = (full.min[k], full.max[k], vec![0; HISTOGRAM_BINS]);
+        }
+        Ok(RangeHistogram { full: full.clone(), label, groups })
+    }
+
+    /// Counts a flat block of width-W vectors (values outside the full range count at its ends).
+    pub fn add(&mut self, data: &[f64]) -> Result<()> {
+        self.full.check_len(data.len())?;
+        for v in data.chunks_exact(self.full.width) {
+            for (&x, &g) in v.iter().zip(&self.label) {
+                let (lo, hi, counts) = &mut self.groups[g];
+                let t = if *hi > *lo { (x - *lo) / (*hi - *lo) } else { 0.0 };
+                let b = (t * HISTOGRAM_BINS as f64).floor().clamp(0.0, (HISTOGRAM_BINS - 1) as f64) as usize;
+                counts[b] += 1;
+            }
+        }
+        Ok(())
+    }
+
+    /// The scaling whose group ranges are the `q` and 1 − `q` quantiles [a, b] of the counted
+    /// values widened by `fence` × (b − a) on each side, within the full range (`q` in
+    /// [0, [`MAX_QUANTILE`]], `fence` ≥ 0; `q` = 0: the full ranges, as [`FeatureScaling::fit`]).
+    /// An end that the fence brings inside the full range is clamped by
+    /// [`FeatureScaling::apply_in_place`].
+    pub fn scaling(&self, q: f64, fence: f64) -> Result<FeatureScaling> {
+        if !(0.0..=MAX_QUANTILE).contains(&q) {
+            return Err(Error::Invalid(format!("scaling quantile {q} must be in [0, {MAX_QUANTILE}]")));
+        }
+        if !(fence >= 0.0 && fence.is_finite()) {
+            return Err(Error::Invalid(format!("scaling fence {fence} must be a finite number ≥ 0")));
+        }
+        if q == 0.0 {
+            return Ok(self.full.clone());
+        }
+        let ranges: Vec<(f64, f64)> = self
+            .groups
+            .iter()
+            .map(|(lo, hi, counts)| {
+                let total: u64 = counts.iter().sum();
+                if total == 0 || hi <= lo {
+                    return (*lo, *hi);
+                }
+                let width = (hi - lo) / HISTOGRAM_BINS as f64;
+                // The bin holding the value of rank r (0-based) from below, and from above.
+                let r = (q * total as f64).floor() as u64;
+                let mut seen = 0;
+                let low = counts.iter().position(|&c| {
+                    seen += c;
+                    seen > r
+                });
+                seen = 0;
+                let high = counts.iter().rposition(|&c| {
+                    seen += c;
+                    seen > r
+                });
+                let a = low.map_or(*lo, |b| lo + b as f64 * width).max(*lo);
+                let b = high.map_or(*hi, |b| (lo + (b + 1) as f64 * width).min(*hi)).max(a);
+                let w = b - a;
+                ((a - fence * w).max(*lo), (b + fence * w).min(*hi))
+            })
+            .collect();
+        let min: Vec<f64> = self.label.iter().map(|&g| ranges[g].0).collect();
+        let max: Vec<f64> = self.label.iter().map(|&g| ranges[g].1).collect();
+        let clamped: Vec<[bool; 2]> =
+            (0..self.full.width).map(|k| [min[k] > self.full.min[k], max[k] < self.full.max[k]]).collect();
+        let clamped = if clamped.iter().flatten().any(|&c| c) { clamped } else { Vec::new() };
+        let s = FeatureScaling { mode: self.full.mode.clone(), width: self.full.width, min, max, clamped };
+        s.validate()?;
+        Ok(s)
+    }
 }
 
 impl FeatureScaling {
@@ -138,6 +252,19 @@ impl FeatureScaling {
         Self::fit_column_ranges(&lo, &hi, mode)
     }
 
+    /// [`FeatureScaling::fit_slice`] with each group's range at the `q` and 1 − `q` quantiles of
+    /// its values, widened by `fence` times its width ([`RangeHistogram::scaling`], module docs;
+    /// `q` = 0 is `fit_slice` exactly).
+    pub fn fit_quantile(data: &[f64], width: usize, mode: ScalingMode, q: f64, fence: f64) -> Result<Self> {
+        let full = Self::fit_slice(data, width, mode)?;
+        if q == 0.0 {
+            return Ok(full);
+        }
+        let mut h = RangeHistogram::new(&full)?;
+        h.add(data)?;
+        h.scaling(q, fence)
+    }
+
     /// Fits from each dimension's training minimum and maximum (W each; what a feature cache
     /// records): groups share the smallest minimum and largest maximum of their dimensions, as
     /// [`FeatureScaling::fit`] on the features themselves.
@@ -166,6 +293,7 @@ impl FeatureScaling {
             max: label.iter().map(|&g| ghi[g]).collect(),
             mode,
             width,
+            clamped: Vec::new(),
         })
     }
 
@@ -180,6 +308,13 @@ impl FeatureScaling {
             )));
         }
         self.mode.labels(self.width)?;
+        if !self.clamped.is_empty() && self.clamped.len() != self.width {
+            return Err(Error::Invalid(format!(
+                "scaling of width {} has {} clamp flags",
+                self.width,
+                self.clamped.len()
+            )));
+        }
         for k in 0..self.width {
             let (lo, hi) = (self.min[k], self.max[k]);
             if !(lo.is_finite() && hi.is_finite() && lo <= hi) {
@@ -236,13 +371,26 @@ impl FeatureScaling {
         Ok(())
     }
 
-    /// Scales a flat array of width-W vectors in place.
+    /// Scales a flat array of width-W vectors in place (the ends of a fenced quantile range that
+    /// lie inside the training range clamp first: module docs).
     pub fn apply_in_place(&self, data: &mut [f64]) -> Result<()> {
         self.check_len(data.len())?;
         let ab: Vec<(f64, f64)> = (0..self.width).map(|k| self.affine(k)).collect();
-        for v in data.chunks_exact_mut(self.width) {
-            for (x, &(c, a)) in v.iter_mut().zip(&ab) {
-                *x = (*x - c) * a;
+        if !self.clamped.is_empty() {
+            let lo: Vec<f64> =
+                (0..self.width).map(|k| if self.clamped[k][0] { self.min[k] } else { f64::NEG_INFINITY }).collect();
+            let hi: Vec<f64> =
+                (0..self.width).map(|k| if self.clamped[k][1] { self.max[k] } else { f64::INFINITY }).collect();
+            for v in data.chunks_exact_mut(self.width) {
+                for (k, (x, &(c, a))) in v.iter_mut().zip(&ab).enumerate() {
+                    *x = (x.max(lo[k]).min(hi[k]) - c) * a;
+                }
+            }
+        } else {
+            for v in data.chunks_exact_mut(self.width) {
+                for (x, &(c, a)) in v.iter_mut().zip(&ab) {
+                    *x = (*x - c) * a;
+                }
             }
         }
         Ok(())
@@ -290,6 +438,78 @@ impl FeatureScaling {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// 1 000 vectors of width 2: dim 0 is k/999 (0..1) but one value of 100, dim 1 is 1 − dim 0.
+    fn with_outlier() -> Vec<f64> {
+        let mut d: Vec<f64> = (0..1000).flat_map(|k| [k as f64 / 999.0, 1.0 - k as f64 / 999.0]).collect();
+        d[2 * 500] = 100.0;
+        d
+    }
+
+    #[test]
+    fn a_quantile_range_clamps_the_outlier_and_a_fence_keeps_the_rest() {
+        let d = with_outlier();
+        let s = FeatureScaling::fit_quantile(&d, 2, ScalingMode::PerDimension, 0.002, 0.0).unwrap();
+        // Dim 0: two values below the 0.2 % rank 2 are 0 and 1/999; the range starts at the bin
+        // of 2/999 and ends at the bin of the third largest value (the outlier and 1 above it).
+        let bin0 = 100.0 / HISTOGRAM_BINS as f64;
+        assert!(s.min[0] <= 2.0 / 999.0 && s.min[0] > 2.0 / 999.0 - bin0, "min {}", s.min[0]);
+        assert!(s.max[0] >= 998.0 / 999.0 - 1e-12 && s.max[0] < 998.0 / 999.0 + bin0, "max {}", s.max[0]);
+        // Dim 1 has no outlier: its range is the same middle, to its finer bins.
+        assert!((s.min[1] - 2.0 / 999.0).abs() < 1.0 / HISTOGRAM_BINS as f64, "{}", s.min[1]);
+        assert!((s.max[1] - 997.0 / 999.0).abs() < 1.0 / HISTOGRAM_BINS as f64, "{}", s.max[1]);
+        assert_eq!(s.clamped, vec![[true, true], [true, true]]);
+        let mut y = d.clone();
+        s.apply_in_place(&mut y).unwrap();
+        // The outlier is clamped to the top of the range; nothing leaves [−0.95, 0.95].
+        assert!((y[1000] - TARGET).abs() < 1e-12, "{}", y[1000]);
+        assert!(y.iter().all(|v| v.abs() <= TARGET + 1e-12));
+        // Inverting never clamps: −2 scaled units map back beyond the range's low end.
+        let mut z = vec![-2.0, 0.0];
+        s.invert_in_place(&mut z).unwrap();
+        assert!(z[0] < s.min[0] - 0.5, "{}", z[0]);
+        // A fence of 1 widens [a, b] by its width each side: dim 1 and the low end of dim 0 reach
+        // the training extremes and clamp nothing; the outlier (100 ≫ 1 + 1) is still clamped.
+        let f = FeatureScaling::fit_quantile(&d, 2, ScalingMode::PerDimension, 0.002, 1.0).unwrap();
+        assert_eq!(f.clamped, vec![[false, true], [false, false]]);
+        assert_eq!((f.min[0], f.min[1], f.max[1]), (0.0, 0.0, 1.0));
+        assert!((f.max[0] - (2.0 * s.max[0] - s.min[0])).abs() < 1e-12, "{}", f.max[0]);
+        let mut y = vec![-5.0, 7.0, 100.0, -3.0];
+        f.apply_in_place(&mut y).unwrap();
+        assert!(y[0] < -TARGET - 1.0 && y[1] > TARGET + 1.0, "unclamped ends pass: {y:?}");
+        assert!((y[2] - TARGET).abs() < 1e-12 && y[3] < -TARGET - 1.0, "{y:?}");
+        // q = 0 is the minimum and maximum, whatever the fence.
+        let full = FeatureScaling::fit_quantile(&d, 2, ScalingMode::PerDimension, 0.0, 1.0).unwrap();
+        assert_eq!(full, FeatureScaling::fit_slice(&d, 2, ScalingMode::PerDimension).unwrap());
+        assert_eq!((full.max[0], full.clamped.len()), (100.0, 0));
+    }
+
+    #[test]
+    fn a_histogram_fed_in_blocks_equals_one_pass_and_groups_share_a_range() {
+        let d = with_outlier();
+        let mode = ScalingMode::Grouped { groups: vec![vec![0, 1]] };
+        let one = FeatureScaling::fit_quantile(&d, 2, mode.clone(), 0.01, 0.5).unwrap();
+        let mut h = RangeHistogram::new(&FeatureScaling::fit_slice(&d, 2, mode).unwrap()).unwrap();
+        for block in d.chunks(2 * 37) {
+            h.add(block).unwrap();
+        }
+        assert_eq!(h.scaling(0.01, 0.5).unwrap(), one);
+        assert_eq!((one.min[0], one.max[0]), (one.min[1], one.max[1]));
+        assert!(one.max[0] < 1.6 && one.min[0] == 0.0, "{:?}", (one.min[0], one.max[0]));
+        // Out of range q or fence; a file written before the field (no `clamped`) clamps nothing.
+        assert!(h.scaling(0.2, 1.0).unwrap_err().to_string().contains("0.2"));
+        assert!(h.scaling(0.01, -1.0).unwrap_err().to_string().contains("-1"));
+        let mut v = serde_json::to_value(&one).unwrap();
+        assert_eq!(v["clamped"], serde_json::json!([[false, true], [false, true]]));
+        v.as_object_mut().unwrap().remove("clamped");
+        let old: FeatureScaling = serde_json::from_value(v).unwrap();
+        assert!(old.clamped.is_empty());
+        let mut y = vec![100.0, 0.0];
+        old.apply_in_place(&mut y).unwrap();
+        assert!(y[0] > 1.0, "without clamp flags nothing is clamped: {}", y[0]);
+        let bad = FeatureScaling { clamped: vec![[true, false]], ..one };
+        assert!(bad.validate().unwrap_err().to_string().contains("clamp flags"));
+    }
 
     fn sample() -> Features {
         // 2 frames × 3 elements × 4 dims; dim 3 constant.
