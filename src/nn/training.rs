@@ -924,31 +924,22 @@ impl<'a> Trainer<'a> {
                 recent.pop_front();
             }
             recent.push_back(loss.reconstruction);
-            if let (Some(at), Some(f)) = (options.stall_check, first)
-                && self.iteration == at
-                && recent.iter().sum::<f64>() / recent.len() as f64 >= f
-            {
-                stalled = true;
-                on_iteration(&IterationReport {
-                    iteration: self.iteration,
-                    iterations: total,
-                    loss,
-                    step_seconds: dt,
-                    checkpointed: false,
-                });
-                break;
-            }
-            let ve = self.config.validate_every.max(1);
-            if self.iteration.is_multiple_of(ve) || self.iteration == total {
-                self.validate()?;
-            }
-            let every = self.config.checkpoint_every;
+            stalled = options.stall_check == Some(self.iteration)
+                && first.is_some_and(|f| recent.iter().sum::<f64>() / recent.len() as f64 >= f);
+            // A stalled step is reported, but neither validated nor checkpointed.
             let mut checkpointed = false;
-            if let Some(path) = &options.checkpoint
-                && ((every > 0 && self.iteration.is_multiple_of(every)) || self.iteration == total)
-            {
-                self.save_checkpoint(path)?;
-                checkpointed = true;
+            if !stalled {
+                let ve = self.config.validate_every.max(1);
+                if self.iteration.is_multiple_of(ve) || self.iteration == total {
+                    self.validate()?;
+                }
+                let every = self.config.checkpoint_every;
+                if let Some(path) = &options.checkpoint
+                    && ((every > 0 && self.iteration.is_multiple_of(every)) || self.iteration == total)
+                {
+                    self.save_checkpoint(path)?;
+                    checkpointed = true;
+                }
             }
             on_iteration(&IterationReport {
                 iteration: self.iteration,
@@ -957,6 +948,9 @@ impl<'a> Trainer<'a> {
                 step_seconds: dt,
                 checkpointed,
             });
+            if stalled {
+                break;
+            }
         }
         if stopped && let Some(path) = &options.checkpoint {
             self.save_checkpoint(path)?;
