@@ -445,6 +445,30 @@ mod tests {
         assert!(e.contains("array `far`") && e.contains("element 1"), "{e}");
     }
 
+    /// A 255-byte name of two-byte characters is cut back to a character boundary, keeping as
+    /// much as fits (issue 33: mutation testing found `end -= 1` → `+= 1` unnoticed, a 256-byte
+    /// temporary name, because one name's parity may or may not put the cut inside a character;
+    /// the two names here have their boundaries at even and at odd bytes, so one of them is cut
+    /// inside a character whatever the suffix's length).
+    #[test]
+    fn temporary_names_of_multibyte_names_fit_and_cut_at_a_character() {
+        let dir = Path::new("out");
+        for name in ["é".repeat(127) + "x", "x".to_string() + &"é".repeat(127)] {
+            assert_eq!(name.len(), 255);
+            let tmp = temp_path(&dir.join(&name));
+            assert_eq!(tmp.parent(), Some(dir));
+            let file = tmp.file_name().unwrap().to_str().unwrap().to_string();
+            let suffix = format!(".{}.", std::process::id());
+            let kept = &file[1..file.rfind(&suffix).unwrap()];
+            assert!(file.starts_with('.') && file.ends_with(".tmp"), "{file}");
+            assert!(name.starts_with(kept), "{kept} is not a prefix of the name");
+            assert!(file.len() <= MAX_FILE_NAME && file.len() >= MAX_FILE_NAME - 1, "{} bytes: {file}", file.len());
+        }
+        let short = temp_path(Path::new("a.obj"));
+        let file = short.file_name().unwrap().to_str().unwrap();
+        assert!(file.starts_with(".a.obj.") && file.ends_with(".tmp"), "{file}");
+    }
+
     #[test]
     fn truncated_bin_is_a_clear_error() {
         let d = tmpdir("trunc");

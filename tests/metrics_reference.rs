@@ -185,9 +185,12 @@ fn close(a: f64, b: f64) -> bool {
     (a - b).abs() <= 1e-12 * (1.0 + a.abs().max(b.abs()))
 }
 
+/// Frames of one sequence.
+type Frames = Vec<Vec<Vec3>>;
+
 /// Truth and result sequences of the test mesh; truth frame 2 makes edge (5, 6) zero length
 /// (vertex 6 moved onto vertex 5), so one (edge, frame) pair is skipped.
-fn sequences() -> (usize, Vec<[usize; 3]>, Vec<Vec<Vec3>>, Vec<Vec<Vec3>>) {
+fn sequences() -> (usize, Vec<[usize; 3]>, Frames, Frames) {
     let (n, faces, rest) = mesh();
     let mut truth = sequence(&rest, 4, 11, 0.05);
     truth[2][6] = truth[2][5];
@@ -451,7 +454,8 @@ fn edge_distortion_matches_its_definition() {
         let d = edge_length_distortion(&mesh, &shape, StedParams { rings, ..Default::default() }).unwrap();
         assert!(close(d.mean_relative, mean), "{} vs {mean}", d.mean_relative);
         assert!(close(d.max_relative, max), "{} vs {max}", d.max_relative);
-        let (spatial, _) = reference_spatial(n, &faces, rings, &[rest.clone()], &[shape.clone()]);
+        let (spatial, _) =
+            reference_spatial(n, &faces, rings, std::slice::from_ref(&rest), std::slice::from_ref(&shape));
         assert!(close(d.spatial_sted, spatial), "rings {rings}: {} vs {spatial}", d.spatial_sted);
         assert!(mean > 0.01 && max > mean && spatial > 0.01);
         // The rest shape itself: all zero.
