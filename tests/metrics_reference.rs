@@ -8,6 +8,7 @@
 
 use std::collections::{BTreeSet, VecDeque};
 
+use meshdeco::mesh::primitives::grid;
 use meshdeco::mesh::{TriMesh, Vec3};
 use meshdeco::metrics::erms::{alignment_shift, erms_from_squared_error, vertex_squared_error};
 use meshdeco::metrics::locality::support_regions;
@@ -25,31 +26,16 @@ impl Lcg {
     }
 }
 
-/// A 4 × 3 vertex grid (12 vertices, irregularly jittered, 12 triangles) plus vertex 12, which no
-/// face uses (an empty neighbourhood).
+/// A 4 × 3 vertex grid ([`grid`]: 12 vertices, 12 triangles, alternating diagonals so that
+/// vertex degrees differ), irregularly jittered, plus vertex 12, which no face uses (an empty
+/// neighbourhood).
 fn mesh() -> (usize, Vec<[usize; 3]>, Vec<Vec3>) {
-    let (w, h) = (4, 3);
-    let mut faces = Vec::new();
-    for y in 0..h - 1 {
-        for x in 0..w - 1 {
-            let a = y * w + x;
-            let (b, c, d) = (a + 1, a + w, a + w + 1);
-            // Alternate the diagonal so that vertex degrees differ.
-            if (x + y) % 2 == 0 {
-                faces.push([a, b, d]);
-                faces.push([a, d, c]);
-            } else {
-                faces.push([a, b, c]);
-                faces.push([b, d, c]);
-            }
-        }
-    }
+    let TriMesh { positions, faces } = grid(3, 2, 3.0);
     let mut g = Lcg(7);
-    let mut rest: Vec<Vec3> = (0..w * h)
-        .map(|i| [(i % w) as f64 + 0.2 * g.next(), (i / w) as f64 + 0.2 * g.next(), 0.3 * g.next()])
-        .collect();
+    let mut rest: Vec<Vec3> =
+        positions.iter().map(|p| [p[0] + 0.2 * g.next(), p[1] + 0.2 * g.next(), 0.3 * g.next()]).collect();
     rest.push([9.0, 9.0, 9.0]);
-    (w * h + 1, faces, rest)
+    (rest.len(), faces, rest)
 }
 
 /// F frames: the rest shape bent and moved a little more each frame, each vertex jittered.
