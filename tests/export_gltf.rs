@@ -240,6 +240,16 @@ fn export_refuses_bad_arguments() {
         assert!(!o.status.success() && output_text(&o).contains(needle), "{}", output_text(&o));
     }
     assert!(!d.join("x.glb").exists());
+    // The library checks the frame rate itself (the command line checks it first) whenever
+    // keys are written: with `animation` or with `bake` alone.
+    let m = load_model(&dir).unwrap();
+    for (animation, bake) in [(true, false), (false, true)] {
+        let opts = meshdeco::export::ExportOptions { animation, bake, fps: 0.0, ..Default::default() };
+        let e = meshdeco::export::gltf::prepare(m.as_ref(), &opts).err().map(|e| e.to_string()).unwrap_or_default();
+        assert!(e.contains("--fps 0.0"), "animation {animation}, bake {bake}: {e:?}");
+    }
+    let still = meshdeco::export::ExportOptions { fps: 0.0, ..Default::default() };
+    assert!(meshdeco::export::gltf::prepare(m.as_ref(), &still).is_ok(), "no keys, so no frame rate to check");
     std::fs::remove_dir_all(&d).unwrap();
 }
 

@@ -888,3 +888,170 @@ pub fn read_glb(path: &Path) -> Result<GlbMorphs> {
     }
     Ok(GlbMorphs { base, faces, targets, target_normals, names, animation, times, rotation, up_axis })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A flat 4 × 2 rectangle far from the origin along z (so that a bounding box's `hi + lo`
+    /// or `hi / lo` would not find z thinnest), wound so that its normals face `+z` or `−z`.
+    fn plate(faces_minus_z: bool) -> (Vec<Vec3>, Vec<[usize; 3]>) {
+        let p = vec![[-2.0, -1.0, 100.0], [2.0, -1.0, 100.0], [2.0, 1.0, 100.0], [-2.0, 1.0, 100.0]];
+        let f = if faces_minus_z { vec![[0, 2, 1], [0, 3, 2]] } else { vec![[0, 1, 2], [0, 2, 3]] };
+        (p, f)
+    }
+
+    #[test]
+    fn orientation_views_along_the_thinnest_axis_from_the_front() {
+        for minus in [false, true] {
+            let (p, f) = plate(minus);
+            let ([x, y, z], name) = orientation(&p, &f, UpAxis::Axis(1, false));
+            assert_eq!(name, "+y");
+            assert_eq!(y, [0.0, 1.0, 0.0]);
+            // The view axis is z (extent 0), not x (extent 4), and its sign puts the front at +Z.
+            let s = if minus { -1.0 } else { 1.0 };
+            assert_eq!(z, [0.0, 0.0, s], "faces toward −z: {minus}");
+            // A proper rotation: x = y × z.
+            assert_eq!(x, [s, 0.0, 0.0]);
+        }
+        // Down the − side of an axis.
+        let (p, f) = plate(false);
+        let ([_, y, _], name) = orientation(&p, &f, UpAxis::Axis(0, true));
+        assert_eq!((y, name.as_str()), ([-1.0, 0.0, 0.0], "-x"));
+    }
+
+    #[test]
+    fn fitting_without_frames_or_targets_changes_nothing() {
+        let target = vec![[1.0, 2.0, 3.0], [0.0, -1.0, 0.5]];
+        let mut b = Blendshapes {
+            base: vec![[0.0; 3]; 2],
+            index: vec![0],
+            names: vec!["r0 k0 v0".into()],
+            deltas: vec![target.clone()],
+            magnitudes: vec![vec![1.0, 1.0]],
+        };
+        let none = Training { dials: vec![], decoded: vec![] };
+        assert!(!b.fit_to_training(&none, 0.1).unwrap(), "no frame: nothing to fit");
+        assert_eq!(b.deltas, vec![target.clone()]);
+        let one = Training { dials: vec![vec![0.5]], decoded: vec![vec![[2.0, 0.0, 0.0], [0.0, 0.0, 0.0]]] };
+        let mut empty =
+            Blendshapes { base: b.base.clone(), index: vec![], names: vec![], deltas: vec![], magnitudes: vec![] };
+        assert!(!empty.fit_to_training(&one, 0.1).unwrap(), "no target: nothing to fit");
+        // With both, the fit moves the target toward the frame's residual over its dial.
+        assert!(b.fit_to_training(&one, 0.1).unwrap());
+        assert!(b.deltas[0][0][0] > 1.0 + 1e-6, "{:?}", b.deltas[0][0]);
+    }
+
+    /// The fit solves (WᵀW + μI)·E = Wᵀ(D − base) + μ·E₀ with μ = mu_rel·trace(WᵀW)/K, checked
+    /// against Cramer's rule for two targets and two frames (K = 2, so that trace/K differs
+    /// from trace·K and trace mod K).
+    #[test]
+    fn fitted_targets_solve_the_regularised_normal_equations() {
+        let base = vec![[0.5, 0.0, -1.0]];
+        let e0 = [[1.0, -2.0, 0.25], [0.0, 3.0, 1.0]];
+        let w = [[1.0, 0.5], [0.0, 2.0]];
+        let d = [[2.0, 1.0, 0.0], [-1.0, 4.0, 2.0]];
+        let mu_rel = 0.3;
+        let mut b = Blendshapes {
+            base: base.clone(),
+            index: vec![0, 1],
+            names: vec!["a".into(), "b".into()],
+            deltas: vec![vec![e0[0]], vec![e0[1]]],
+            magnitudes: vec![vec![1.0], vec![1.0]],
+        };
+        let t =
+            Training { dials: w.iter().map(|r| r.to_vec()).collect(), decoded: d.iter().map(|f| vec![*f]).collect() };
+        assert!(b.fit_to_training(&t, mu_rel).unwrap());
+        let a = [
+            [w[0][0] * w[0][0] + w[1][0] * w[1][0], w[0][0] * w[0][1] + w[1][0] * w[1][1]],
+            [w[0][1] * w[0][0] + w[1][1] * w[1][0], w[0][1] * w[0][1] + w[1][1] * w[1][1]],
+        ];
+        let mu = mu_rel * (a[0][0] + a[1][1]) / 2.0;
+        let (a00, a11) = (a[0][0] + mu, a[1][1] + mu);
+        let det = a00 * a11 - a[0][1] * a[1][0];
+        for c in 0..3 {
+            let r: Vec<f64> =
+                (0..2).map(|i| (0..2).map(|f| w[f][i] * (d[f][c] - base[0][c])).sum::<f64>() + mu * e0[i][c]).collect();
+            let x0 = (r[0] * a11 - a[0][1] * r[1]) / det;
+            let x1 = (a00 * r[1] - a[1][0] * r[0]) / det;
+            assert!((b.deltas[0][0][c] - x0).abs() < 1e-12, "target 0, coordinate {c}: {} vs {x0}", b.deltas[0][0][c]);
+            assert!((b.deltas[1][0][c] - x1).abs() < 1e-12, "target 1, coordinate {c}: {} vs {x1}", b.deltas[1][0][c]);
+        }
+    }
+
+    /// Each vertex takes the colour of the component with the largest magnitude relative to that
+    /// component's peak, darkened by that ratio; hues are spread as t·7 mod K over K; a vertex no
+    /// component reaches is black.
+    #[test]
+    fn support_colours_follow_the_strongest_component() {
+        let m = vec![
+            vec![2.0, 1.0, 0.0, 0.0, 1.0, 1.0],
+            vec![0.0, 2.0, 0.5, 0.0, 0.0, 1.0],
+            vec![0.0, 0.0, 3.0, 0.0, 0.0, 0.0],
+            vec![0.0; 6],
+        ];
+        let c = support_colors(&m, 6);
+        // K = 4: hues 0, 3/4, 2/4, 1/4 for components 0..3.
+        let palette = crate::mesh::colormap_range(&[0.0, 0.75, 0.5, 0.25], 0.0, 1.0);
+        assert_ne!(palette[1], palette[3]);
+        let expect = |t: usize, r: f64| palette[t].map(|x| (x as f64 / 255.0 * r) as f32);
+        // Vertex 5: components 0 and 1 tie at half their peaks; the first wins.
+        let want = [expect(0, 1.0), expect(1, 1.0), expect(2, 1.0), [0.0; 3], expect(0, 0.5), expect(0, 0.5)];
+        for (v, w) in want.iter().enumerate() {
+            assert_eq!(&c[3 * v..3 * v + 3], w, "vertex {v}");
+        }
+    }
+
+    fn prepared(index: Vec<usize>, dials: Option<Vec<Vec<f64>>>, fitted: bool) -> Prepared {
+        let k = index.len();
+        Prepared {
+            shapes: Blendshapes {
+                base: vec![[0.0; 3]],
+                index,
+                names: vec![String::new(); k],
+                deltas: vec![vec![[1.0, 0.0, 0.0]]; k],
+                magnitudes: vec![vec![1.0]; k],
+            },
+            base_normals: vec![[0.0, 1.0, 0.0]],
+            target_normals: vec![vec![[0.0; 3]]; k],
+            additivity: None,
+            additivity_extreme: None,
+            fitted,
+            rotation: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+            up_axis: "+y".into(),
+            open: true,
+            training: dials.map(|dials| Training { decoded: vec![vec![[0.0; 3]]; dials.len()], dials }),
+        }
+    }
+
+    /// Keys are written with `animation` or `bake` (either alone), in target order, and not
+    /// without a target; a model without training weights cannot be animated.
+    #[test]
+    fn keyed_weights_follow_the_options_in_target_order() {
+        let p = prepared(vec![1, 0], Some(vec![vec![0.2, 0.7], vec![-1.0, 0.5]]), false);
+        let no = ExportOptions::default();
+        assert!(p.keyed_weights(&no).unwrap().is_empty());
+        let want = vec![vec![0.7, 0.2], vec![0.5, -1.0]];
+        assert_eq!(p.keyed_weights(&ExportOptions { animation: true, ..no }).unwrap(), want);
+        assert_eq!(p.keyed_weights(&ExportOptions { bake: true, ..no }).unwrap(), want);
+        let empty = prepared(vec![], Some(vec![vec![0.2, 0.7]]), false);
+        assert!(empty.keyed_weights(&ExportOptions { animation: true, ..no }).unwrap().is_empty());
+        let e = prepared(vec![0], None, false).keyed_weights(&ExportOptions { animation: true, ..no }).unwrap_err();
+        assert!(e.to_string().contains("no training weights"), "{e}");
+        // The kind of targets named in the file.
+        assert_eq!(p.targets_kind(&ExportOptions { bake: true, ..no }), "baked");
+        assert_eq!(prepared(vec![0], None, true).targets_kind(&no), "fitted");
+        assert_eq!(p.targets_kind(&no), "extreme");
+    }
+
+    #[test]
+    fn frame_rates_outside_the_range_are_named() {
+        for fps in [0.01, 1.0, 24.0, 1000.0] {
+            assert_eq!(fps_error(fps), None, "{fps}");
+        }
+        for fps in [0.0, 0.009, -24.0, 1000.5, f64::NAN, f64::INFINITY] {
+            let e = fps_error(fps).unwrap_or_else(|| panic!("{fps} accepted"));
+            assert!(e.starts_with("--fps ") && e.contains("from 0.01 to 1000"), "{e}");
+        }
+    }
+}

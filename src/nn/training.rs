@@ -461,7 +461,20 @@ impl<'a> Trainer<'a> {
         neighbors: &'a NeighborIndex,
         distances: &'a dyn CenterDistances,
     ) -> Result<Self> {
-        let ck = Checkpoint::load(checkpoint)?;
+        Self::resume_from(Checkpoint::load(checkpoint)?, checkpoint, config, data, neighbors, distances)
+    }
+
+    /// [`Self::resume`] from a checkpoint already read (and verified) by [`Checkpoint::load`]
+    /// from `checkpoint`, the path its errors name: a caller that looked at the header first
+    /// does not read a large file twice.
+    pub fn resume_from(
+        ck: Checkpoint,
+        checkpoint: &Path,
+        config: AutoencoderConfig,
+        data: &'a TrainingData,
+        neighbors: &'a NeighborIndex,
+        distances: &'a dyn CenterDistances,
+    ) -> Result<Self> {
         config.check_resumable(&ck.header.config)?;
         if ck.header.n_vertices != neighbors.n_vertices() || ck.header.neighbor_fingerprint != neighbors.fingerprint() {
             return Err(Error::Invalid(format!(

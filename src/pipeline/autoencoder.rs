@@ -41,6 +41,7 @@ use crate::mesh::{self, MeshSequence, TriMesh, Vec3};
 use crate::methods::support_map::{ComponentLocality, SupportDistances, component_locality, support_ramp};
 use crate::model::{Component, Model, PointFit, PoseOptions, PoseResult, RefineOptions, Refined};
 use crate::nn::ComponentSummary;
+use crate::nn::checkpoint::Checkpoint;
 use crate::nn::{
     Autoencoder, AutoencoderConfig, CenterDistances, NeighborIndex, RunOptions, STALL_WINDOW, Trainer, TrainingData,
     stall_check_step,
@@ -747,16 +748,21 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
     std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
     // A run that stalled and restarted with halved step sizes (`stall_restarts`) wrote its
     // checkpoints with the restart's rates: a resume continues that restart.
+    // The checkpoint is read (and its checksum verified) once, here.
+    let resumed = match ctx.resume {
+        Some(from) => Some((from, Checkpoint::load(from)?)),
+        None => None,
+    };
     let mut restart = 0;
-    if let Some(from) = ctx.resume {
-        let ck = crate::nn::checkpoint::Checkpoint::load(from)?.header.config;
-        if let Some(r) = (1..=ae_cfg.stall_restarts).find(|&r| ae_cfg.restarted(r).check_resumable(&ck).is_ok()) {
+    if let Some((_, ck)) = &resumed {
+        let saved = &ck.header.config;
+        if let Some(r) = (1..=ae_cfg.stall_restarts).find(|&r| ae_cfg.restarted(r).check_resumable(saved).is_ok()) {
             restart = r;
         }
     }
-    let make_trainer = |cfg: AutoencoderConfig, resume: Option<&Path>| -> Result<Trainer<'_>> {
-        let mut trainer = if let Some(from) = resume {
-            Trainer::resume(from, cfg, data, &neighbors, &distances)?
+    let make_trainer = |cfg: AutoencoderConfig, resume: Option<(&Path, Checkpoint)>| -> Result<Trainer<'_>> {
+        let mut trainer = if let Some((from, ck)) = resume {
+            Trainer::resume_from(ck, from, cfg, data, &neighbors, &distances)?
         } else {
             Trainer::new(cfg, data, &neighbors, &distances)?
         };
@@ -768,7 +774,7 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
         }
         Ok(trainer)
     };
-    let mut trainer = make_trainer(ae_cfg.restarted(restart), ctx.resume)?;
+    let mut trainer = make_trainer(ae_cfg.restarted(restart), resumed)?;
     let log_path = out.join(LOG_FILE);
     let mut log = std::fs::OpenOptions::new()
         .create(true)
