@@ -62,6 +62,30 @@ fn every_kind_exports_valid_gltf_that_replays_the_model() {
         let tallest = (0..3).max_by(|&a, &b| (hi[a] - lo[a]).total_cmp(&(hi[b] - lo[b]))).unwrap();
         assert_eq!((tallest, file.up_axis.as_str()), (1, "+z"), "{name}: tallest axis of the file's base");
         assert_eq!(file.target_normals.len(), k, "{name}: morph target normals");
+        // The base normals are the unit area-weighted vertex normals of the file's base, and
+        // the material is the matte grey one, double-sided exactly when the mesh has a boundary.
+        let (json, bin) = glb_chunks(&glb);
+        let prim = &json["meshes"][0]["primitives"][0];
+        let normals = accessor_f32(&json, &bin, prim["attributes"]["NORMAL"].as_u64().unwrap() as usize);
+        let want = mesh::normals::vertex_normals(&file.base, &m.rest().faces, mesh::normals::NormalWeighting::Area);
+        assert_eq!(normals.len(), 3 * want.len(), "{name}");
+        for (v, n) in want.iter().enumerate() {
+            for c in 0..3 {
+                assert!((normals[3 * v + c] as f64 - n[c]).abs() < 1e-5, "{name}: normal of vertex {v}: {n:?}");
+            }
+        }
+        let material = &json["materials"][prim["material"].as_u64().unwrap() as usize];
+        let mut edges = std::collections::HashMap::new();
+        for f in &m.rest().faces {
+            for (a, b) in [(f[0], f[1]), (f[1], f[2]), (f[2], f[0])] {
+                *edges.entry((a.min(b), a.max(b))).or_insert(0) += 1;
+            }
+        }
+        let open = edges.values().any(|&n| n == 1);
+        assert_eq!(material["doubleSided"], serde_json::json!(open), "{name}: open {open}, {material}");
+        let pbr = &material["pbrMetallicRoughness"];
+        assert_eq!(pbr["baseColorFactor"], serde_json::json!([0.8, 0.8, 0.8, 1.0]), "{name}: {material}");
+        assert_eq!((pbr["metallicFactor"].as_f64(), pbr["roughnessFactor"].as_f64()), (Some(0.0), Some(0.8)), "{name}");
         for (i, t) in file.times.iter().enumerate() {
             assert!((t - i as f64 / 30.0).abs() < 1e-6, "{name}: key {i} at {t} s");
         }
@@ -348,4 +372,27 @@ fn real_exports_stand_up_in_blender() {
         common::record_skip("blender");
     }
     std::fs::remove_dir_all(&d).unwrap();
+}
+
+/// The JSON and BIN chunks of a binary glTF file (read here, independently of `read_glb`).
+fn glb_chunks(path: &Path) -> (serde_json::Value, Vec<u8>) {
+    let b = std::fs::read(path).unwrap();
+    let u32_at = |i: usize| u32::from_le_bytes(b[i..i + 4].try_into().unwrap()) as usize;
+    assert_eq!(&b[..4], b"glTF");
+    let json_len = u32_at(12);
+    assert_eq!(&b[16..20], b"JSON");
+    let json = serde_json::from_slice(&b[20..20 + json_len]).unwrap();
+    let at = 20 + json_len;
+    assert_eq!(&b[at + 4..at + 8], b"BIN\0");
+    (json, b[at + 8..at + 8 + u32_at(at)].to_vec())
+}
+
+/// The `f32` values of accessor `i` (tightly packed).
+fn accessor_f32(json: &serde_json::Value, bin: &[u8], i: usize) -> Vec<f32> {
+    let a = &json["accessors"][i];
+    assert_eq!(a["componentType"].as_u64(), Some(5126), "{a}");
+    let n = a["count"].as_u64().unwrap() as usize * if a["type"] == "VEC3" { 3 } else { 1 };
+    let view = &json["bufferViews"][a["bufferView"].as_u64().unwrap() as usize];
+    let start = view["byteOffset"].as_u64().unwrap_or(0) as usize + a["byteOffset"].as_u64().unwrap_or(0) as usize;
+    bin[start..start + 4 * n].chunks_exact(4).map(|c| f32::from_le_bytes(c.try_into().unwrap())).collect()
 }
