@@ -74,6 +74,9 @@ fn every_kind_exports_valid_gltf_that_replays_the_model() {
                 assert!((normals[3 * v + c] as f64 - n[c]).abs() < 1e-5, "{name}: normal of vertex {v}: {n:?}");
             }
         }
+        // One node named "model" holding the mesh, whose default weights are K zeros.
+        assert_eq!(json["nodes"][0]["name"], "model", "{name}");
+        assert_eq!(json["meshes"][0]["weights"], serde_json::json!(vec![0.0; k]), "{name}");
         let material = &json["materials"][prim["material"].as_u64().unwrap() as usize];
         let mut edges = std::collections::HashMap::new();
         for f in &m.rest().faces {
