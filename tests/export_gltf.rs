@@ -63,7 +63,8 @@ fn every_kind_exports_valid_gltf_that_replays_the_model() {
         assert_eq!((tallest, file.up_axis.as_str()), (1, "+z"), "{name}: tallest axis of the file's base");
         assert_eq!(file.target_normals.len(), k, "{name}: morph target normals");
         // The base normals are the unit area-weighted vertex normals of the file's base, and
-        // the material is the matte grey one, double-sided exactly when the mesh has a boundary.
+        // the material is the matte grey one, double-sided exactly when the mesh has a boundary
+        // (the synthetic sets are closed, so only the single-sided case is met here).
         let (json, bin) = glb_chunks(&glb);
         let prim = &json["meshes"][0]["primitives"][0];
         let normals = accessor_f32(&json, &bin, prim["attributes"]["NORMAL"].as_u64().unwrap() as usize);

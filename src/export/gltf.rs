@@ -1044,6 +1044,30 @@ mod tests {
         assert_eq!(p.targets_kind(&no), "extreme");
     }
 
+    /// The reader's header checks: too short, exactly a header with an empty JSON chunk, and
+    /// long enough but not glTF — each a named error, never a panic.
+    #[test]
+    fn read_glb_names_what_is_wrong_with_a_header() {
+        let dir = std::env::temp_dir().join(format!("meshdeco-read-glb-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let mut header = b"glTF".to_vec();
+        header.extend_from_slice(&2u32.to_le_bytes());
+        header.extend_from_slice(&20u32.to_le_bytes());
+        header.extend_from_slice(&0u32.to_le_bytes());
+        header.extend_from_slice(b"JSON");
+        for (name, bytes, want) in [
+            ("short.glb", b"glTF".to_vec(), "not a binary glTF file"),
+            ("header.glb", header, "truncated JSON chunk"),
+            ("text.glb", vec![b'x'; 100], "not a binary glTF file"),
+        ] {
+            let path = dir.join(name);
+            std::fs::write(&path, &bytes).unwrap();
+            let e = read_glb(&path).err().map(|e| e.to_string()).unwrap_or_default();
+            assert!(e.contains(want) && e.contains(name), "{name}: {e:?}");
+        }
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
     #[test]
     fn frame_rates_outside_the_range_are_named() {
         for fps in [0.01, 1.0, 24.0, 1000.0] {
