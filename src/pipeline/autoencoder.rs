@@ -746,13 +746,13 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
     };
 
     std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
-    // A run that stalled and restarted with halved step sizes (`stall_restarts`) wrote its
-    // checkpoints with the restart's rates: a resume continues that restart.
     // The checkpoint is read (and its checksum verified) once, here.
     let resumed = match ctx.resume {
         Some(from) => Some((from, Checkpoint::load(from)?)),
         None => None,
     };
+    // A run that stalled and restarted with halved step sizes (`stall_restarts`) wrote its
+    // checkpoints with the restart's rates: a resume continues that restart.
     let mut restart = 0;
     if let Some((_, ck)) = &resumed {
         let saved = &ck.header.config;
