@@ -334,6 +334,32 @@ fn numpy_sequences_train_like_mesh_files() {
     std::fs::remove_dir_all(&d).unwrap();
 }
 
+/// A mesh with a boundary (the bumps with one triangle taken out of the template) is drawn from
+/// both sides: glTF's material and USD's mesh say double-sided (the closed meshes of
+/// `every_kind_exports_valid_gltf_that_replays_the_model` say single-sided).
+#[test]
+fn open_meshes_export_double_sided() {
+    let d = tmp("open");
+    let seq = meshdeco::preprocess::load_frames("synthetic:bumps").unwrap();
+    let mut template = seq.mesh(0);
+    template.faces.pop();
+    mesh::write_obj(&d.join("open.obj"), &template).unwrap();
+    mesh::npy::write_npy(&d.join("bumps.npy"), &seq.frames).unwrap();
+    let data = "path = \"bumps.npy\"\ntrain = \"1-30\"\ntest = \"rest\"\ntemplate = \"open.obj\"";
+    let dir = train(&d, "open", data, "kind = \"pca\"\ncomponents = 2");
+    let (glb, usda) = (d.join("open.glb"), d.join("open.usda"));
+    for f in [&glb, &usda] {
+        let o = meshdeco(&["export", dir.to_str().unwrap(), "--out", f.to_str().unwrap()], &d);
+        assert!(o.status.success(), "{}", output_text(&o));
+    }
+    let (json, _) = glb_chunks(&glb);
+    let material = json["meshes"][0]["primitives"][0]["material"].as_u64().unwrap() as usize;
+    assert_eq!(json["materials"][material]["doubleSided"], serde_json::json!(true), "{json}");
+    let text = std::fs::read_to_string(&usda).unwrap();
+    assert!(text.contains("uniform bool doubleSided = true\n"), "{text}");
+    std::fs::remove_dir_all(&d).unwrap();
+}
+
 /// SCAPE (lying along +x in its data) and face-poses exports as Blender imports them: the rest
 /// mesh's tallest bounding-box axis is Z (Blender's up), with K + 1 shape keys. (three.js:
 /// `tests/view_browser.rs::exports_stand_up_in_three_js_in_chromium`.)

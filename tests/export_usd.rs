@@ -13,6 +13,7 @@ use std::process::Command;
 
 mod common;
 use common::{json_lines, meshdeco, output_text, train_cli};
+use meshdeco::export::read_glb;
 
 fn usd_python() -> Option<PathBuf> {
     let candidates = [
@@ -33,6 +34,24 @@ fn usd_python() -> Option<PathBuf> {
     eprintln!("SKIPPED USD validation: no Python with usd-core (pip install usd-core; MESHDECO_USD_PYTHON)");
     common::record_skip("python with usd-core");
     None
+}
+
+/// Every list of 3-vectors that follows `key` on a line of a `.usda` text, in order.
+fn usda_vec3s(text: &str, key: &str) -> Vec<Vec<[f64; 3]>> {
+    text.lines()
+        .filter_map(|l| l.split_once(key).map(|(_, v)| v))
+        .map(|v| {
+            let v = &v[..=v.rfind(']').unwrap_or_else(|| panic!("{key}{v}"))];
+            let inner = v.strip_prefix("[(").and_then(|v| v.strip_suffix(")]")).unwrap_or_else(|| panic!("{key}{v}"));
+            inner
+                .split("), (")
+                .map(|p| {
+                    let c: Vec<f64> = p.split(", ").map(|x| x.parse::<f32>().unwrap() as f64).collect();
+                    [c[0], c[1], c[2]]
+                })
+                .collect()
+        })
+        .collect()
 }
 
 const BUMPS: &str = "path = \"synthetic:bumps\"\ntrain = \"1-30\"\ntest = \"rest\"";
@@ -56,8 +75,34 @@ fn usd_exports_pass_every_pxr_validator() {
                 text.starts_with("#usda 1.0") && text.contains("upAxis = \"Y\"") && text.contains("metersPerUnit = 1")
             );
             let shapes = if tag == "bake" { 30 } else { k };
+            // The same numbers as the glTF export of the same model with the same options.
+            let g = d.join(format!("{name}-{tag}.glb"));
+            let o = meshdeco(&["export", dir.to_str().unwrap(), "--out", g.to_str().unwrap(), extra], &d);
+            assert!(o.status.success(), "{name} {tag}: {}", output_text(&o));
+            let g = read_glb(&g).unwrap();
+            assert_eq!(usda_vec3s(&text, "point3f[] points = "), vec![g.base.clone()], "{name} {tag}: points");
+            assert_eq!(usda_vec3s(&text, "uniform vector3f[] offsets = "), g.targets, "{name} {tag}: offsets");
+            assert_eq!(usda_vec3s(&text, "uniform vector3f[] normalOffsets = "), g.target_normals, "{name} {tag}");
+            assert_eq!(g.targets.len(), shapes);
+            assert!(text.contains("startTimeCode = 0\n    endTimeCode = 29\n"), "{name} {tag}");
+            assert!(text.contains("timeCodesPerSecond = 30.0\n    framesPerSecond = 30.0\n"), "{name} {tag}");
+            let samples: Vec<Vec<f64>> = text
+                .lines()
+                .filter_map(|l| l.trim().split_once(": [").filter(|(t, _)| t.parse::<usize>().is_ok()))
+                .map(|(_, v)| v.trim_end_matches("],").split(", ").map(|x| x.parse::<f32>().unwrap() as f64).collect())
+                .collect();
+            assert_eq!(samples, g.animation, "{name} {tag}: blendShapeWeights time samples");
             files.push((f, shapes));
         }
+        // Without an animation: no time range, no SkelAnimation.
+        let f = d.join(format!("{name}-still.usda"));
+        let o = meshdeco(&["export", dir.to_str().unwrap(), "--out", f.to_str().unwrap()], &d);
+        assert!(o.status.success(), "{name} still: {}", output_text(&o));
+        let text = std::fs::read_to_string(&f).unwrap();
+        assert!(!text.contains("TimeCode") && !text.contains("SkelAnimation") && !text.contains("animationSource"));
+        // The bumps are closed: single-sided (`export_gltf.rs::open_meshes_export_double_sided`).
+        assert!(text.contains("uniform bool doubleSided = false\n"), "{name} still");
+        assert_eq!(usda_vec3s(&text, "uniform vector3f[] offsets = ").len(), k, "{name} still");
     }
     // A bad output name is refused and nothing is written.
     let o = meshdeco(&["export", d.join("splocs").to_str().unwrap(), "--out", "x.usdz"], &d);

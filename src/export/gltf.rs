@@ -550,6 +550,21 @@ impl Prepared {
     }
 }
 
+/// Whether an additivity error `extreme` (data units) of a model whose rest mesh has the
+/// bounding-box diagonal `diagonal` is more than rounding: above 10⁻⁹ of 1000 diagonals (a
+/// displacement model's sum of targets is exact up to rounding, so only a nonlinear model's
+/// targets are worth fitting). A zero diagonal counts as the smallest positive number.
+fn beyond_rounding(extreme: f64, diagonal: f64) -> bool {
+    extreme > 1e-9 * (1000.0 * diagonal).max(f64::MIN_POSITIVE)
+}
+
+/// Whether every coordinate of the base, the targets and the targets' normal changes is a
+/// finite number that single precision (glTF's and USD's floats) can hold.
+fn single_precision(base: &[Vec3], deltas: &[Vec<Vec3>], target_normals: &[Vec<Vec3>]) -> bool {
+    let fits = |p: &[Vec3]| p.iter().flatten().all(|x| x.is_finite() && x.abs() <= f32::MAX as f64);
+    fits(base) && deltas.iter().all(|d| fits(d)) && target_normals.iter().all(|d| fits(d))
+}
+
 /// Builds the blendshapes of `model` as `options` ask (fitted or baked targets, rotation to
 /// Y-up, normals) and checks that everything is finite.
 pub fn prepare(model: &dyn Model, options: &ExportOptions) -> Result<Prepared> {
@@ -580,11 +595,10 @@ pub fn prepare(model: &dyn Model, options: &ExportOptions) -> Result<Prepared> {
         let mut s = Blendshapes::of(model)?;
         let extreme = training.as_ref().map(|t| additivity_error(&s, t, alignment)).transpose()?;
         // Displacement models blend exactly (0 up to rounding): nothing to fit.
-        let scale = {
+        let nonlinear = extreme.is_some_and(|e| {
             let (lo, hi) = rest.bounding_box();
-            1000.0 * crate::mesh::dist(lo, hi)
-        };
-        let nonlinear = extreme.is_some_and(|e| e > 1e-9 * scale.max(f64::MIN_POSITIVE));
+            beyond_rounding(e, crate::mesh::dist(lo, hi))
+        });
         match training.as_ref() {
             Some(t)
                 if options.targets == TargetFit::Fitted
@@ -621,8 +635,7 @@ pub fn prepare(model: &dyn Model, options: &ExportOptions) -> Result<Prepared> {
             normals_of(&shape).iter().zip(&base_normals).map(|(a, b)| sub(*a, *b)).collect()
         })
         .collect();
-    let finite = |p: &[Vec3]| p.iter().flatten().all(|x| x.is_finite() && x.abs() <= f32::MAX as f64);
-    if !(finite(&shapes.base) && shapes.deltas.iter().all(|d| finite(d)) && target_normals.iter().all(|d| finite(d))) {
+    if !single_precision(&shapes.base, &shapes.deltas, &target_normals) {
         return Err(Error::Invalid(format!(
             "the {} model's shapes are not finite single-precision numbers; nothing written",
             model.kind().name()
@@ -1066,6 +1079,182 @@ mod tests {
             assert!(e.contains(want) && e.contains(name), "{name}: {e:?}");
         }
         std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// A `.glb` from a JSON chunk and a BIN chunk (`None`: no BIN chunk), with the chunk types
+    /// given (`JSON`, `BIN\0` in a valid file); the JSON is padded with spaces to 4 bytes.
+    fn glb_bytes(json: &str, json_type: &[u8; 4], bin: Option<(&[u8], &[u8; 4])>) -> Vec<u8> {
+        let mut j = json.as_bytes().to_vec();
+        while !j.len().is_multiple_of(4) {
+            j.push(b' ');
+        }
+        let total = 12 + 8 + j.len() + bin.map_or(0, |(b, _)| 8 + b.len());
+        let mut out = b"glTF".to_vec();
+        out.extend_from_slice(&2u32.to_le_bytes());
+        out.extend_from_slice(&(total as u32).to_le_bytes());
+        out.extend_from_slice(&(j.len() as u32).to_le_bytes());
+        out.extend_from_slice(json_type);
+        out.extend_from_slice(&j);
+        if let Some((b, t)) = bin {
+            out.extend_from_slice(&(b.len() as u32).to_le_bytes());
+            out.extend_from_slice(t);
+            out.extend_from_slice(b);
+        }
+        out
+    }
+
+    /// A hand-made file whose accessors start inside their buffer views (view offsets 4 and 44,
+    /// the positions' accessor 4 bytes into its view, the buffer's first 8 bytes a decoy 99.0),
+    /// with `rotation` as the asset's rotation and an animation of `times` keys and `sets`
+    /// weight sets (no morph target: one weight per set).
+    fn crafted(rotation: &str, times: usize, sets: usize) -> (String, Vec<u8>) {
+        let mut bin: Vec<u8> = Vec::new();
+        for x in [99.0f32, 99.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0] {
+            bin.extend_from_slice(&x.to_le_bytes());
+        }
+        for i in [0u32, 2, 1] {
+            bin.extend_from_slice(&i.to_le_bytes());
+        }
+        let keyed = 56;
+        for i in 0..times + sets {
+            bin.extend_from_slice(&(i as f32 * 0.5).to_le_bytes());
+        }
+        let json = format!(
+            r#"{{"asset":{{"version":"2.0","extras":{{"rotation":{rotation},"up_axis":"+z"}}}},
+            "buffers":[{{"byteLength":{n}}}],
+            "bufferViews":[{{"buffer":0,"byteOffset":4,"byteLength":40}},{{"buffer":0,"byteOffset":44,"byteLength":12}},
+              {{"buffer":0,"byteOffset":{keyed},"byteLength":{tb}}},{{"buffer":0,"byteOffset":{wo},"byteLength":{wb}}}],
+            "accessors":[{{"bufferView":0,"byteOffset":4,"componentType":5126,"count":3,"type":"VEC3"}},
+              {{"bufferView":1,"componentType":5125,"count":3,"type":"SCALAR"}},
+              {{"bufferView":2,"componentType":5126,"count":{times},"type":"SCALAR"}},
+              {{"bufferView":3,"componentType":5126,"count":{sets},"type":"SCALAR"}}],
+            "meshes":[{{"primitives":[{{"attributes":{{"POSITION":0}},"indices":1}}]}}],
+            "nodes":[{{"mesh":0}}],
+            "animations":[{{"channels":[{{"sampler":0,"target":{{"node":0,"path":"weights"}}}}],
+              "samplers":[{{"input":2,"output":3}}]}}]}}"#,
+            n = bin.len(),
+            tb = 4 * times,
+            wo = keyed + 4 * times,
+            wb = 4 * sets,
+        );
+        (json, bin)
+    }
+
+    /// Accessors are read from their view's offset plus their own, the asset's rotation is
+    /// checked, and the animation's key times must match its weight sets.
+    #[test]
+    fn read_glb_reads_offsets_rotation_and_keys() {
+        let dir = std::env::temp_dir().join(format!("meshdeco-read-glb-crafted-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("crafted.glb");
+        let turn = "[[0.0,-1.0,0.0],[1.0,0.0,0.0],[0.0,0.0,1.0]]";
+        let (json, bin) = crafted(turn, 2, 2);
+        std::fs::write(&path, glb_bytes(&json, b"JSON", Some((&bin, b"BIN\0")))).unwrap();
+        let g = read_glb(&path).unwrap();
+        assert_eq!(g.base, vec![[1.0, 2.0, 3.0], [4.0, 5.0, 6.0], [7.0, 8.0, 9.0]]);
+        assert_eq!(g.faces, vec![[0, 2, 1]]);
+        assert_eq!(g.rotation, [[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]);
+        assert_eq!(g.up_axis, "+z");
+        assert!(g.targets.is_empty() && g.target_normals.is_empty() && g.names.is_empty());
+        assert_eq!(g.times, vec![0.0, 0.5]);
+        assert_eq!(g.animation, vec![vec![1.0], vec![1.5]]);
+        // Rotated back into the data axes: Rᵀ p.
+        assert_eq!(g.in_data_axes().base[0], [2.0, -1.0, 3.0]);
+        for (rotation, times, sets, want) in [
+            ("[[2.0,0.0,0.0],[0.0,1.0,0.0],[0.0,0.0,1.0]]", 2, 2, "not a rotation"),
+            ("[[1.0,0.0,0.0],[0.0,1.0,0.0],[0.0,0.0,-1.0]]", 2, 2, "not a rotation"),
+            ("[[1.0,0.0],[0.0,1.0]]", 2, 2, "not a 3×3 matrix"),
+            (turn, 2, 3, "2 key times for 3 keyed weight sets"),
+        ] {
+            let (json, bin) = crafted(rotation, times, sets);
+            std::fs::write(&path, glb_bytes(&json, b"JSON", Some((&bin, b"BIN\0")))).unwrap();
+            let e = read_glb(&path).err().map(|e| e.to_string()).unwrap_or_default();
+            assert!(e.contains(want) && e.contains("crafted.glb"), "{rotation} {times}/{sets}: {e:?}");
+        }
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// Chunks of the wrong type or length, a file cut anywhere, and a valid file with an empty
+    /// BIN chunk: each a named error (never a panic), and the empty chunk read as such.
+    #[test]
+    fn read_glb_checks_every_chunk_bound() {
+        let dir = std::env::temp_dir().join(format!("meshdeco-read-glb-chunks-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("chunks.glb");
+        let read = |bytes: &[u8]| -> std::result::Result<GlbMorphs, String> {
+            std::fs::write(&path, bytes).unwrap();
+            read_glb(&path).map_err(|e| e.to_string())
+        };
+        let (json, bin) = crafted("[[1.0,0.0,0.0],[0.0,1.0,0.0],[0.0,0.0,1.0]]", 2, 2);
+        let good = glb_bytes(&json, b"JSON", Some((&bin, b"BIN\0")));
+        assert!(read(&good).is_ok());
+        for (bytes, want) in [
+            (glb_bytes(&json, b"JSN\0", Some((&bin, b"BIN\0"))), "truncated JSON chunk"),
+            (glb_bytes(&json, b"JSON", Some((&bin, b"BIN "))), "truncated BIN chunk"),
+            (glb_bytes(&json, b"JSON", None), "truncated JSON chunk"),
+            // No mesh, and a BIN chunk of 0 bytes ending the file exactly.
+            (glb_bytes(r#"{"asset":{"version":"2.0"}}"#, b"JSON", Some((&[], b"BIN\0"))), "no mesh"),
+            // A BIN chunk that claims one byte more than the file holds.
+            (
+                {
+                    let mut b = good.clone();
+                    let at = b.len() - bin.len() - 8;
+                    b[at..at + 4].copy_from_slice(&(bin.len() as u32 + 1).to_le_bytes());
+                    b
+                },
+                "truncated BIN chunk",
+            ),
+            // A JSON chunk that claims to run past the end.
+            (
+                {
+                    let mut b = good.clone();
+                    b[12..16].copy_from_slice(&(good.len() as u32).to_le_bytes());
+                    b
+                },
+                "truncated JSON chunk",
+            ),
+        ] {
+            let e = read(&bytes).err().unwrap_or_default();
+            assert!(e.contains(want) && e.contains("chunks.glb"), "{want}: {e:?}");
+        }
+        for n in 0..good.len() {
+            let e = read(&good[..n]).err().unwrap_or_else(|| panic!("cut at {n} read"));
+            assert!(e.contains("chunks.glb"), "cut at {n}: {e}");
+        }
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// The threshold between a model that blends exactly up to rounding and one whose targets
+    /// are worth fitting: 10⁻⁹ of 1000 bounding-box diagonals, a zero diagonal counting as the
+    /// smallest positive number; an error at the threshold is rounding.
+    #[test]
+    fn rounding_threshold_scales_with_the_mesh() {
+        let at = |d: f64| 1e-9 * (1000.0 * d);
+        assert!(!beyond_rounding(at(1.0), 1.0));
+        assert!(beyond_rounding(at(1.0) * 1.5, 1.0));
+        assert!(!beyond_rounding(1e-10, 1.0));
+        // A 1 mm mesh: 10⁻⁹ is beyond rounding, 10⁻¹⁰ is not.
+        assert!(beyond_rounding(5e-7, 1e-3) && beyond_rounding(2e-9, 1e-3) && !beyond_rounding(1e-10, 1e-3));
+        // A 10⁶ m mesh: 0.5 is rounding, 2 is not.
+        assert!(!beyond_rounding(0.5, 1e6) && beyond_rounding(2.0, 1e6));
+        assert!(!beyond_rounding(0.0, 0.0) && beyond_rounding(1e-300, 0.0));
+    }
+
+    /// Each of the base, the targets and the normal changes is checked, every value of it:
+    /// infinite, NaN or beyond f32's range anywhere is refused.
+    #[test]
+    fn single_precision_checks_every_part() {
+        let ok = vec![[1.0, -2.0, f32::MAX as f64]];
+        let two = vec![ok.clone(), ok.clone()];
+        assert!(single_precision(&ok, &two, &two));
+        assert!(single_precision(&ok, &[], &[]));
+        for bad in [f64::INFINITY, f64::NAN, -1e39] {
+            let b = vec![[1.0, bad, 0.0]];
+            let mixed = vec![ok.clone(), b.clone()];
+            assert!(!single_precision(&b, &two, &two), "{bad} in the base");
+            assert!(!single_precision(&ok, &mixed, &two), "{bad} in the second target");
+            assert!(!single_precision(&ok, &two, &mixed), "{bad} in the second normal change");
+        }
     }
 
     #[test]

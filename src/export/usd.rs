@@ -136,3 +136,36 @@ pub fn export_usda(model: &dyn Model, path: &Path, options: &ExportOptions) -> R
     crate::artifact::write_atomic(path, s.as_bytes())?;
     Ok(p.report(s.len(), keys.len()))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Identifiers keep ASCII letters and digits, turn everything else into `_`, never start
+    /// with a digit or come out empty, and are made unique with `_2`, `_3`, … in order.
+    #[test]
+    fn identifiers_are_valid_and_unique() {
+        let mut used = std::collections::BTreeSet::new();
+        let ids: Vec<String> =
+            ["r0 k3 v12", "3 arms", "", "a-b", "a_b", "a-b", "é"].iter().map(|n| identifier(n, &mut used)).collect();
+        assert_eq!(ids, ["r0_k3_v12", "_3_arms", "_", "a_b", "a_b_2", "a_b_3", "__2"]);
+    }
+
+    /// Lists are bracketed, comma-separated and hold the shortest round-trip form of each
+    /// value's `f32`.
+    #[test]
+    fn lists_hold_the_single_precision_values() {
+        let mut s = String::new();
+        vec3_list(&mut s, &[[1.0, -2.5, 0.1], [0.0, 1e-3, 3.0]]);
+        assert_eq!(s, "[(1.0, -2.5, 0.1), (0.0, 0.001, 3.0)]");
+        s.clear();
+        vec3_list(&mut s, &[]);
+        assert_eq!(s, "[]");
+        s.clear();
+        float_list(&mut s, &[0.5, 1.0 / 3.0, -7.0]);
+        assert_eq!(s, "[0.5, 0.33333334, -7.0]");
+        s.clear();
+        float_list(&mut s, &[2.0]);
+        assert_eq!(s, "[2.0]");
+    }
+}
