@@ -399,6 +399,35 @@ mod tests {
         d
     }
 
+    /// A header number exactly at the bound is kept; just beyond it, or not finite, is refused
+    /// with its key.
+    #[test]
+    fn header_numbers_up_to_the_bound_are_plausible() {
+        let p = Path::new("model.json");
+        let ok = serde_json::json!({ "a": [1.0, -MAX_MODEL_VALUE], "b": { "c": MAX_MODEL_VALUE } });
+        assert!(check_plausible_json(p, &ok).is_ok());
+        let bad = serde_json::json!({ "a": [1.0], "b": { "c": 1.5 * MAX_MODEL_VALUE } });
+        let e = check_plausible_json(p, &bad).unwrap_err().to_string();
+        assert!(e.contains("model.json") && e.contains("c"), "{e}");
+    }
+
+    /// The weight table: a header, one row per frame in frame-major order (weight `f·k + c`),
+    /// and nothing written when a weight is not finite.
+    #[test]
+    fn weights_csv_is_frame_major_and_refuses_non_finite() {
+        let d = tmpdir("weights-csv");
+        std::fs::create_dir_all(&d).unwrap();
+        let names = vec!["f0".to_string(), "f1".to_string(), "f2".to_string()];
+        let p = d.join("w.csv");
+        write_weights_csv(&p, &names, &[0.5, 1.0, 2.0, 3.0, -4.0, 5.25], 2).unwrap();
+        assert_eq!(std::fs::read_to_string(&p).unwrap(), "frame,c0,c1\nf0,0.5,1\nf1,2,3\nf2,-4,5.25\n");
+        let q = d.join("nan.csv");
+        let e = write_weights_csv(&q, &names, &[0.5, 1.0, 2.0, f64::NAN, 0.0, 0.0], 2).unwrap_err().to_string();
+        assert!(e.contains("frame f1, component 1") && e.contains("nan.csv"), "{e}");
+        assert!(!q.exists());
+        std::fs::remove_dir_all(&d).unwrap();
+    }
+
     #[test]
     fn model_round_trip() {
         let d = tmpdir("rt");
