@@ -399,8 +399,8 @@ mod tests {
         d
     }
 
-    /// A header number exactly at the bound is kept; just beyond it, or not finite, is refused
-    /// with its key.
+    /// A header number exactly at the bound is kept; one beyond it is refused, naming the file
+    /// and the number's key path.
     #[test]
     fn header_numbers_up_to_the_bound_are_plausible() {
         let p = Path::new("model.json");
@@ -408,7 +408,7 @@ mod tests {
         assert!(check_plausible_json(p, &ok).is_ok());
         let bad = serde_json::json!({ "a": [1.0], "b": { "c": 1.5 * MAX_MODEL_VALUE } });
         let e = check_plausible_json(p, &bad).unwrap_err().to_string();
-        assert!(e.contains("model.json") && e.contains("c"), "{e}");
+        assert!(e.contains("model.json") && e.contains("`b.c`"), "{e}");
     }
 
     /// The weight table: a header, one row per frame in frame-major order (weight `f·k + c`),
