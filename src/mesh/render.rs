@@ -361,4 +361,211 @@ mod tests {
             View::Axes { up: 1, view: 2, negative: true }
         );
     }
+
+    /// Pixels of a `w`-wide picture that are not the white background.
+    fn inked(img: &[u8], w: usize) -> Vec<(usize, usize)> {
+        (0..img.len() / 3).filter(|i| img[3 * i..3 * i + 3] != [255, 255, 255]).map(|i| (i % w, i / w)).collect()
+    }
+
+    /// The right triangle (0,0,0), (1,0,0), (0,1,0), facing +z.
+    fn corner_triangle() -> TriMesh {
+        TriMesh { positions: vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]], faces: vec![[0, 1, 2]] }
+    }
+
+    /// Seen from the front in 100 × 100 pixels, the unit triangle is fitted with a 5 % margin:
+    /// pixel x = 5 + 90 X, y = 95 − 90 Y, so it covers (5, 95), (95, 95), (5, 5). A pixel is
+    /// drawn exactly when its centre is inside or on an edge (the hypotenuse's pixels too), all
+    /// in one Lambert shade of the base colour: 0.2 + 0.8 |n·l|, light ∝ (−0.3, 0.4, 1).
+    #[test]
+    fn a_flat_triangle_fills_the_pixels_inside_it_in_one_shade() {
+        let opts = RenderOptions { width: 100, height: 100, base_color: [200, 100, 50], ..Default::default() };
+        let img = render(&corner_triangle(), None, &opts).unwrap();
+        let shade = 0.2 + 0.8 / 1.25f64.sqrt();
+        let want = [200.0, 100.0, 50.0].map(|c: f64| (c * shade).round() as u8);
+        for y in 0..100 {
+            for x in 0..100 {
+                let got = &img[3 * (y * 100 + x)..3 * (y * 100 + x) + 3];
+                let inside = x >= 5 && y <= 94 && x <= y;
+                assert_eq!(got, if inside { &want[..] } else { &[255, 255, 255][..] }, "pixel ({x}, {y})");
+            }
+        }
+        // Two-sided: the same triangle wound the other way (facing −z) looks the same.
+        let mut back = corner_triangle();
+        back.faces = vec![[0, 2, 1]];
+        assert_eq!(render(&back, None, &opts).unwrap(), img);
+    }
+
+    /// Vertex colours are blended by the pixel centre's barycentric weights, then shaded.
+    #[test]
+    fn vertex_colours_blend_by_barycentric_weight() {
+        let opts = RenderOptions { width: 100, height: 100, ..Default::default() };
+        let colors = [[255, 0, 0], [0, 255, 0], [0, 0, 255]];
+        let img = render(&corner_triangle(), Some(&colors), &opts).unwrap();
+        let shade = 0.2 + 0.8 / 1.25f64.sqrt();
+        for (x, y) in [(34usize, 64usize), (6, 93), (90, 93), (6, 10), (50, 80)] {
+            // Weights of the corners at the pixel centre (x + ½, y + ½): b = (1,0,0) grows with
+            // x, c = (0,1,0) grows upwards, a takes the rest.
+            let wb = (x as f64 + 0.5 - 5.0) / 90.0;
+            let wc = (95.0 - (y as f64 + 0.5)) / 90.0;
+            let wa = 1.0 - wb - wc;
+            let want = [wa, wb, wc].map(|w| (255.0 * w * shade).round() as i32);
+            let got = &img[3 * (y * 100 + x)..3 * (y * 100 + x) + 3];
+            for k in 0..3 {
+                assert!((got[k] as i32 - want[k]).abs() <= 1, "pixel ({x}, {y}): {got:?}, expected {want:?}");
+            }
+        }
+    }
+
+    /// The nearer surface hides the farther one whatever the face order; from the other side
+    /// the other surface is nearer.
+    #[test]
+    fn the_nearer_face_wins_in_either_order() {
+        // Two squares overlapping in x ∈ [1, 2]: red at z = 0 (x ∈ [0, 2]), blue at z = 0.5
+        // (x ∈ [1, 3]); both y ∈ [0, 1].
+        let mut positions = Vec::new();
+        for (x0, z) in [(0.0, 0.0), (1.0, 0.5)] {
+            positions.extend([[x0, 0.0, z], [x0 + 2.0, 0.0, z], [x0 + 2.0, 1.0, z], [x0, 1.0, z]]);
+        }
+        let red_blue = [[[255, 0, 0]; 4], [[0, 0, 255]; 4]].concat();
+        let squares = |order: [usize; 2]| TriMesh {
+            positions: positions.clone(),
+            faces: order.iter().flat_map(|&q| [[4 * q, 4 * q + 1, 4 * q + 2], [4 * q, 4 * q + 2, 4 * q + 3]]).collect(),
+        };
+        // 3 × 1 units fitted into 120 × 40: 36 pixels per unit, x = 6 + 36 X, the middle row y = 20.
+        let middle = |img: &[u8], x_units: f64| {
+            let x = (6.0 + 36.0 * x_units) as usize;
+            let i = 3 * (20 * 120 + x);
+            [img[i], img[i + 1], img[i + 2]]
+        };
+        for (view, overlap) in [(View::Front, "blue"), (View::Axes { up: 1, view: 2, negative: true }, "red")] {
+            let opts = RenderOptions { width: 120, height: 40, view, ..Default::default() };
+            let a = render(&squares([0, 1]), Some(&red_blue), &opts).unwrap();
+            let b = render(&squares([1, 0]), Some(&red_blue), &opts).unwrap();
+            assert_eq!(a, b, "{view:?}: the face order changed the picture");
+            // From −z the picture is mirrored: red's own part is on the right.
+            let (red_x, blue_x) = if overlap == "blue" { (0.5, 2.5) } else { (2.5, 0.5) };
+            let m = middle(&a, 1.5);
+            assert!(
+                if overlap == "blue" { m[2] > 150 && m[0] == 0 } else { m[0] > 150 && m[2] == 0 },
+                "{view:?}: overlap {m:?}"
+            );
+            assert!(middle(&a, red_x)[0] > 150 && middle(&a, red_x)[2] == 0, "{view:?}");
+            assert!(middle(&a, blue_x)[2] > 150 && middle(&a, blue_x)[0] == 0, "{view:?}");
+        }
+    }
+
+    /// Side and top views put the screen axes where their docs say: side: right = −z, up = +y;
+    /// top: right = +x, up = −z. The right angle of a corner triangle lands in a known corner.
+    #[test]
+    fn side_and_top_views_orient_the_picture() {
+        let tri = |q: Vec3, r: Vec3| TriMesh { positions: vec![[0.0; 3], q, r], faces: vec![[0, 1, 2]] };
+        // The drawn pixel nearest each corner of the 100 × 100 image's fitted square (5..95).
+        let corners = |img: &[u8]| {
+            let at = |x: usize, y: usize| img[3 * (y * 100 + x)..3 * (y * 100 + x) + 3] != [255, 255, 255];
+            [at(6, 6), at(93, 6), at(6, 93), at(93, 93)] // top-left, top-right, bottom-left, bottom-right
+        };
+        let opts = |view| RenderOptions { width: 100, height: 100, view, ..Default::default() };
+        // Side: the triangle in the y-z plane with its right angle at the origin, legs +z and +y:
+        // +z is screen left, so the right angle is bottom-right.
+        let side = render(&tri([0.0, 0.0, 1.0], [0.0, 1.0, 0.0]), None, &opts(View::Side)).unwrap();
+        assert_eq!(corners(&side), [false, true, true, true]);
+        // Top: legs +x and +z: +z is screen down, so the right angle is top-left.
+        let top = render(&tri([1.0, 0.0, 0.0], [0.0, 0.0, 1.0]), None, &opts(View::Top)).unwrap();
+        assert_eq!(corners(&top), [true, true, true, false]);
+        // Front: legs +x and +y: the right angle is bottom-left.
+        let front = render(&corner_triangle(), None, &opts(View::Front)).unwrap();
+        assert_eq!(corners(&front), [true, false, true, true]);
+        assert_eq!(View::parse("side"), Some(View::Side));
+        assert_eq!(View::parse("top"), Some(View::Top));
+        assert_eq!(View::parse("front"), Some(View::Front));
+        assert_eq!(View::parse("back"), None);
+    }
+
+    /// A given box frames the picture instead of the mesh's own: a larger box draws the shape
+    /// smaller; a smaller one crops it at the image border (no panic, nothing wrapped).
+    #[test]
+    fn a_given_box_frames_the_picture() {
+        let opts = |bounds| RenderOptions { width: 100, height: 100, bounds, ..Default::default() };
+        let tri = corner_triangle();
+        // Box (−1, −1, −1)–(2, 2, 2): 30 pixels per unit about the centre (0.5, 0.5):
+        // the triangle spans (35, 65), (65, 65), (35, 35).
+        let small = render(&tri, None, &opts(Some(([-1.0; 3], [2.0; 3])))).unwrap();
+        let want: Vec<(usize, usize)> = (0..100)
+            .flat_map(|y| (0..100).map(move |x| (x, y)))
+            .filter(|&(x, y)| x >= 35 && y <= 64 && x <= y)
+            .collect();
+        assert_eq!(inked(&small, 100), want);
+        // Box (0, 0, 0)–(0.5, 0.5, 0): 180 pixels per unit about (0.25, 0.25): the triangle
+        // spans (5, 95), (185, 95), (5, −85), cut by the image border.
+        let big = render(&tri, None, &opts(Some(([0.0; 3], [0.5, 0.5, 0.0])))).unwrap();
+        let want: Vec<(usize, usize)> = (0..100)
+            .flat_map(|y| (0..100).map(move |x| (x, y)))
+            .filter(|&(x, y)| x >= 5 && y <= 94 && x <= y + 90)
+            .collect();
+        assert_eq!(inked(&big, 100), want);
+    }
+
+    /// A face of (near) zero area draws nothing — its barycentric weights would be 0/0 — and
+    /// the sizes 8 and 16384 are the bounds; an empty mesh is the background.
+    #[test]
+    fn degenerate_faces_draw_nothing_and_sizes_are_bounded() {
+        let opts = RenderOptions { width: 100, height: 100, ..Default::default() };
+        let mut m = corner_triangle();
+        // Three points on the line y = 1 − x: a face of zero area across the picture.
+        m.positions.extend([[0.0, 1.0, 0.0], [0.5, 0.5, 0.0], [1.0, 0.0, 0.0]]);
+        m.faces.push([3, 4, 5]);
+        assert_eq!(render(&m, None, &opts).unwrap(), render(&corner_triangle(), None, &opts).unwrap());
+        let tri = corner_triangle();
+        for (w, h, ok) in
+            [(8, 8, true), (7, 8, false), (8, 7, false), (16384, 8, true), (16385, 8, false), (8, 16385, false)]
+        {
+            assert_eq!(render(&tri, None, &RenderOptions { width: w, height: h, ..opts }).is_ok(), ok, "{w}×{h}");
+        }
+        let empty = TriMesh { positions: vec![], faces: vec![] };
+        let bg = RenderOptions { background: [1, 2, 3], ..opts };
+        assert!(render(&empty, None, &bg).unwrap().chunks(3).all(|c| c == [1, 2, 3]));
+        let mut bad = corner_triangle();
+        bad.faces = vec![[0, 1, 3]];
+        assert!(render(&bad, None, &opts).unwrap_err().to_string().contains("face 0"));
+        let mut nan = corner_triangle();
+        nan.positions[2][1] = f64::NAN;
+        assert!(render(&nan, None, &opts).unwrap_err().to_string().contains("vertex 2"));
+        nan.positions[2][1] = f64::INFINITY;
+        assert!(render(&nan, None, &opts).is_err());
+    }
+
+    /// Colours from an ASCII PLY's `red green blue` vertex properties, wherever they sit among
+    /// the others; `None` for a binary PLY or one without colours; errors name the file and line.
+    #[test]
+    fn ply_vertex_colours_are_read_by_property_name() {
+        let dir = std::env::temp_dir().join(format!("meshdeco-ply-colours-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        let read = |name: &str, text: &str| {
+            let path = dir.join(name);
+            std::fs::write(&path, text).unwrap();
+            vertex_colors_from_ply(&path).map_err(|e| e.to_string())
+        };
+        let head = "ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty uchar blue\n\
+                    property float y\nproperty uchar red\nproperty float z\nproperty uchar green\n\
+                    element face 1\nproperty list uchar int vertex_indices\nproperty uchar red\nend_header\n";
+        let ok = format!("{head}0 1 0 2 0 3\n1 4 1 5 1 6\n3 0 1 1 9\n");
+        assert_eq!(read("ok.ply", &ok).unwrap(), Some(vec![[2, 3, 1], [5, 6, 4]]));
+        let binary = ok.replace("format ascii 1.0", "format binary_little_endian 1.0");
+        assert_eq!(read("binary.ply", &binary).unwrap(), None);
+        let plain = "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\n\
+                     property float z\nend_header\n0 0 0\n";
+        assert_eq!(read("plain.ply", plain).unwrap(), None);
+        // Colours given only on faces are not vertex colours.
+        let face_only = "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nelement face 0\n\
+                         property uchar red\nproperty uchar green\nproperty uchar blue\nend_header\n0\n";
+        assert_eq!(read("face.ply", face_only).unwrap(), None);
+        let e = read("big.ply", &format!("{head}0 1 0 2 0 3\n1 4 1 256 1 6\n")).unwrap_err();
+        assert!(e.contains("big.ply:15") && e.contains("256"), "{e}");
+        let e = read("short.ply", &format!("{head}0 1 0 2 0 3\n")).unwrap_err();
+        assert!(e.contains("short.ply") && e.contains("1 vertex lines, header says 2"), "{e}");
+        let e = read("count.ply", &head.replace("element vertex 2", "element vertex two")).unwrap_err();
+        assert!(e.contains("count.ply:3") && e.contains("`two`"), "{e}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
 }
