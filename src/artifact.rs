@@ -511,6 +511,22 @@ mod tests {
         assert!(e.contains("model.bin") && e.contains("describes 4 numbers"), "{e}");
         std::fs::remove_dir_all(&d).unwrap();
     }
+
+    /// The skipped per-file sync is scoped to the call: on when inside (nested too), off again
+    /// after it returns or panics, so later writes on the thread are synced.
+    #[test]
+    fn deferred_sync_is_scoped_to_the_call_even_when_it_panics() {
+        let deferred = || DEFER_SYNC.with(|d| d.get());
+        assert!(!deferred());
+        deferred_sync(|| {
+            assert!(deferred());
+            deferred_sync(|| assert!(deferred()));
+            assert!(deferred(), "the inner call ended the outer one's deferral");
+        });
+        assert!(!deferred(), "still deferred after the call");
+        assert!(std::panic::catch_unwind(|| deferred_sync(|| panic!("inside"))).is_err());
+        assert!(!deferred(), "still deferred after a panic");
+    }
 }
 
 thread_local! {
