@@ -512,6 +512,25 @@ mod tests {
         std::fs::remove_dir_all(&d).unwrap();
     }
 
+    /// A resumed training takes the interrupted run's checkpoint (in the staging directory)
+    /// before the finished run's (in the directory itself), and none when neither is a file.
+    #[test]
+    fn resumable_checkpoint_prefers_the_interrupted_run() {
+        let d = tmpdir("resume");
+        let out = d.join("run");
+        std::fs::create_dir_all(out.join(CHECKPOINT_FILE)).unwrap();
+        assert_eq!(resumable_checkpoint(&out), None, "a directory is not a checkpoint");
+        std::fs::remove_dir(out.join(CHECKPOINT_FILE)).unwrap();
+        assert_eq!(resumable_checkpoint(&out), None);
+        std::fs::write(out.join(CHECKPOINT_FILE), b"finished").unwrap();
+        assert_eq!(resumable_checkpoint(&out), Some(out.join(CHECKPOINT_FILE)));
+        let staged = staging_path(&out).unwrap();
+        std::fs::create_dir_all(&staged).unwrap();
+        std::fs::write(staged.join(CHECKPOINT_FILE), b"interrupted").unwrap();
+        assert_eq!(resumable_checkpoint(&out), Some(staged.join(CHECKPOINT_FILE)));
+        std::fs::remove_dir_all(&d).unwrap();
+    }
+
     /// The skipped per-file sync is scoped to the call: on when inside (nested too), off again
     /// after it returns or panics, so later writes on the thread are synced.
     #[test]

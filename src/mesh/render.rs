@@ -360,6 +360,25 @@ mod tests {
             View::auto(&TriMesh { positions: cap.positions.clone(), faces: flipped }),
             View::Axes { up: 1, view: 2, negative: true }
         );
+        // A vote by vertex count: a fine grid (81 vertices) facing one way outvotes a coarse
+        // one (9) facing the other, whichever way each faces; equal counts: the + side.
+        let two = |fine_up: bool, coarse: usize| {
+            let (fine, rough) =
+                (crate::mesh::primitives::grid(8, 8, 1.0), crate::mesh::primitives::grid(coarse, coarse, 1.0));
+            let flip = |f: &[usize; 3], up: bool| if up { *f } else { [f[0], f[2], f[1]] };
+            let n = fine.positions.len();
+            let positions: Vec<Vec3> = fine.positions.iter().chain(&rough.positions).copied().collect();
+            let faces: Vec<[usize; 3]> = fine
+                .faces
+                .iter()
+                .map(|f| flip(f, fine_up))
+                .chain(rough.faces.iter().map(|f| flip(&[f[0] + n, f[1] + n, f[2] + n], !fine_up)))
+                .collect();
+            front_is_negative(&positions, &faces, 2)
+        };
+        assert!(!two(true, 2), "81 vertices face +z, 9 face −z");
+        assert!(two(false, 2), "81 vertices face −z, 9 face +z");
+        assert!(!two(false, 8), "as many face each way");
     }
 
     /// Pixels of a `w`-wide picture that are not the white background.
@@ -452,6 +471,23 @@ mod tests {
             assert!(middle(&a, red_x)[0] > 150 && middle(&a, red_x)[2] == 0, "{view:?}");
             assert!(middle(&a, blue_x)[2] > 150 && middle(&a, blue_x)[0] == 0, "{view:?}");
         }
+    }
+
+    /// Ties in extent prefer y, z, x for up: exactly (a point, no extent at all) and within the
+    /// tolerance of 10⁻⁶ × the largest extent, which scales with the shape (here 1000 units).
+    #[test]
+    fn auto_axes_ties_prefer_y_up_at_any_scale() {
+        assert_eq!(auto_axes(&[[3.0, 4.0, 5.0]]), (1, 2));
+        assert_eq!(auto_axes(&[]), (1, 2));
+        // x and y 1000 units, x longer by 10⁻⁴ (within 10⁻³): still y up; z shortest: view z.
+        let near_tie = [[0.0, 0.0, 0.0], [1000.0 + 1e-4, 1000.0, 10.0]];
+        assert_eq!(auto_axes(&near_tie), (1, 2));
+        // Longer by 10⁻² (beyond the tolerance): x up.
+        let longer = [[0.0, 0.0, 0.0], [1000.01, 1000.0, 10.0]];
+        assert_eq!(auto_axes(&longer), (0, 2));
+        // The view axis is the shortest other than up, even when it comes later in z, x, y.
+        assert_eq!(auto_axes(&[[0.0, 0.0, 0.0], [1.0, 5.0, 3.0]]), (1, 0));
+        assert_eq!(auto_axes(&[[0.0, 0.0, 0.0], [5.0, 1.0, 3.0]]), (0, 1));
     }
 
     /// Side and top views put the screen axes where their docs say: side: right = −z, up = +y;
