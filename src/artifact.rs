@@ -531,6 +531,23 @@ mod tests {
         std::fs::remove_dir_all(&d).unwrap();
     }
 
+    /// A commit directory whose plan is gone (removed last, just before the directory) is
+    /// simply removed; a plan that cannot be read for another reason is an error naming it.
+    #[test]
+    fn a_commit_without_its_plan_is_cleaned_up_and_an_unreadable_plan_is_an_error() {
+        let d = tmpdir("finish");
+        let out = d.join("run");
+        let dir = commit_path(&out).unwrap();
+        std::fs::create_dir_all(dir.join("components")).unwrap();
+        finish_commit(&out).unwrap();
+        assert!(!dir.exists(), "the plan-less commit directory was left");
+        std::fs::create_dir_all(dir.join(PLAN_FILE)).unwrap();
+        let e = finish_commit(&out).unwrap_err().to_string();
+        assert!(e.contains(PLAN_FILE), "{e}");
+        assert!(dir.join(PLAN_FILE).is_dir(), "an unreadable plan's commit was removed");
+        std::fs::remove_dir_all(&d).unwrap();
+    }
+
     /// The skipped per-file sync is scoped to the call: on when inside (nested too), off again
     /// after it returns or panics, so later writes on the thread are synced.
     #[test]

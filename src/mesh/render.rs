@@ -379,6 +379,10 @@ mod tests {
         assert!(!two(true, 2), "81 vertices face +z, 9 face −z");
         assert!(two(false, 2), "81 vertices face −z, 9 face +z");
         assert!(!two(false, 8), "as many face each way");
+        // Vertices whose normal has no component along the view (here: on no face) do not vote.
+        let mut lone = crate::mesh::primitives::grid(2, 2, 1.0);
+        lone.positions.extend((0..20).map(|i| [i as f64, 5.0, 0.0]));
+        assert!(!front_is_negative(&lone.positions, &lone.faces, 2), "9 face +z, 20 have no normal");
     }
 
     /// Pixels of a `w`-wide picture that are not the white background.
