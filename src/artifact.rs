@@ -548,6 +548,37 @@ mod tests {
         std::fs::remove_dir_all(&d).unwrap();
     }
 
+    /// An uncommitted run that has a checkpoint keeps its staging directory; resuming it keeps
+    /// the work files (checkpoint, log) and drops everything else it left. A commit into a
+    /// directory that holds no artefact (no manifest, no resolved config) leaves the user's
+    /// entries alone, even ones named like artefact files.
+    #[test]
+    fn staging_keeps_work_files_for_resume_and_a_users_directory_alone() {
+        let d = tmpdir("staging");
+        let out = d.join("run");
+        let s = Staging::begin(&out, false).unwrap();
+        let staged = s.dir().to_path_buf();
+        for name in [CHECKPOINT_FILE, LOG_FILE, "model.json"] {
+            std::fs::write(staged.join(name), name).unwrap();
+        }
+        drop(s);
+        assert!(staged.join(CHECKPOINT_FILE).is_file(), "an interrupted run's checkpoint was removed");
+        let s = Staging::begin(&out, true).unwrap();
+        assert_eq!(s.resume_from(), Some(staged.join(CHECKPOINT_FILE).as_path()));
+        assert!(staged.join(CHECKPOINT_FILE).is_file() && staged.join(LOG_FILE).is_file());
+        assert!(!staged.join("model.json").exists(), "a stray file of the interrupted run was kept");
+        drop(s);
+        let mine = d.join("mine");
+        std::fs::create_dir_all(&mine).unwrap();
+        std::fs::write(mine.join("metrics.json"), "my own").unwrap();
+        let s = Staging::begin(&mine, false).unwrap();
+        std::fs::write(s.dir().join("model.json"), "{}").unwrap();
+        s.commit().unwrap();
+        assert_eq!(std::fs::read_to_string(mine.join("metrics.json")).unwrap(), "my own");
+        assert!(mine.join("model.json").is_file() && mine.join(MANIFEST_FILE).is_file());
+        std::fs::remove_dir_all(&d).unwrap();
+    }
+
     /// The skipped per-file sync is scoped to the call: on when inside (nested too), off again
     /// after it returns or panics, so later writes on the thread are synced.
     #[test]

@@ -545,6 +545,43 @@ mod tests {
         assert_eq!(inked(&big, 100), want);
     }
 
+    /// The framing does not depend on where the shape sits, and the side that limits the scale
+    /// fills 90 % of its image side: a 2 × 1 triangle spans x 5..95 and y 27.5..72.5 of a
+    /// 100 × 100 picture, a 1 × 2 one the transpose. A given box's extent along the view's
+    /// screen axes frames it (here z, seen from the side).
+    #[test]
+    fn framing_ignores_position_and_fills_the_limiting_side() {
+        let opts = RenderOptions { width: 100, height: 100, ..Default::default() };
+        let scaled = |sx: f64, sy: f64, at: Vec3| TriMesh {
+            positions: corner_triangle()
+                .positions
+                .iter()
+                .map(|p| [at[0] + sx * p[0], at[1] + sy * p[1], at[2] + p[2]])
+                .collect(),
+            faces: vec![[0, 1, 2]],
+        };
+        let extent = |img: &[u8]| {
+            let ink = inked(img, 100);
+            let xs = ink.iter().map(|p| p.0);
+            let ys = ink.iter().map(|p| p.1);
+            (xs.clone().min().unwrap(), xs.max().unwrap(), ys.clone().min().unwrap(), ys.max().unwrap())
+        };
+        for (sx, sy, want) in [(2.0, 1.0, (5, 94, 28, 72)), (1.0, 2.0, (27, 71, 5, 94))] {
+            let here = render(&scaled(sx, sy, [0.0; 3]), None, &opts).unwrap();
+            assert_eq!(extent(&here), want, "{sx} × {sy}");
+            let there = render(&scaled(sx, sy, [10.0, 20.0, 30.0]), None, &opts).unwrap();
+            assert_eq!(there, here, "{sx} × {sy} moved by (10, 20, 30)");
+        }
+        // Seen from the side (screen x = −z), a triangle in the y-z plane inside a box 3 deep in z:
+        let side = RenderOptions { view: View::Side, bounds: Some(([0.0, 0.0, -1.0], [1.0, 1.0, 2.0])), ..opts };
+        let tri_yz = TriMesh { positions: vec![[0.0; 3], [0.0, 0.0, 1.0], [0.0, 1.0, 0.0]], faces: vec![[0, 1, 2]] };
+        // 3 units of z across: 30 pixels a unit about z = 0.5 (screen x = −z): z = 0 at x = 65,
+        // z = 1 at x = 35; y = 0 at 65, y = 1 at 35.
+        let ink = inked(&render(&tri_yz, None, &side).unwrap(), 100);
+        let xs: Vec<usize> = ink.iter().map(|p| p.0).collect();
+        assert_eq!((*xs.iter().min().unwrap(), *xs.iter().max().unwrap()), (35, 64), "side view framed by the box's z");
+    }
+
     /// A face of (near) zero area draws nothing — its barycentric weights would be 0/0 — and
     /// the sizes 8 and 16384 are the bounds; an empty mesh is the background.
     #[test]
