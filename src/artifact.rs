@@ -551,7 +551,7 @@ mod tests {
     /// An uncommitted run that has a checkpoint keeps its staging directory; resuming it keeps
     /// the work files (checkpoint, log) and drops everything else it left. A commit into a
     /// directory that holds no artefact (no manifest, no resolved config) leaves the user's
-    /// entries alone, even ones named like artefact files.
+    /// entries alone, even ones named like artefact files; one with a resolved config does not.
     #[test]
     fn staging_keeps_work_files_for_resume_and_a_users_directory_alone() {
         let d = tmpdir("staging");
@@ -576,6 +576,16 @@ mod tests {
         s.commit().unwrap();
         assert_eq!(std::fs::read_to_string(mine.join("metrics.json")).unwrap(), "my own");
         assert!(mine.join("model.json").is_file() && mine.join(MANIFEST_FILE).is_file());
+        // A config resolved by meshdeco marks an earlier run even without a manifest: the
+        // entries that run wrote and this one did not are removed.
+        let earlier = d.join("earlier");
+        std::fs::create_dir_all(&earlier).unwrap();
+        std::fs::write(earlier.join("config.toml"), "# Resolved by meshdeco 0.1\n").unwrap();
+        std::fs::write(earlier.join("metrics.json"), "stale").unwrap();
+        let s = Staging::begin(&earlier, false).unwrap();
+        std::fs::write(s.dir().join("model.json"), "{}").unwrap();
+        s.commit().unwrap();
+        assert!(!earlier.join("metrics.json").exists(), "the earlier run's metrics were kept");
         std::fs::remove_dir_all(&d).unwrap();
     }
 
