@@ -183,3 +183,20 @@ pub fn bounding_box(points: &[Vec3]) -> (Vec3, Vec3) {
 }
 
 pub mod primitives;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The mean over every face's three edges: a right triangle with legs 2 has edges 2, 2 and
+    /// 2√2; a second face on one of its edges counts that edge twice.
+    #[test]
+    fn mean_edge_length_averages_each_faces_edges() {
+        let mut m =
+            TriMesh { positions: vec![[0.0, 0.0, 0.0], [2.0, 0.0, 0.0], [0.0, 2.0, 0.0]], faces: vec![[0, 1, 2]] };
+        assert!((m.mean_edge_length() - (4.0 + 8f64.sqrt()) / 3.0).abs() < 1e-12);
+        m.positions.push([2.0, 2.0, 0.0]);
+        m.faces.push([1, 3, 2]);
+        assert!((m.mean_edge_length() - (8.0 + 2.0 * 8f64.sqrt()) / 6.0).abs() < 1e-12);
+    }
+}
