@@ -1061,7 +1061,7 @@ mod tests {
     /// long enough but not glTF — each a named error, never a panic.
     #[test]
     fn read_glb_names_what_is_wrong_with_a_header() {
-        let dir = scratch("read-glb");
+        let dir = crate::mesh::load::test_dir("read-glb");
         let mut header = b"glTF".to_vec();
         header.extend_from_slice(&2u32.to_le_bytes());
         header.extend_from_slice(&20u32.to_le_bytes());
@@ -1078,14 +1078,6 @@ mod tests {
             assert!(e.contains(want) && e.contains(name), "{name}: {e:?}");
         }
         std::fs::remove_dir_all(&dir).unwrap();
-    }
-
-    /// An empty directory of this process under the system's temporary directory.
-    fn scratch(tag: &str) -> std::path::PathBuf {
-        let dir = std::env::temp_dir().join(format!("meshdeco-{tag}-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).unwrap();
-        dir
     }
 
     /// A `.glb` from a JSON chunk and a BIN chunk (`None`: no BIN chunk), with the chunk types
@@ -1151,7 +1143,7 @@ mod tests {
     /// checked, and the animation's key times must match its weight sets.
     #[test]
     fn read_glb_reads_offsets_rotation_and_keys() {
-        let dir = scratch("read-glb-crafted");
+        let dir = crate::mesh::load::test_dir("read-glb-crafted");
         let path = dir.join("crafted.glb");
         let turn = "[[0.0,-1.0,0.0],[1.0,0.0,0.0],[0.0,0.0,1.0]]";
         let (json, bin) = crafted(turn, 2, 2);
@@ -1184,7 +1176,7 @@ mod tests {
     /// BIN chunk: each a named error (never a panic), and the empty chunk read as such.
     #[test]
     fn read_glb_checks_every_chunk_bound() {
-        let dir = scratch("read-glb-chunks");
+        let dir = crate::mesh::load::test_dir("read-glb-chunks");
         let path = dir.join("chunks.glb");
         let read = |bytes: &[u8]| -> std::result::Result<GlbMorphs, String> {
             std::fs::write(&path, bytes).unwrap();

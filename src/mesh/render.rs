@@ -390,6 +390,18 @@ mod tests {
         (0..img.len() / 3).filter(|i| img[3 * i..3 * i + 3] != [255, 255, 255]).map(|i| (i % w, i / w)).collect()
     }
 
+    /// The colour of pixel (`x`, `y`) of a `w`-wide picture.
+    fn pixel(img: &[u8], w: usize, x: usize, y: usize) -> [u8; 3] {
+        let i = 3 * (y * w + x);
+        [img[i], img[i + 1], img[i + 2]]
+    }
+
+    /// The Lambert factor of a surface facing the camera (normal +z, light ∝ (−0.3, 0.4, 1)):
+    /// 0.2 + 0.8 n·l.
+    fn facing_shade() -> f64 {
+        0.2 + 0.8 / 1.25f64.sqrt()
+    }
+
     /// The right triangle (0,0,0), (1,0,0), (0,1,0), facing +z.
     fn corner_triangle() -> TriMesh {
         TriMesh { positions: vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]], faces: vec![[0, 1, 2]] }
@@ -403,13 +415,11 @@ mod tests {
     fn a_flat_triangle_fills_the_pixels_inside_it_in_one_shade() {
         let opts = RenderOptions { width: 100, height: 100, base_color: [200, 100, 50], ..Default::default() };
         let img = render(&corner_triangle(), None, &opts).unwrap();
-        let shade = 0.2 + 0.8 / 1.25f64.sqrt();
-        let want = [200.0, 100.0, 50.0].map(|c: f64| (c * shade).round() as u8);
+        let want = [200.0, 100.0, 50.0].map(|c: f64| (c * facing_shade()).round() as u8);
         for y in 0..100 {
             for x in 0..100 {
-                let got = &img[3 * (y * 100 + x)..3 * (y * 100 + x) + 3];
                 let inside = x >= 5 && y <= 94 && x <= y;
-                assert_eq!(got, if inside { &want[..] } else { &[255, 255, 255][..] }, "pixel ({x}, {y})");
+                assert_eq!(pixel(&img, 100, x, y), if inside { want } else { [255; 3] }, "pixel ({x}, {y})");
             }
         }
         // Two-sided: the same triangle wound the other way (facing −z) looks the same.
@@ -424,15 +434,14 @@ mod tests {
         let opts = RenderOptions { width: 100, height: 100, ..Default::default() };
         let colors = [[255, 0, 0], [0, 255, 0], [0, 0, 255]];
         let img = render(&corner_triangle(), Some(&colors), &opts).unwrap();
-        let shade = 0.2 + 0.8 / 1.25f64.sqrt();
         for (x, y) in [(34usize, 64usize), (6, 93), (90, 93), (6, 10), (50, 80)] {
             // Weights of the corners at the pixel centre (x + ½, y + ½): b = (1,0,0) grows with
             // x, c = (0,1,0) grows upwards, a takes the rest.
             let wb = (x as f64 + 0.5 - 5.0) / 90.0;
             let wc = (95.0 - (y as f64 + 0.5)) / 90.0;
             let wa = 1.0 - wb - wc;
-            let want = [wa, wb, wc].map(|w| (255.0 * w * shade).round() as i32);
-            let got = &img[3 * (y * 100 + x)..3 * (y * 100 + x) + 3];
+            let want = [wa, wb, wc].map(|w| (255.0 * w * facing_shade()).round() as i32);
+            let got = pixel(&img, 100, x, y);
             for k in 0..3 {
                 assert!((got[k] as i32 - want[k]).abs() <= 1, "pixel ({x}, {y}): {got:?}, expected {want:?}");
             }
@@ -455,11 +464,7 @@ mod tests {
             faces: order.iter().flat_map(|&q| [[4 * q, 4 * q + 1, 4 * q + 2], [4 * q, 4 * q + 2, 4 * q + 3]]).collect(),
         };
         // 3 × 1 units fitted into 120 × 40: 36 pixels per unit, x = 6 + 36 X, the middle row y = 20.
-        let middle = |img: &[u8], x_units: f64| {
-            let x = (6.0 + 36.0 * x_units) as usize;
-            let i = 3 * (20 * 120 + x);
-            [img[i], img[i + 1], img[i + 2]]
-        };
+        let middle = |img: &[u8], x_units: f64| pixel(img, 120, (6.0 + 36.0 * x_units) as usize, 20);
         for (view, overlap) in [(View::Front, "blue"), (View::Axes { up: 1, view: 2, negative: true }, "red")] {
             let opts = RenderOptions { width: 120, height: 40, view, ..Default::default() };
             let a = render(&squares([0, 1]), Some(&red_blue), &opts).unwrap();
@@ -501,7 +506,7 @@ mod tests {
         let tri = |q: Vec3, r: Vec3| TriMesh { positions: vec![[0.0; 3], q, r], faces: vec![[0, 1, 2]] };
         // The drawn pixel nearest each corner of the 100 × 100 image's fitted square (5..95).
         let corners = |img: &[u8]| {
-            let at = |x: usize, y: usize| img[3 * (y * 100 + x)..3 * (y * 100 + x) + 3] != [255, 255, 255];
+            let at = |x: usize, y: usize| pixel(img, 100, x, y) != [255; 3];
             [at(6, 6), at(93, 6), at(6, 93), at(93, 93)] // top-left, top-right, bottom-left, bottom-right
         };
         let opts = |view| RenderOptions { width: 100, height: 100, view, ..Default::default() };
@@ -615,9 +620,7 @@ mod tests {
     /// the others; `None` for a binary PLY or one without colours; errors name the file and line.
     #[test]
     fn ply_vertex_colours_are_read_by_property_name() {
-        let dir = std::env::temp_dir().join(format!("meshdeco-ply-colours-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).unwrap();
+        let dir = crate::mesh::load::test_dir("ply-colours");
         let read = |name: &str, text: &str| {
             let path = dir.join(name);
             std::fs::write(&path, text).unwrap();
