@@ -435,3 +435,111 @@ fn components_overview_png_shows_every_component() {
     // The sixth slot of the grid stays empty.
     assert!(cell(2, 1, 0).iter().all(|p| *p == [255, 255, 255]));
 }
+
+/// The overview's picture, pixel by pixel, from the library: block r (rank order, `per_row` to a
+/// row) holds the rest shape, the component at its extreme training dial and the heat map, each
+/// rendered with the same view and the one box that frames the rest and every extreme; the name
+/// (rank, name, dial) sits in the 20 px strip above its block and every other pixel is white.
+/// Bad layouts are refused with the value in the message.
+#[test]
+fn overview_places_each_picture_and_label_of_each_component() {
+    use meshdeco::mesh::render::{RenderOptions, View, render};
+    use meshdeco::view::overview::{OverviewOptions, extreme_dials, overview};
+    let d = fresh_dir("view-api", "overview-lib");
+    let model = train(&d, "pca", "synthetic:tube", "kind = \"pca\"\ncomponents = 5");
+    let m = load_model(&model).unwrap();
+    let k = m.n_components();
+
+    // The extreme dial of each component: the training weight of largest magnitude, sign kept.
+    let ws = m.train_weights().expect("a PCA model keeps its training weights");
+    let ext = extreme_dials(&*m).unwrap();
+    assert_eq!(ext.len(), k);
+    for i in 0..k {
+        let e = ext[i].expect("every component has training dials");
+        let all: Vec<f64> = ws.iter().map(|w| m.dials(w).unwrap()[i]).collect();
+        assert!(all.iter().all(|x| x.abs() <= e.abs()), "component {i}: {e} is not the largest of {all:?}");
+        assert!(all.contains(&e), "component {i}: {e} is not one of the training dials");
+        assert!((e.abs() - 1.0).abs() > 1e-3, "component {i}: the test needs an extreme other than ±1");
+    }
+
+    for (cell, per_row) in [(31, 2), (2049, 2), (100, 0)] {
+        let e = overview(&*m, &OverviewOptions { cell, per_row }).expect_err("a bad layout").to_string();
+        assert!(e.contains(&format!("cell {cell} px")) && e.contains(&format!("{per_row} per row")), "{e}");
+    }
+
+    let (cell, per_row) = (100usize, 2usize);
+    let (w, h, img, names) = overview(&*m, &OverviewOptions { cell, per_row }).unwrap();
+    let (block_w, block_h) = (3 * cell + 12, cell + 20 + 6);
+    assert_eq!((w, h), (2 * block_w + 12, 3 * block_h + 12), "5 blocks, 2 to a row");
+    assert_eq!(img.len(), 3 * w * h);
+
+    // The expected pictures, from the renderer with the overview's view and framing.
+    let rest = m.rest();
+    let comps = meshdeco::model::ranked(&*m).unwrap();
+    let mut shapes = Vec::new();
+    for c in &comps {
+        let mut dials = vec![0.0; k];
+        dials[c.index] = ext[c.index].unwrap();
+        shapes.push(meshdeco::model::synthesize(&*m, &dials).unwrap());
+    }
+    let (mut lo, mut hi) = rest.bounding_box();
+    for s in &shapes {
+        let (a, b) = meshdeco::mesh::bounding_box(s);
+        for j in 0..3 {
+            lo[j] = lo[j].min(a[j]);
+            hi[j] = hi[j].max(b[j]);
+        }
+    }
+    let (rest_lo, rest_hi) = rest.bounding_box();
+    assert!((0..3).any(|j| lo[j] < rest_lo[j] - 1e-9 || hi[j] > rest_hi[j] + 1e-9), "no extreme leaves the rest's box");
+    let ropts = RenderOptions {
+        width: cell,
+        height: cell,
+        view: View::auto(&rest),
+        bounds: Some((lo, hi)),
+        ..Default::default()
+    };
+    let font = meshdeco::eval::plots::font_path().is_some();
+    let mut class = vec![0u8; w * h]; // 0: must be white, 1: a picture, 2: a label strip
+    for (r, c) in comps.iter().enumerate() {
+        let dial = ext[c.index].unwrap();
+        assert_eq!(names[r], format!("#{} {} (dial {dial:.3})", c.rank, c.name));
+        let (bx, top) = (12 + (r % per_row) * block_w, 6 + (r / per_row) * block_h);
+        let mesh = meshdeco::mesh::TriMesh::new(shapes[r].clone(), rest.faces.clone());
+        let heat = meshdeco::mesh::colormap(&c.magnitudes);
+        let pics = [
+            render(&rest, None, &ropts).unwrap(),
+            render(&mesh, None, &ropts).unwrap(),
+            render(&rest, Some(&heat), &ropts).unwrap(),
+        ];
+        for (j, pic) in pics.iter().enumerate() {
+            let (x0, y0) = (bx + j * cell, top + 20);
+            for y in 0..cell {
+                for x in 0..cell {
+                    let (o, p) = (3 * ((y0 + y) * w + x0 + x), 3 * (y * cell + x));
+                    assert_eq!(img[o..o + 3], pic[p..p + 3], "rank {r}, picture {j}, pixel ({x}, {y})");
+                    class[(y0 + y) * w + x0 + x] = 1;
+                }
+            }
+        }
+        let mut ink_x = Vec::new();
+        for y in top..top + 20 {
+            for x in bx..(bx + block_w).min(w) {
+                class[y * w + x] = 2;
+                if img[3 * (y * w + x)..3 * (y * w + x) + 3] != [255, 255, 255] {
+                    ink_x.push(x);
+                }
+            }
+        }
+        if font {
+            let first = *ink_x.iter().min().unwrap_or_else(|| panic!("rank {r}: no label above its block"));
+            assert!((bx..bx + 6).contains(&first), "rank {r}: label starts at x = {first}, block at {bx}");
+        }
+    }
+    for (i, c) in class.iter().enumerate() {
+        if *c == 0 {
+            assert_eq!(img[3 * i..3 * i + 3], [255, 255, 255], "pixel ({}, {}) is outside every block", i % w, i / w);
+        }
+    }
+    std::fs::remove_dir_all(&d).unwrap();
+}
