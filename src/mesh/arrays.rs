@@ -120,4 +120,55 @@ mod tests {
         let e = mesh_from_arrays(("vertices", "faces"), &p, &[0, -1, 2]).unwrap_err().to_string();
         assert!(e.contains("faces") && e.contains("-1"), "{e}");
     }
+
+    /// Every shape check with its message, on both sides of each bound: whole triangles, at
+    /// least one, indices in `0..N` (N itself refused), N × 3 positions with N ≥ 1, F ≥ 1 frames
+    /// dividing the positions, names one per frame, generated names padded to the count's width.
+    #[test]
+    fn shape_checks_and_names_at_their_bounds() {
+        let err = |r: Result<Vec<[usize; 3]>>| r.unwrap_err().to_string();
+        assert_eq!(faces_from_array("f", &[0, 1, 2, 2, 1, 0], 3).unwrap(), vec![[0, 1, 2], [2, 1, 0]]);
+        assert!(err(faces_from_array("f", &[0, 1, 2, 0], 3)).contains("f: 4 indices is not a whole number"));
+        assert!(err(faces_from_array("f", &[], 3)).contains("f: no triangles"));
+        let e = err(faces_from_array("f", &[0, 1, 2, 0, 3, 1], 3));
+        assert!(e.contains("f: triangle 1 has vertex index 3 (column 1), outside 0..3"), "{e}");
+        assert_eq!(faces_from_array("f", &[2, 2, 0], 3).unwrap(), vec![[2, 2, 0]]);
+
+        // A single mesh: positions N × 3, N ≥ 1; the bad coordinate named by vertex (no frame).
+        let tri = [0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0];
+        let m = mesh_from_arrays(("p", "f"), &tri, &[0, 1, 2]).unwrap();
+        assert_eq!(m.positions, vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]);
+        assert_eq!(m.faces, vec![[0, 1, 2]]);
+        let merr = |p: &[f64], f: &[i64]| mesh_from_arrays(("p", "f"), p, f).unwrap_err().to_string();
+        assert!(merr(&tri[..8], &[0, 1, 2]).contains("p: 8 numbers is not N × 3 with N ≥ 1"));
+        assert!(merr(&[], &[0, 1, 2]).contains("p: 0 numbers"));
+        let mut inf = tri;
+        inf[5] = f64::INFINITY;
+        let e = merr(&inf, &[0, 1, 2]);
+        assert!(e.contains("p: vertex 1, coordinate 2 is inf (must be finite)") && !e.contains("frame"), "{e}");
+        assert!(merr(&tri, &[0, 1, 3]).contains("f: triangle 0 has vertex index 3"));
+
+        // Sequences: F ≥ 1 frames that divide the positions; faces checked against N, not F·N.
+        let seq =
+            |p: &[f64], f: usize, names: Option<Vec<String>>| sequence_from_arrays(("p", "f"), p, f, &[0, 1, 2], names);
+        let six: Vec<f64> = (0..6).flat_map(|f| tri.map(|x| x + f as f64)).collect();
+        let s = seq(&six, 6, None).unwrap();
+        assert_eq!((s.n_frames(), s.n_vertices()), (6, 3));
+        assert_eq!(s.frames[5][1], [6.0, 5.0, 5.0]);
+        assert_eq!(s.names[5], "frame_006");
+        assert!(sequence_from_arrays(("p", "f"), &six, 2, &[0, 1, 3], None).is_ok(), "N = 9 per frame at F = 2");
+        let e = sequence_from_arrays(("p", "f"), &six, 6, &[0, 1, 3], None).unwrap_err().to_string();
+        assert!(e.contains("outside 0..3"), "{e}");
+        let sizes = |f: usize| format!("p: {} numbers is not F × N × 3 with F = {f} ≥ 1 and N ≥ 1", six.len());
+        assert!(seq(&six, 0, None).unwrap_err().to_string().contains(&sizes(0)));
+        assert!(seq(&six, 4, None).unwrap_err().to_string().contains(&sizes(4)));
+        assert!(seq(&[], 1, None).unwrap_err().to_string().contains("p: 0 numbers"));
+        let big: Vec<f64> = (0..1000).flat_map(|_| tri).collect();
+        let s = sequence_from_arrays(("p", "f"), &big, 1000, &[0, 0, 0], None).unwrap();
+        assert_eq!((s.names[0].as_str(), s.names[999].as_str()), ("frame_0001", "frame_1000"));
+        let names: Vec<String> = (0..6).map(|i| format!("pose{i}")).collect();
+        assert_eq!(seq(&six, 6, Some(names.clone())).unwrap().names, names);
+        let e = seq(&six, 6, Some(names[..5].to_vec())).unwrap_err().to_string();
+        assert!(e.contains("5 frame names given for 6 frames"), "{e}");
+    }
 }

@@ -199,4 +199,24 @@ mod tests {
         m.faces.push([1, 3, 2]);
         assert!((m.mean_edge_length() - (8.0 + 2.0 * 8f64.sqrt()) / 6.0).abs() < 1e-12);
     }
+
+    /// A sequence as a `FrameSource`: frames and names by index, `"?"` and an error naming the
+    /// index out of range, and `select_frames` keeping each chosen frame's name.
+    #[test]
+    fn frame_source_of_a_sequence_names_and_selects_frames() {
+        let seq = MeshSequence {
+            faces: vec![[0, 1, 2]],
+            frames: (0..3).map(|f| vec![[f as f64, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]).collect(),
+            names: vec!["rest".into(), "bend".into(), "twist".into()],
+        };
+        let src: &dyn FrameSource = &seq;
+        assert_eq!((src.n_frames(), src.n_vertices(), src.faces()), (3, 3, &[[0, 1, 2]][..]));
+        assert_eq!((src.name(0), src.name(2), src.name(3)), ("rest", "twist", "?"));
+        assert_eq!(src.frame(1).unwrap()[0], [1.0, 0.0, 0.0]);
+        assert!(src.frame(3).unwrap_err().to_string().contains("frame index 3 is out of range (3 frames)"));
+        let picked = src.select_frames(&[2, 0]).unwrap();
+        assert_eq!(picked.names, ["twist", "rest"]);
+        assert_eq!(picked.frames, vec![seq.frames[2].clone(), seq.frames[0].clone()]);
+        assert_eq!(picked, seq.select(&[2, 0]));
+    }
 }
