@@ -563,4 +563,64 @@ mod tests {
         assert_eq!(num(1.5e-7), "1.50000e-7");
         assert_eq!(num(123456789.0), "1.23457e8");
     }
+
+    /// Counts and plurals of the messages, each repeated-index position, faces that are not
+    /// there, and the bounds of the abbreviated lists and of the frame line.
+    #[test]
+    fn counts_plurals_and_bounds_of_the_report() {
+        // A repeated index at each pair of positions: three degenerate faces.
+        let p =
+            vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 1.0, 0.0], [1.0, 0.0, 1.0]];
+        let r = inspect(&seq(vec![p], vec![[0, 0, 1], [2, 3, 3], [4, 5, 4]]));
+        assert_eq!(r.warnings[0].kind, WarningKind::RepeatedIndex);
+        assert!(
+            r.warnings[0].message.starts_with("3 degenerate faces repeat a vertex index (first: face 0 = [0, 0, 1])")
+        );
+
+        // No faces: no edges (mean edge length 0, not 0/0), every vertex unreferenced.
+        let r = inspect(&seq(vec![vec![[0.0; 3], [1.0, 0.0, 0.0], [0.0, 2.0, 0.0]]], vec![]));
+        assert_eq!((r.edges, r.mean_edge_length, r.euler_characteristic), (0, 0.0, 0));
+        let w = r.warnings.last().unwrap();
+        assert_eq!(w.kind, WarningKind::UnreferencedVertices);
+        assert!(w.message.starts_with("3 vertices referenced by no face (first: vertex 0)"), "{w}");
+
+        // An unreferenced vertex does not count in V − E + F; one frame prints its name alone.
+        let (mut p, f) = octahedron(1.0);
+        p.push([5.0; 3]);
+        let r = inspect(&seq(vec![p], f.clone()));
+        assert_eq!((r.vertices, r.euler_characteristic, r.components), (7, 2, 1));
+        assert!(r.to_string().contains("frames            1 (f0)\n"), "{r}");
+        let empty = inspect(&seq(vec![], vec![]));
+        assert!(empty.to_string().contains("frames            0\n"), "{empty}");
+
+        // One boundary loop, in the report's text and in its warning.
+        let (p, mut f) = octahedron(1.0);
+        f.pop();
+        let r = inspect(&seq(vec![p], f));
+        assert!(r.to_string().contains("boundary          1 loop (3 boundary edges; loop lengths 3)\n"), "{r}");
+        assert!(
+            r.warnings[0].message.contains("1 boundary loop (3 boundary edges; loop lengths 3)"),
+            "{}",
+            r.warnings[0]
+        );
+
+        // Zero area: two faces in the first frame, one face in each of two later frames.
+        let p = vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, 1.0]];
+        let f = vec![[0, 1, 2], [1, 0, 3], [0, 1, 4]];
+        let (mut flat, mut later) = (p.clone(), p.clone());
+        flat[2] = [0.25, 0.0, 0.0];
+        flat[4] = [0.5, 0.0, 0.0];
+        later[4] = [0.5, 0.0, 0.0];
+        let r = inspect(&seq(vec![flat, later.clone(), later], f));
+        let za: Vec<&Warning> = r.warnings.iter().filter(|w| w.kind == WarningKind::ZeroArea).collect();
+        assert_eq!(za.len(), 2, "{za:?}");
+        assert!(za[0].message.starts_with("2 faces of zero area in the first frame 'f0' (first: face 0 = [0, 1, 2])"));
+        assert!(za[1].message.contains("in 2 frames after the first (first: frame 'f1', 1 face, face 2)"), "{}", za[1]);
+
+        // Lists of up to 8 items are written whole.
+        let items = |n: usize| (1..=n).map(|i| i.to_string()).collect::<Vec<_>>();
+        assert_eq!(abbreviate(&items(8)), "1, 2, 3, 4, 5, 6, 7, 8");
+        assert_eq!(abbreviate(&items(9)), "1, 2, 3, 4, 5, 6, 7, 8, … (1 more)");
+        assert_eq!(abbreviate(&items(11)), "1, 2, 3, 4, 5, 6, 7, 8, … (3 more)");
+    }
 }
