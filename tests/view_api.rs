@@ -545,3 +545,98 @@ fn overview_places_each_picture_and_label_of_each_component() {
     }
     std::fs::remove_dir_all(&d).unwrap();
 }
+
+/// The segmentation overlay's rule, written from its documentation: where every component
+/// reaches every vertex (above 10⁻⁶ of its peak), a vertex goes to the component largest there
+/// relative to its peak; otherwise components with the same support form a group (in order of
+/// first appearance) and a vertex goes to the group of its largest component. Ties go to the
+/// later component. Returns the labels and the number of groups.
+fn segmentation_by_definition(comps: &[meshdeco::model::Component], n: usize) -> (Vec<u32>, usize) {
+    let peaks: Vec<f64> = comps.iter().map(|c| c.magnitudes.iter().cloned().fold(0.0, f64::max)).collect();
+    let everywhere = comps.len() > 1
+        && comps.iter().zip(&peaks).all(|(c, &p)| p > 0.0 && c.magnitudes.iter().all(|&m| m > 1e-6 * p));
+    let argmax = |score: &dyn Fn(usize) -> f64| {
+        let mut best = 0;
+        for a in 1..comps.len() {
+            if score(a) >= score(best) {
+                best = a;
+            }
+        }
+        best
+    };
+    if everywhere {
+        let labels = (0..n).map(|v| argmax(&|a| comps[a].magnitudes[v] / peaks[a]) as u32).collect();
+        return (labels, comps.len());
+    }
+    let mut supports: Vec<Vec<bool>> = Vec::new();
+    let mut group = Vec::new();
+    for (c, &p) in comps.iter().zip(&peaks) {
+        let s: Vec<bool> = c.magnitudes.iter().map(|&m| m > 1e-6 * p).collect();
+        group.push(supports.iter().position(|t| *t == s).unwrap_or_else(|| {
+            supports.push(s);
+            supports.len() - 1
+        }) as u32);
+    }
+    let labels = (0..n).map(|v| group[argmax(&|a| comps[a].magnitudes[v])]).collect();
+    (labels, supports.len())
+}
+
+/// `/api/model`'s dial ranges and peaks and `/api/segmentation` against their definitions: a
+/// range spans 0 and every training dial, padded by 10 % of its span on each side; labels for a
+/// PCA's global components (one support) and a region PCA's regions (supports shared within one).
+#[test]
+fn description_ranges_and_segmentation_follow_their_definitions() {
+    let d = fresh_dir("view-api", "ranges");
+    let cases = [
+        ("pca", "synthetic:tube", "kind = \"pca\"\ncomponents = 5"),
+        ("region", "synthetic:bumps", "kind = \"region-pca\"\ncomponents = 8\nmax_regions = 4"),
+    ];
+    for (name, data, method) in cases {
+        let model = train(&d, name, data, method);
+        let m = load_model(&model).unwrap();
+        let k = m.n_components();
+        let n = m.rest().n_vertices();
+        let v = Viewer::start(&[model.to_str().unwrap()]);
+        let (s, _, body) = v.request("GET", "/api/model", b"");
+        assert_eq!(s, 200);
+        let desc: Value = serde_json::from_slice(&body).unwrap();
+        assert_eq!(desc["ranges_from"], "training weights");
+        let comps = m.components().unwrap();
+        let ws = m.train_weights().unwrap();
+        let close = |a: f64, b: f64| (a - b).abs() <= 1e-12 * (1.0 + b.abs());
+        let mut padded = 0;
+        for c in desc["components"].as_array().unwrap() {
+            let i = c["index"].as_u64().unwrap() as usize;
+            let dials: Vec<f64> = ws.iter().map(|w| m.dials(w).unwrap()[i]).collect();
+            let lo = dials.iter().cloned().fold(0.0, f64::min);
+            let hi = dials.iter().cloned().fold(0.0, f64::max);
+            let span = hi - lo;
+            // Dials that do not vary (a region's unused component) get the default [−1, 1].
+            let want = if span > 1e-12 { [lo - 0.1 * span, hi + 0.1 * span] } else { [-1.0, 1.0] };
+            let got = [c["range"][0].as_f64().unwrap(), c["range"][1].as_f64().unwrap()];
+            assert!(
+                close(got[0], want[0]) && close(got[1], want[1]),
+                "{name} component {i}: range {got:?}, dials from {lo} to {hi}"
+            );
+            padded += usize::from(span > 1e-12);
+            let peak = comps[i].magnitudes.iter().cloned().fold(0.0, f64::max);
+            assert!(close(c["peak"].as_f64().unwrap(), peak), "{name} component {i}: peak");
+        }
+        assert!(padded >= 3, "{name}: only {padded} components with varying dials");
+        let (want, groups) = segmentation_by_definition(&comps, n);
+        assert_eq!(desc["segmentation_groups"], json!(groups), "{name}");
+        let (s, _, seg) = v.request("GET", "/api/segmentation", b"");
+        assert_eq!(s, 200);
+        let labels: Vec<u32> = seg.chunks_exact(4).map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect();
+        assert_eq!(labels, want, "{name}: segmentation labels");
+        if name == "region" {
+            let used: std::collections::BTreeSet<u32> = labels.iter().copied().collect();
+            assert!(used.len() >= 2, "region PCA: one label everywhere");
+            assert!(
+                groups < k,
+                "region PCA: {groups} groups for {k} components (a region's components share a support)"
+            );
+        }
+    }
+    std::fs::remove_dir_all(&d).unwrap();
+}

@@ -593,6 +593,16 @@ mod tests {
         let empty = inspect(&seq(vec![], vec![]));
         assert!(empty.to_string().contains("frames            0\n"), "{empty}");
 
+        // Problems are every warning but the boundary loops.
+        let (p, mut f) = octahedron(1.0);
+        f.pop();
+        f.push([0, 0, 1]);
+        let s = seq(vec![p], f);
+        let t = Topology::new(6, &s.faces);
+        let kinds = |w: Vec<Warning>| w.iter().map(|w| w.kind).collect::<Vec<_>>();
+        assert_eq!(kinds(mesh_warnings(&s, &t)), [WarningKind::RepeatedIndex, WarningKind::BoundaryLoops]);
+        assert_eq!(kinds(problem_warnings(&s, &t)), [WarningKind::RepeatedIndex]);
+
         // One boundary loop, in the report's text and in its warning.
         let (p, mut f) = octahedron(1.0);
         f.pop();
@@ -602,6 +612,11 @@ mod tests {
             r.warnings[0].message.contains("1 boundary loop (3 boundary edges; loop lengths 3)"),
             "{}",
             r.warnings[0]
+        );
+        assert_eq!(r.warnings[0].to_string(), r.warnings[0].message);
+        assert!(
+            r.to_string().contains("warnings (1, vertex and face indices 0-based):\n  - open surface: 1 boundary loop"),
+            "{r}"
         );
 
         // Zero area: two faces in the first frame, one face in each of two later frames.
