@@ -455,8 +455,8 @@ fn overview_places_each_picture_and_label_of_each_component() {
     let ws = m.train_weights().expect("a PCA model keeps its training weights");
     let ext = extreme_dials(&*m).unwrap();
     assert_eq!(ext.len(), k);
-    for i in 0..k {
-        let e = ext[i].expect("every component has training dials");
+    for (i, e) in ext.iter().enumerate() {
+        let e = e.expect("every component has training dials");
         let all: Vec<f64> = ws.iter().map(|w| m.dials(w).unwrap()[i]).collect();
         assert!(all.iter().all(|x| x.abs() <= e.abs()), "component {i}: {e} is not the largest of {all:?}");
         assert!(all.contains(&e), "component {i}: {e} is not one of the training dials");
