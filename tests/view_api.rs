@@ -453,11 +453,12 @@ fn overview_places_each_picture_and_label_of_each_component() {
 
     // The extreme dial of each component: the training weight of largest magnitude, sign kept.
     let ws = m.train_weights().expect("a PCA model keeps its training weights");
+    let train_dials: Vec<Vec<f64>> = ws.iter().map(|w| m.dials(w).unwrap()).collect();
     let ext = extreme_dials(&*m).unwrap();
     assert_eq!(ext.len(), k);
     for (i, e) in ext.iter().enumerate() {
         let e = e.expect("every component has training dials");
-        let all: Vec<f64> = ws.iter().map(|w| m.dials(w).unwrap()[i]).collect();
+        let all: Vec<f64> = train_dials.iter().map(|d| d[i]).collect();
         assert!(all.iter().all(|x| x.abs() <= e.abs()), "component {i}: {e} is not the largest of {all:?}");
         assert!(all.contains(&e), "component {i}: {e} is not one of the training dials");
         assert!((e.abs() - 1.0).abs() > 1e-3, "component {i}: the test needs an extreme other than ±1");
@@ -483,7 +484,8 @@ fn overview_places_each_picture_and_label_of_each_component() {
         dials[c.index] = ext[c.index].unwrap();
         shapes.push(meshdeco::model::synthesize(&*m, &dials).unwrap());
     }
-    let (mut lo, mut hi) = rest.bounding_box();
+    let (rest_lo, rest_hi) = rest.bounding_box();
+    let (mut lo, mut hi) = (rest_lo, rest_hi);
     for s in &shapes {
         let (a, b) = meshdeco::mesh::bounding_box(s);
         for j in 0..3 {
@@ -491,7 +493,6 @@ fn overview_places_each_picture_and_label_of_each_component() {
             hi[j] = hi[j].max(b[j]);
         }
     }
-    let (rest_lo, rest_hi) = rest.bounding_box();
     assert!((0..3).any(|j| lo[j] < rest_lo[j] - 1e-9 || hi[j] > rest_hi[j] + 1e-9), "no extreme leaves the rest's box");
     let ropts = RenderOptions {
         width: cell,
@@ -500,6 +501,7 @@ fn overview_places_each_picture_and_label_of_each_component() {
         bounds: Some((lo, hi)),
         ..Default::default()
     };
+    let rest_pic = render(&rest, None, &ropts).unwrap();
     let font = meshdeco::eval::plots::font_path().is_some();
     let mut class = vec![0u8; w * h]; // 0: must be white, 1: a picture, 2: a label strip
     for (r, c) in comps.iter().enumerate() {
@@ -508,12 +510,9 @@ fn overview_places_each_picture_and_label_of_each_component() {
         let (bx, top) = (12 + (r % per_row) * block_w, 6 + (r / per_row) * block_h);
         let mesh = meshdeco::mesh::TriMesh::new(shapes[r].clone(), rest.faces.clone());
         let heat = meshdeco::mesh::colormap(&c.magnitudes);
-        let pics = [
-            render(&rest, None, &ropts).unwrap(),
-            render(&mesh, None, &ropts).unwrap(),
-            render(&rest, Some(&heat), &ropts).unwrap(),
-        ];
-        for (j, pic) in pics.iter().enumerate() {
+        let extreme = render(&mesh, None, &ropts).unwrap();
+        let heat_pic = render(&rest, Some(&heat), &ropts).unwrap();
+        for (j, pic) in [&rest_pic, &extreme, &heat_pic].into_iter().enumerate() {
             let (x0, y0) = (bx + j * cell, top + 20);
             for y in 0..cell {
                 for x in 0..cell {
@@ -602,12 +601,12 @@ fn description_ranges_and_segmentation_follow_their_definitions() {
         let desc: Value = serde_json::from_slice(&body).unwrap();
         assert_eq!(desc["ranges_from"], "training weights");
         let comps = m.components().unwrap();
-        let ws = m.train_weights().unwrap();
+        let train_dials: Vec<Vec<f64>> = m.train_weights().unwrap().iter().map(|w| m.dials(w).unwrap()).collect();
         let close = |a: f64, b: f64| (a - b).abs() <= 1e-12 * (1.0 + b.abs());
         let mut padded = 0;
         for c in desc["components"].as_array().unwrap() {
             let i = c["index"].as_u64().unwrap() as usize;
-            let dials: Vec<f64> = ws.iter().map(|w| m.dials(w).unwrap()[i]).collect();
+            let dials: Vec<f64> = train_dials.iter().map(|d| d[i]).collect();
             let lo = dials.iter().cloned().fold(0.0, f64::min);
             let hi = dials.iter().cloned().fold(0.0, f64::max);
             let span = hi - lo;
