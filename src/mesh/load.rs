@@ -421,4 +421,47 @@ mod tests {
         assert!(finite_coordinate(b"-inf", 2).unwrap_err().contains("non-finite z"));
         assert!(finite_coordinate(b"abc", 0).unwrap_err().contains("not a number"));
     }
+
+    /// The fast path's own contract at its bounds (the random test above checks only that its
+    /// results equal `str::parse`'s and that it is taken often): 15 significant digits (leading
+    /// zeros not counted) and not 16, both exponent letters and signs, decimal exponents ±22 and
+    /// not ±23, junk after the exponent, and exponents too long for an `i32`.
+    #[test]
+    fn fast_decimal_takes_its_numbers_and_no_others() {
+        let fast = |t: &str| fast_decimal(t.as_bytes()).map(f64::to_bits);
+        let parsed = |t: &str| Some(t.parse::<f64>().unwrap().to_bits());
+        for t in [
+            "123456789012345",
+            "-1234567.89012345",
+            "0.000000000000000012",
+            "0.0000000000000000000012",
+            "1e5",
+            "1E5",
+            "2.5e-5",
+            "2.5E+5",
+            "7e22",
+            "7e-22",
+            "+3",
+        ] {
+            assert_eq!(fast(t), parsed(t), "{t} takes the fast path");
+        }
+        for t in ["1234567890123456", "1000000000000000", "7e23", "7e-23", "1e5x", "1e-5-", "1e+"] {
+            assert_eq!(fast(t), None, "{t} is not for the fast path");
+        }
+        // Exponents that would overflow an i32 when accumulated: the general path's answers.
+        for t in ["1e4294967296", "1e-4294967296", "1e99999999999", "5e1000"] {
+            assert_eq!(fast(t), None, "{t}");
+            assert_eq!(parse_f64(t.as_bytes()).map(f64::to_bits), parsed(t), "{t}");
+        }
+        assert_eq!(parse_f64(b"1e5x"), None);
+    }
+
+    #[test]
+    fn shown_tokens_are_cut_after_40_characters() {
+        let forty = "é".repeat(40);
+        assert_eq!(show(forty.as_bytes()), forty);
+        let forty_one = format!("{forty}z");
+        assert_eq!(show(forty_one.as_bytes()), format!("{forty}…"));
+        assert_eq!(show(&[b'a', 0xff]), "a\u{fffd}");
+    }
 }
