@@ -1014,3 +1014,90 @@ fn viewer_host_names_and_ipv6() {
     eprintln!("viewer host cases: {n}");
     std::fs::remove_dir_all(&d).unwrap();
 }
+
+/// What README.md and docs/viewer.md promise of request heads and bodies on the default limits:
+/// a 16 KiB head is read and one byte more is a 431; a 4 MiB body is read and one byte more is a
+/// 413; four 4 MiB bodies (16 MiB) are received at once and a fifth is a 503 until they end;
+/// chunked bodies are a 411 and a malformed request line a 400. Blank lines before a request are
+/// skipped, bare `\n` line ends read, the query string split off the path, and an HTTP/1.0
+/// connection closed after one response unless it asks for keep-alive.
+#[test]
+fn http_heads_bodies_and_connections_on_the_default_limits() {
+    let addr = echo_server(Limits::default());
+    let exchange = |raw: &[u8]| -> String {
+        let mut s = TcpStream::connect(&addr).unwrap();
+        s.write_all(raw).unwrap();
+        String::from_utf8_lossy(&read_until_closed(&mut s, Duration::from_secs(10)).0).into_owned()
+    };
+    let status_line = |t: &str| t.lines().next().unwrap_or_default().to_string();
+    let mut n = 0;
+    // Heads: exactly 16 KiB is read; one byte more is refused (and nothing past it is read).
+    let head = |len: usize| {
+        let frame = "GET /h HTTP/1.1\r\nConnection: close\r\nX: \r\n\r\n".len();
+        format!("GET /h HTTP/1.1\r\nConnection: close\r\nX: {}\r\n\r\n", "y".repeat(len - frame))
+    };
+    assert_eq!(head(16 << 10).len(), 16 << 10);
+    let t = exchange(head(16 << 10).as_bytes());
+    assert!(status_of(t.as_bytes()) == 200 && t.ends_with("GET /h 0"), "{t}");
+    let t = exchange(head((16 << 10) + 1).as_bytes());
+    assert_eq!(status_of(t.as_bytes()), 431, "{t}");
+    assert!(t.contains("request head longer than 16384 bytes"), "{t}");
+    n += 2;
+    // Bodies: 4 MiB is read whole; a Content-Length one byte over is refused from the head.
+    let mut raw = format!("POST /b HTTP/1.1\r\nContent-Length: {}\r\nConnection: close\r\n\r\n", 4 << 20).into_bytes();
+    raw.resize(raw.len() + (4 << 20), b'z');
+    let t = exchange(&raw);
+    assert!(status_of(t.as_bytes()) == 200 && t.ends_with(&format!("POST /b {}", 4 << 20)), "{}", status_line(&t));
+    let t = exchange(format!("POST /b HTTP/1.1\r\nContent-Length: {}\r\n\r\n", (4 << 20) + 1).as_bytes());
+    assert_eq!(status_of(t.as_bytes()), 413, "{t}");
+    assert!(t.contains("larger than the limit of 4194304"), "{t}");
+    n += 2;
+    // Four unfinished 4 MiB bodies are all taken in (16 MiB at once); a fifth is a 503.
+    let mut open = Vec::new();
+    for i in 0..4 {
+        let mut s = TcpStream::connect(&addr).unwrap();
+        s.write_all(format!("POST /u HTTP/1.1\r\nContent-Length: {}\r\n\r\n", 4 << 20).as_bytes()).unwrap();
+        s.write_all(&[b'u'; 1024]).unwrap();
+        s.set_read_timeout(Some(Duration::from_millis(300))).unwrap();
+        let mut b = [0u8; 256];
+        match s.read(&mut b) {
+            Err(e) if matches!(e.kind(), std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut) => {}
+            other => panic!("unfinished body {i} of 4 was not taken in: {other:?} {}", String::from_utf8_lossy(&b)),
+        }
+        open.push(s);
+    }
+    let t = exchange(format!("POST /u HTTP/1.1\r\nContent-Length: {}\r\n\r\n", 4 << 20).as_bytes());
+    assert_eq!(status_of(t.as_bytes()), 503, "{t}");
+    assert!(t.contains("at most 16777216 bytes at once") && t.contains("Retry-After: 1\r\n"), "{t}");
+    // Once those connections end, their reservations are given back.
+    drop(open);
+    std::thread::sleep(Duration::from_millis(500));
+    let (s, _, b) = view_support::http(&addr, "POST", "/after", b"abc");
+    assert_eq!((s, String::from_utf8_lossy(&b).to_string()), (200, "POST /after 3".to_string()));
+    n += 3;
+    // Request lines and headers.
+    let cases: [(&[u8], u16, &str); 5] = [
+        (b"POST /c HTTP/1.1\r\nTransfer-Encoding: chunked\r\n\r\n", 411, "send Content-Length"),
+        (b"GARBAGE\r\n\r\n", 400, "malformed request line `GARBAGE`"),
+        (b"\r\n\r\nGET /s HTTP/1.1\r\nConnection: close\r\n\r\n", 200, "GET /s 0"),
+        (b"GET /n HTTP/1.1\nConnection: close\n\n", 200, "GET /n 0"),
+        (b"GET /q?a=1&b=%3F HTTP/1.1\r\nConnection: close\r\n\r\n", 200, "GET /q 0"),
+    ];
+    for (raw, status, tail) in cases {
+        let t = exchange(raw);
+        assert_eq!(status_of(t.as_bytes()), status, "{}: {t}", String::from_utf8_lossy(raw));
+        assert!(t.ends_with(&format!("{tail}\"}}")) || t.ends_with(tail), "{}: {t}", String::from_utf8_lossy(raw));
+        n += 1;
+    }
+    // HTTP/1.0 closes after its response (the 10 s limit would fail on an open connection) ...
+    let t = exchange(b"GET /a HTTP/1.0\r\n\r\n");
+    assert!(t.contains("Connection: close\r\n") && t.ends_with("GET /a 0"), "{t}");
+    // ... unless it asks for keep-alive; HTTP/1.1 keeps the connection unless told to close.
+    let t = exchange(b"GET /a HTTP/1.0\r\nConnection: keep-alive\r\n\r\nGET /b HTTP/1.0\r\n\r\n");
+    assert_eq!(t.matches("HTTP/1.1 200 OK\r\n").count(), 2, "{t}");
+    assert!(t.contains("Connection: keep-alive\r\n") && t.ends_with("GET /b 0"), "{t}");
+    let t = exchange(b"GET /a HTTP/1.1\r\n\r\nGET /b HTTP/1.1\r\nConnection: Close\r\n\r\n");
+    assert_eq!(t.matches("HTTP/1.1 200 OK\r\n").count(), 2, "{t}");
+    n += 3;
+    eprintln!("http head and body cases: {n}");
+}

@@ -219,6 +219,7 @@ fn view_api_refuses_bad_requests_and_keeps_serving() {
         ("POST", "/api/decode", br#"{"dials": {"0": 1e999}}"#.to_vec(), 400, "malformed JSON"),
         ("POST", "/api/decode", br#"{"dials": {"0": 1e300}}"#.to_vec(), 400, "non-finite"),
         ("POST", "/api/decode", br#"{}"#.to_vec(), 400, "missing `dials`"),
+        ("POST", "/api/decode", br#"{"weights": {"0": 1}}"#.to_vec(), 400, "`weights` must be an array of 4 numbers"),
         ("GET", "/api/heat/4", vec![], 400, "unknown component `4`"),
         ("GET", "/api/heat/x", vec![], 400, "unknown component `x`"),
         (
@@ -385,13 +386,34 @@ fn view_api_decodes_an_autoencoder_like_synthesize() {
     assert_eq!(desc["kind"], "autoencoder");
     // The page shows the pose options the model reads, with the one set of defaults.
     assert_eq!(desc["pose_parameters"], json!(["gamma", "max_iterations"]));
-    // Its segmentation overlay is one group per component, not a single colour.
+    // Its segmentation overlay is one group per component, not a single colour: every component
+    // reaches every vertex, and a vertex goes to the component largest there relative to its
+    // own peak.
     assert_eq!(desc["segmentation_groups"], json!(4));
     let (s, _, seg) = v.request("GET", "/api/segmentation", b"");
     assert_eq!(s, 200);
-    let labels: std::collections::BTreeSet<u32> =
-        seg.chunks_exact(4).map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect();
-    assert!(labels.len() >= 2, "the autoencoder's segmentation has {} label(s)", labels.len());
+    let labels: Vec<u32> = seg.chunks_exact(4).map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect();
+    let m = load_model(&model).unwrap();
+    let comps = m.components().unwrap();
+    for c in &comps {
+        let peak = c.magnitudes.iter().cloned().fold(0.0, f64::max);
+        assert!(c.magnitudes.iter().all(|&x| x > 1e-6 * peak), "component {} is not everywhere", c.index);
+    }
+    let peaks: Vec<f64> = comps.iter().map(|c| c.magnitudes.iter().cloned().fold(0.0, f64::max)).collect();
+    assert!(
+        peaks.iter().any(|&p| (p - peaks[0]).abs() > 1e-3 * peaks[0]),
+        "the peaks {peaks:?} are equal: relative and absolute magnitudes would give the same labels"
+    );
+    assert_eq!((labels.clone(), 4), segmentation_by_definition(&comps, m.rest().n_vertices()));
+    let used: std::collections::BTreeSet<u32> = labels.iter().copied().collect();
+    assert!(used.len() >= 2, "the autoencoder's segmentation has {} label(s)", used.len());
+    // The compute time the page shows is the model call's: within the request's round trip.
+    let t0 = std::time::Instant::now();
+    let (s, h, _) = v.post("/api/decode", &json!({ "dials": { "1": 0.5 } }));
+    let round_trip_ms = 1e3 * t0.elapsed().as_secs_f64();
+    assert_eq!(s, 200);
+    let compute_ms: f64 = header(&h, "x-compute-ms").unwrap().parse().unwrap();
+    assert!((0.0..=round_trip_ms).contains(&compute_ms), "X-Compute-Ms {compute_ms} for a {round_trip_ms} ms request");
     let d = meshdeco::model::PoseOptions::default();
     assert_eq!(desc["pose_defaults"]["gamma"], json!(d.gamma));
     assert_eq!(desc["pose_defaults"]["prior"], json!("shape"));
@@ -637,5 +659,56 @@ fn description_ranges_and_segmentation_follow_their_definitions() {
             );
         }
     }
+    std::fs::remove_dir_all(&d).unwrap();
+}
+
+/// `/api/model`'s camera framing (`up_axis`, `view_axis`, `view_sign`) is the renderer's
+/// automatic framing of the rest shape: the page's camera looks at the side most vertex normals
+/// face. A bumpy sheet whose faces wind toward +z and the same sheet wound toward −z are seen
+/// from opposite sides.
+#[test]
+fn description_frames_the_camera_like_the_renderer() {
+    use meshdeco::mesh::render::auto_frame;
+    let d = fresh_dir("view-api", "frame");
+    let side = 9;
+    let mut faces = Vec::new();
+    for r in 0..side - 1 {
+        for c in 0..side - 1 {
+            let v = r * side + c;
+            faces.push([v, v + 1, v + side + 1]);
+            faces.push([v, v + side + 1, v + side]);
+        }
+    }
+    let mut signs = Vec::new();
+    for (name, flip) in [("up", false), ("down", true)] {
+        let dir = d.join(name);
+        std::fs::create_dir_all(&dir).unwrap();
+        for f in 0..10 {
+            let (a, b) = ((f as f64 * 0.7).sin(), (f as f64 * 1.3).cos());
+            let positions = (0..side * side)
+                .map(|v| {
+                    let (x, y) = ((v % side) as f64 / 8.0, (v / side) as f64 / 8.0);
+                    let bump = |cx: f64, cy: f64| (-20.0 * ((x - cx).powi(2) + (y - cy).powi(2))).exp();
+                    let z = 0.1 * (a * bump(0.3, 0.3) + b * bump(0.7, 0.6));
+                    [x, y, z]
+                })
+                .collect();
+            let faces = faces.iter().map(|t| if flip { [t[0], t[2], t[1]] } else { *t }).collect();
+            let mesh = meshdeco::mesh::TriMesh { positions, faces };
+            meshdeco::mesh::write_obj(&dir.join(format!("f{f:02}.obj")), &mesh).unwrap();
+        }
+        let model = train(&d, &format!("{name}-model"), dir.to_str().unwrap(), "kind = \"pca\"\ncomponents = 2");
+        let (up, view, negative) = auto_frame(&load_model(&model).unwrap().rest());
+        assert_eq!(view, 2, "{name}: the sheet is seen along z");
+        let sign = if negative { -1 } else { 1 };
+        let v = Viewer::start(&[model.to_str().unwrap()]);
+        let (s, _, body) = v.request("GET", "/api/model", b"");
+        assert_eq!(s, 200);
+        let desc: Value = serde_json::from_slice(&body).unwrap();
+        let got = [&desc["up_axis"], &desc["view_axis"], &desc["view_sign"]];
+        assert_eq!(got, [&json!(up), &json!(view), &json!(sign)], "{name}");
+        signs.push(sign);
+    }
+    assert_eq!(signs, [1, -1], "the sheet wound toward +z, then toward −z");
     std::fs::remove_dir_all(&d).unwrap();
 }

@@ -638,4 +638,24 @@ mod tests {
         assert_eq!(abbreviate(&items(9)), "1, 2, 3, 4, 5, 6, 7, 8, … (1 more)");
         assert_eq!(abbreviate(&items(11)), "1, 2, 3, 4, 5, 6, 7, 8, … (3 more)");
     }
+
+    /// The report's bounding-box rows: each corner and the size as points of `num`s, for the
+    /// first frame and over all frames.
+    #[test]
+    fn report_rows_show_both_boxes_as_points() {
+        let (p, f) = octahedron(1.0);
+        let (mut q, _) = octahedron(2.5);
+        q[3] = [0.0, -0.125, 0.0];
+        let text = inspect(&seq(vec![p, q], f)).to_string();
+        let rows: Vec<&str> = text.lines().filter(|l| l.contains(" min (")).collect();
+        assert_eq!(
+            rows,
+            [
+                "bounding box      first frame  min (-1, -1, -1)  max (1, 1, 1)  size (2, 2, 2)",
+                "                  all frames   min (-2.5, -1, -2.5)  max (2.5, 2.5, 2.5)  size (5, 3.5, 5)",
+            ],
+            "{text}"
+        );
+        assert!(text.contains("\nmean edge length  1.41421 (first frame)\n"), "{text}");
+    }
 }

@@ -125,11 +125,33 @@ pub fn http(addr: &str, method: &str, path: &str, body: &[u8]) -> (u16, Vec<(Str
     parse_response(&raw)
 }
 
+/// The reason phrase of each status meshdeco's server sends (RFC 7231 §6.1; 431: RFC 6585 §5).
+fn reason_phrase(status: u16) -> &'static str {
+    match status {
+        100 => "Continue",
+        200 => "OK",
+        400 => "Bad Request",
+        404 => "Not Found",
+        405 => "Method Not Allowed",
+        408 => "Request Timeout",
+        411 => "Length Required",
+        413 => "Payload Too Large",
+        431 => "Request Header Fields Too Large",
+        500 => "Internal Server Error",
+        503 => "Service Unavailable",
+        other => panic!("status {other} is not one the server is meant to send"),
+    }
+}
+
+/// A response's status, headers (names in lower case) and body; its status line must be
+/// `HTTP/1.1 <status> <reason phrase>`.
 pub fn parse_response(raw: &[u8]) -> (u16, Vec<(String, String)>, Vec<u8>) {
     let split = raw.windows(4).position(|w| w == b"\r\n\r\n").expect("response head");
     let head = String::from_utf8_lossy(&raw[..split]);
     let mut lines = head.lines();
-    let status: u16 = lines.next().unwrap().split_whitespace().nth(1).unwrap().parse().unwrap();
+    let status_line = lines.next().unwrap();
+    let status: u16 = status_line.split_whitespace().nth(1).unwrap().parse().unwrap();
+    assert_eq!(status_line, format!("HTTP/1.1 {status} {}", reason_phrase(status)), "the status line");
     let headers = lines
         .filter_map(|l| l.split_once(':'))
         .map(|(k, v)| (k.trim().to_ascii_lowercase(), v.trim().to_string()))
