@@ -200,11 +200,13 @@ fn view_api_refuses_bad_requests_and_keeps_serving() {
     };
     // Work per pose request is bounded: pins, iterations (a clear 400 before any solving).
     let many_pins: Vec<Value> = (0..101).map(|v| json!({ "vertex": v, "target": [0, 0, 0] })).collect();
+    let most_pins = serde_json::to_vec(&json!({ "constraints": many_pins[..100] })).unwrap();
     let many_pins = serde_json::to_vec(&json!({ "constraints": many_pins })).unwrap();
     let one_pin =
         |extra: &str| format!(r#"{{"constraints": [{{"vertex": 3, "target": [0, 0, 0]}}]{extra}}}"#).into_bytes();
     let cases: Vec<(&str, &str, Vec<u8>, u16, &str)> = vec![
         ("POST", "/api/pose", many_pins, 400, "101 pins; a pose request takes at most 100"),
+        ("POST", "/api/pose", most_pins, 200, ""),
         ("POST", "/api/pose", one_pin(r#", "max_iterations": 1000"#), 400, "`max_iterations` 1000"),
         ("POST", "/api/pose", one_pin(r#", "max_iterations": 100"#), 200, ""),
         ("POST", "/api/pose", one_pin(r#", "max_iterations": 101"#), 400, "`max_iterations` 101"),
