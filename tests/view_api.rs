@@ -375,7 +375,7 @@ fn view_api_decodes_an_autoencoder_like_synthesize() {
         "synthetic:tube",
         "kind = \"autoencoder\"\ncomponents = 4\niterations = 60\ncheckpoint_every = 60\nseed = 1",
     );
-    let v = Viewer::start(&[model.to_str().unwrap()]);
+    let v = Viewer::start(&[model.to_str().unwrap(), "--data", "synthetic:tube"]);
     let (s, _, body) = v.post("/api/decode", &json!({ "dials": { "2": 0.8 } }));
     assert_eq!(s, 200, "{}", String::from_utf8_lossy(&body));
     let o = meshdeco(&["synthesize", model.to_str().unwrap(), "--weights", "2:0.8", "--out", "s.obj"], &d);
@@ -416,6 +416,24 @@ fn view_api_decodes_an_autoencoder_like_synthesize() {
     assert_eq!(s, 200);
     let compute_ms: f64 = header(&h, "x-compute-ms").unwrap().parse().unwrap();
     assert!((0.0..=round_trip_ms).contains(&compute_ms), "X-Compute-Ms {compute_ms} for a {round_trip_ms} ms request");
+    // A frame's per-vertex error is measured as its Erms is, after the centroid alignment
+    // (the autoencoder's features do not hold a translation): the reconstruction is shifted by
+    // the mean of truth − reconstruction.
+    let (s, _, body) = v.request("GET", "/api/frame/5", b"");
+    assert_eq!(s, 200, "{}", String::from_utf8_lossy(&body));
+    let f = parse_shape(&body);
+    let n = f.positions.len();
+    let truth: Vec<[f64; 3]> = f32s(&f.rest[..12 * n]).chunks(3).map(|c| [c[0], c[1], c[2]]).collect();
+    let err = f32s(&f.rest[12 * n..]);
+    let shift: [f64; 3] =
+        std::array::from_fn(|k| truth.iter().zip(&f.positions).map(|(t, r)| t[k] - r[k]).sum::<f64>() / n as f64);
+    let size = dist(m.rest().bounding_box().0, m.rest().bounding_box().1);
+    assert!(dist(shift, [0.0; 3]) > 1e-3 * size, "the shift {shift:?} is too small to tell");
+    for i in 0..n {
+        let r = f.positions[i];
+        let want = dist(truth[i], [r[0] + shift[0], r[1] + shift[1], r[2] + shift[2]]);
+        assert!((err[i] - want).abs() <= 1e-5 * size, "vertex {i}: error {} against {want}", err[i]);
+    }
     let d = meshdeco::model::PoseOptions::default();
     assert_eq!(desc["pose_defaults"]["gamma"], json!(d.gamma));
     assert_eq!(desc["pose_defaults"]["prior"], json!("shape"));

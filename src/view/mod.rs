@@ -33,7 +33,7 @@ use serde_json::{Value, json};
 
 use crate::error::{Error, Result};
 use crate::mesh::{MeshSequence, TriMesh, Vec3};
-use crate::metrics::erms::Alignment;
+use crate::metrics::erms;
 use crate::model::{self, Constraints, Model, PoseOptions};
 use crate::pipeline::load_model;
 use http::{Request, Response};
@@ -605,21 +605,10 @@ fn frame(i: &str, shared: &Shared, jobs: &Sender<Job>) -> ApiResult<Response> {
             let e = model::encode_frames(m, &one, &s.data_name, None).map_err(|e| bad(e.to_string()))?;
             let truth = &one.frames[0];
             let rec = &e.reconstructions[0];
-            let shift = match e.alignment {
-                Alignment::Centroid => {
-                    let c = |p: &[Vec3]| -> Vec3 {
-                        std::array::from_fn(|k| p.iter().map(|q| q[k]).sum::<f64>() / p.len().max(1) as f64)
-                    };
-                    let (a, b) = (c(truth), c(rec));
-                    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-                }
-                Alignment::None => [0.0; 3],
-            };
-            let err: Vec<f64> = truth
-                .iter()
-                .zip(rec)
-                .map(|(t, r)| crate::mesh::dist(*t, [r[0] + shift[0], r[1] + shift[1], r[2] + shift[2]]))
-                .collect();
+            // The per-vertex error of the frame's Erms: after the model's alignment.
+            let shift = erms::alignment_shift(truth, rec, e.alignment);
+            let err: Vec<f64> =
+                truth.iter().zip(rec).map(|(t, r)| erms::vertex_squared_error(*t, *r, shift).sqrt()).collect();
             let w = &e.weights[0];
             let d = m.dials(w).map_err(|e| bad(e.to_string()))?;
             let mut b = shape_bytes(w, &d, rec);
