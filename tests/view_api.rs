@@ -732,3 +732,41 @@ fn description_frames_the_camera_like_the_renderer() {
     assert_eq!(signs, [1, -1], "the sheet wound toward +z, then toward −z");
     std::fs::remove_dir_all(&d).unwrap();
 }
+
+/// Pose requests queued behind a busy model thread are superseded by newer ones (README's API
+/// table): they are answered 409 Conflict without solving, and the newest is solved. Two dozen
+/// requests of 100 pins each are sent at once, so that several wait while one is solved.
+#[test]
+fn queued_pose_requests_are_superseded_by_newer_ones() {
+    let d = fresh_dir("view-api", "supersede");
+    let model = train(&d, "pca", "synthetic:tube", "kind = \"pca\"\ncomponents = 4");
+    let v = Viewer::start(&[model.to_str().unwrap()]);
+    let pins: Vec<Value> = (0..100).map(|i| json!({ "vertex": 7 * i, "target": [0, 0, 0] })).collect();
+    let body = serde_json::to_vec(&json!({ "constraints": pins, "max_iterations": 100 })).unwrap();
+    let answers: Vec<(u16, Vec<u8>)> = std::thread::scope(|s| {
+        let sent: Vec<_> = (0..24)
+            .map(|_| {
+                s.spawn(|| {
+                    let (status, _, b) = v.request("POST", "/api/pose", &body);
+                    (status, b)
+                })
+            })
+            .collect();
+        sent.into_iter().map(|h| h.join().unwrap()).collect()
+    });
+    let statuses: Vec<u16> = answers.iter().map(|a| a.0).collect();
+    let superseded = statuses.iter().filter(|&&s| s == 409).count();
+    let solved = statuses.iter().filter(|&&s| s == 200).count();
+    assert_eq!(superseded + solved, 24, "{statuses:?}");
+    assert!(superseded >= 1 && solved >= 1, "{superseded} superseded and {solved} solved of 24 at once");
+    for (s, b) in &answers {
+        if *s == 409 {
+            let text = String::from_utf8_lossy(b);
+            assert!(text.contains("superseded by a newer pose request; not solved"), "{text}");
+        } else {
+            assert_eq!(parse_shape(b).positions.len(), 1466);
+        }
+    }
+    eprintln!("pose requests at once: {solved} solved, {superseded} superseded");
+    std::fs::remove_dir_all(&d).unwrap();
+}
