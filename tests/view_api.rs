@@ -429,10 +429,9 @@ fn view_api_decodes_an_autoencoder_like_synthesize() {
         std::array::from_fn(|k| truth.iter().zip(&f.positions).map(|(t, r)| t[k] - r[k]).sum::<f64>() / n as f64);
     let size = dist(m.rest().bounding_box().0, m.rest().bounding_box().1);
     assert!(dist(shift, [0.0; 3]) > 1e-3 * size, "the shift {shift:?} is too small to tell");
-    for i in 0..n {
-        let r = f.positions[i];
-        let want = dist(truth[i], [r[0] + shift[0], r[1] + shift[1], r[2] + shift[2]]);
-        assert!((err[i] - want).abs() <= 1e-5 * size, "vertex {i}: error {} against {want}", err[i]);
+    for (i, ((t, r), e)) in truth.iter().zip(&f.positions).zip(&err).enumerate() {
+        let want = dist(*t, [r[0] + shift[0], r[1] + shift[1], r[2] + shift[2]]);
+        assert!((e - want).abs() <= 1e-5 * size, "vertex {i}: error {e} against {want}");
     }
     let d = meshdeco::model::PoseOptions::default();
     assert_eq!(desc["pose_defaults"]["gamma"], json!(d.gamma));
