@@ -689,24 +689,17 @@ fn description_ranges_and_segmentation_follow_their_definitions() {
 fn description_frames_the_camera_like_the_renderer() {
     use meshdeco::mesh::render::auto_frame;
     let d = fresh_dir("view-api", "frame");
-    let side = 9;
-    let mut faces = Vec::new();
-    for r in 0..side - 1 {
-        for c in 0..side - 1 {
-            let v = r * side + c;
-            faces.push([v, v + 1, v + side + 1]);
-            faces.push([v, v + side + 1, v + side]);
-        }
-    }
+    // A 9 × 9 grid in the unit square, its faces wound toward +z.
+    let (grid, faces) = common::unit_grid(9, 9);
     let mut signs = Vec::new();
     for (name, flip) in [("up", false), ("down", true)] {
         let dir = d.join(name);
         std::fs::create_dir_all(&dir).unwrap();
         for f in 0..10 {
             let (a, b) = ((f as f64 * 0.7).sin(), (f as f64 * 1.3).cos());
-            let positions = (0..side * side)
-                .map(|v| {
-                    let (x, y) = ((v % side) as f64 / 8.0, (v / side) as f64 / 8.0);
+            let positions = grid
+                .iter()
+                .map(|&[x, y, _]| {
                     let bump = |cx: f64, cy: f64| (-20.0 * ((x - cx).powi(2) + (y - cy).powi(2))).exp();
                     let z = 0.1 * (a * bump(0.3, 0.3) + b * bump(0.7, 0.6));
                     [x, y, z]
