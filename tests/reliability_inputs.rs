@@ -1104,5 +1104,18 @@ fn http_heads_bodies_and_connections_on_the_default_limits() {
     let t = exchange(b"GET /a HTTP/1.1\r\n\r\nGET /b HTTP/1.1\r\nConnection: Close\r\n\r\n");
     assert_eq!(t.matches("HTTP/1.1 200 OK\r\n").count(), 2, "{t}");
     n += 3;
+    // `Expect: 100-continue` on an empty body: there is nothing to wait for, so the final
+    // response is the first and only one (no interim 100).
+    let t = exchange(b"POST /e HTTP/1.1\r\nContent-Length: 0\r\nExpect: 100-continue\r\nConnection: close\r\n\r\n");
+    assert!(t.starts_with("HTTP/1.1 200 OK\r\n") && !t.contains("100 Continue") && t.ends_with("POST /e 0"), "{t}");
+    // A client that half-closes before its whole body arrived: the request is dropped, not
+    // answered as if the shorter body were all of it (the echo would say `POST /cut 5`).
+    let mut s = TcpStream::connect(&addr).unwrap();
+    s.write_all(b"POST /cut HTTP/1.1\r\nContent-Length: 10\r\n\r\n12345").unwrap();
+    s.shutdown(std::net::Shutdown::Write).unwrap();
+    let (raw, took) = read_until_closed(&mut s, Duration::from_secs(10));
+    assert!(raw.is_empty(), "a cut-short body was answered: {}", String::from_utf8_lossy(&raw));
+    assert!(took < Duration::from_secs(5), "the connection stayed open {took:?} after the client's half-close");
+    n += 2;
     eprintln!("http head and body cases: {n}");
 }
