@@ -351,4 +351,24 @@ mod tests {
         let e = err("# empty\n");
         assert!(e.starts_with("t.obj: no vertices"), "{e}");
     }
+
+    /// General-path indices (multi-digit, negative back to the first vertex, a lone '-', more
+    /// digits than an i64), digits_i64's own answers, and tabs in fast-path faces.
+    #[test]
+    fn general_path_indices_and_fast_path_edges() {
+        let mut text: String = (0..12).map(|i| format!("v {i} 0 0\n")).collect();
+        text.push_str("f 10 11 12 #\nf -12 -11 -10\nf -3 -2 -1\n");
+        let m = parse(&text).unwrap();
+        assert_eq!(m.mesh.faces, vec![[9, 10, 11], [0, 1, 2], [9, 10, 11]]);
+        let tri = "v 0 0 0\nv 1 0 0\nv 0 1 0\n";
+        for bad in ["-", "99999999999999999999"] {
+            let e = err(&format!("{tri}f 1 2 {bad}\n"));
+            assert!(e.starts_with(&format!("t.obj:4: face vertex '{bad}' is not an integer index")), "{e}");
+        }
+        assert_eq!(digits_i64(b"-12"), Some(-12));
+        assert_eq!(digits_i64(b"123456789012345678"), Some(123_456_789_012_345_678));
+        let mut p = Vec::new();
+        assert!(plain_face(b"f\t1 2 3", &mut p) && p == [0, 1, 2]);
+        assert!(plain_face(b"f 1\t2\t3", &mut p) && p == [0, 1, 2]);
+    }
 }

@@ -220,4 +220,23 @@ mod tests {
         let m = e("OFF BINARY\n");
         assert!(m.contains("binary OFF"), "{m}");
     }
+
+    #[test]
+    fn prefixes_colours_and_counts_are_checked_exactly() {
+        for text in [
+            "STOFF\n3 1\n0 0 0 0 0\n1 0 0 1 0\n0 1 0 0 1\n3 0 1 2\n",
+            "NOFF\n3 1\n0 0 0 0 0 1\n1 0 0 0 0 1\n0 1 0 0 0 1\n3 0 1 2\n",
+            "COFF\n3 1\n0 0 0 255 0 0\n1 0 0 0 255 0\n0 1 0 0 0 255\n3 0 1 2\n",
+            "OFF\n3 1\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2 1 1 1 1\n",
+        ] {
+            let m = parse(text).unwrap();
+            assert!(m.warnings.is_empty(), "{text:?}: {:?}", m.warnings);
+            assert_eq!(m.mesh.faces, vec![[0, 1, 2]]);
+        }
+        let m = parse("OFF\n3 1\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2 x\n").unwrap();
+        assert_eq!(m.warnings.len(), 1, "{:?}", m.warnings);
+        assert!(m.warnings[0].starts_with("t.off:6: 1 face line(s) carry data"), "{:?}", m.warnings);
+        let e = parse("OFF\n3 0\n0 0 0\n1 0 0\n0 1 0\n").unwrap_err().to_string();
+        assert!(e.starts_with("t.off:2: the file declares 3 vertices and 0 faces"), "{e}");
+    }
 }

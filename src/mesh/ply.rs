@@ -657,4 +657,31 @@ mod tests {
         );
         assert!(m.contains("point cloud"), "{m}");
     }
+
+    #[test]
+    fn ascii_values_lists_trailing_lines_and_a_cut_skip() {
+        let head = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n\
+                    element face 1\nproperty list uchar int vertex_indices\nend_header\n";
+        let verts = "0 0 0\n1 0 0\n0 1 0\n";
+        let e = |s: String| parse(s.as_bytes()).unwrap_err().to_string();
+        let m = e(format!("{head}0 0 0\n1 0\n0 1 0\n3 0 1 2\n"));
+        assert!(m.starts_with("t.ply:11: too few values for element 'vertex'"), "{m}");
+        for (face, want) in [
+            ("3 0 1.5 2", "t.ply:13: value '1.5' is not an integer"),
+            ("-1 0 1 2", "t.ply:13: negative list length -1"),
+            ("0", "t.ply:13: face with 0 vertices"),
+        ] {
+            let m = e(format!("{head}{verts}{face}\n"));
+            assert!(m.starts_with(want), "{face}: {m}");
+        }
+        let floats = head.replace("list uchar int", "list uchar float");
+        let m = e(format!("{floats}{verts}3 0 1 2\n"));
+        assert!(m.contains("must be a list of integers"), "{m}");
+        let ok = parse(format!("{head}{verts}3 0 1 2\n\nextra\n").as_bytes()).unwrap();
+        assert_eq!(ok.warnings, vec!["t.ply:15: content after the last element ignored".to_string()]);
+        // Binary: the file ends inside a skipped property (the material's char, the last byte).
+        let full = binary_square(false, "vertex_indices", false);
+        let m = parse(&full[..full.len() - 1]).unwrap_err().to_string();
+        assert!(m.starts_with("t.ply: unexpected end of file in material 0 of 1"), "{m}");
+    }
 }
