@@ -1119,3 +1119,43 @@ fn http_heads_bodies_and_connections_on_the_default_limits() {
     n += 2;
     eprintln!("http head and body cases: {n}");
 }
+
+#[test]
+fn http_a_client_that_hangs_up_mid_response_frees_its_connection_at_once() {
+    // One connection at most, and 8 s to write a response: a server that kept writing to a
+    // client that is gone would hold the only slot for those 8 s.
+    let limits = Limits { max_connections: 1, request: Duration::from_secs(8), ..Limits::default() };
+    let listener = TcpListener::bind("127.0.0.1:0").unwrap();
+    let addr = listener.local_addr().unwrap().to_string();
+    std::thread::spawn(move || {
+        http::serve(listener, limits, |r: &Request| match r.path.as_str() {
+            "/big" => Response::binary(vec![7u8; 64 << 20]),
+            _ => Response::new(200, "text/plain", b"small".to_vec()),
+        })
+    });
+    let mut s = TcpStream::connect(&addr).unwrap();
+    s.write_all(b"GET /big HTTP/1.1\r\n\r\n").unwrap();
+    let mut start = [0u8; 4096];
+    s.read_exact(&mut start).unwrap();
+    assert!(start.starts_with(b"HTTP/1.1 200 OK\r\n"));
+    // Closing with unread bytes resets the connection: the server's next write fails.
+    drop(s);
+    let t0 = Instant::now();
+    let mut busy = 0;
+    loop {
+        let (status, _, body) = view_support::http(&addr, "GET", "/small", b"");
+        if status == 200 {
+            assert_eq!(body, b"small");
+            break;
+        }
+        assert_eq!(status, 503, "{}", String::from_utf8_lossy(&body));
+        busy += 1;
+        assert!(
+            t0.elapsed() < Duration::from_secs(4),
+            "the connection of a client that hung up was held {:?} ({busy} requests answered 503)",
+            t0.elapsed()
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    eprintln!("slot free {:?} after the client hung up ({busy} requests answered 503 before)", t0.elapsed());
+}

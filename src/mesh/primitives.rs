@@ -215,4 +215,25 @@ mod tests {
             assert!(dot(n, centre) > 0.0);
         }
     }
+
+    #[test]
+    fn base_icosahedron_is_regular_and_cylinder_vertices_sit_where_documented() {
+        let m = icosphere(0);
+        let t = (1.0 + 5f64.sqrt()) / 2.0;
+        let r = (1.0 + t * t).sqrt();
+        assert!((m.positions[0][0] + 1.0 / r).abs() < 1e-12 && (m.positions[0][1] - t / r).abs() < 1e-12);
+        for f in &m.faces {
+            for k in 0..3 {
+                let l = crate::math::vec3::dist(m.positions[f[k]], m.positions[f[(k + 1) % 3]]);
+                assert!((l - 2.0 / r).abs() < 1e-12, "{f:?}: {l}");
+            }
+        }
+        let c = cylinder(12, 5, 0.5, 2.0);
+        for (i, p) in c.positions.iter().enumerate() {
+            let (k, ring) = (i % 12, i / 12);
+            assert!((p[2] - 0.4 * ring as f64).abs() < 1e-12, "vertex {i}: {p:?}");
+            let a = 2.0 * std::f64::consts::PI * k as f64 / 12.0;
+            assert!((p[0] - 0.5 * a.cos()).abs() < 1e-12 && (p[1] - 0.5 * a.sin()).abs() < 1e-12, "vertex {i}: {p:?}");
+        }
+    }
 }

@@ -452,4 +452,42 @@ mod tests {
         );
         std::fs::remove_dir_all(&d).unwrap();
     }
+
+    #[test]
+    fn mismatch_counts_only_the_differing_faces() {
+        let d = test_dir("seq-ndiff");
+        let three = format!("{TRI}f 1 2 4\n");
+        std::fs::write(d.join("1.obj"), &three).unwrap();
+        std::fs::write(d.join("2.obj"), three.replace("f 1 2 4", "f 1 4 2")).unwrap();
+        let e = read_sequence(d.to_str().unwrap()).unwrap_err().to_string();
+        assert!(e.contains("in 1 of 3 faces") && e.contains("face 2 (0-based): [0, 3, 1] here, [0, 1, 3]"), "{e}");
+        std::fs::remove_dir_all(&d).unwrap();
+    }
+
+    #[test]
+    fn mesh_files_read_one_frame_at_a_time() {
+        let d = test_dir("seq-files");
+        let quad = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\n";
+        for name in ["10.obj", "2.obj", "1.obj"] {
+            let body = if name == "10.obj" { quad.replace("v 1 1 0", "v 1 1 5") } else { quad.to_string() };
+            std::fs::write(d.join(name), body).unwrap();
+        }
+        let files = MeshFiles::open(d.to_str().unwrap()).unwrap();
+        assert_eq!((files.n_frames(), files.n_vertices()), (3, 4));
+        assert_eq!(files.faces(), &[[0, 1, 2], [0, 2, 3]][..]);
+        assert_eq!(files.names(), vec!["1", "2", "10"]);
+        let (p, w) = files.read_frame(2).unwrap();
+        assert_eq!(p, vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 5.0], [0.0, 1.0, 0.0]]);
+        assert!(w.len() == 1 && w[0].contains("10.obj:5: 1 polygon"), "{w:?}");
+        let per_file: Vec<Vec<String>> = (0..3).map(|f| files.read_frame(f).unwrap().1).collect();
+        let merged = files.merge_warnings(&per_file);
+        assert_eq!(merged.len(), 1, "{merged:?}");
+        assert!(merged[0].contains("1.obj:5: 1 polygon") && merged[0].ends_with("(and the same in 2 other frames)"));
+        let e = files.read_frame(3).unwrap_err().to_string();
+        assert!(e.contains("frame index 3 is out of range (3 frames)"), "{e}");
+        std::fs::write(d.join("2.obj"), format!("{quad}v 2 2 2\n")).unwrap();
+        let e = files.read_frame(1).unwrap_err().to_string();
+        assert!(e.contains("2.obj: 5 vertices, but the first frame"), "{e}");
+        std::fs::remove_dir_all(&d).unwrap();
+    }
 }

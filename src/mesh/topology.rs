@@ -317,4 +317,28 @@ mod tests {
         r.sort_unstable();
         assert_eq!(r, vec![1, 2, 3, 4]);
     }
+
+    #[test]
+    fn max_degree_edge_ids_and_boundary_direction() {
+        let f = square();
+        let t = Topology::new(4, &f);
+        assert_eq!(t.max_degree(), 3);
+        assert_eq!(Topology::new(6, &octahedron()).max_degree(), 4);
+        assert_eq!((t.edge_id(0, 1), t.edge_id(3, 2), t.edge_id(1, 3)), (Some(0), Some(4), None));
+        // The loop follows the faces' orientation 0 → 1 → 2 → 3, not the reverse.
+        assert_eq!(t.boundary_loops(&f), vec![vec![0, 1, 2, 3]]);
+    }
+
+    #[test]
+    fn two_closed_fans_at_one_vertex_keep_all_neighbours() {
+        // Two tetrahedra sharing only vertex 0: its wedges form two separate cycles.
+        let tet = [[0, 2, 1], [0, 1, 3], [1, 2, 3], [0, 3, 2]];
+        let faces: Vec<[usize; 3]> =
+            tet.iter().copied().chain(tet.iter().map(|f| f.map(|v| if v == 0 { 0 } else { v + 3 }))).collect();
+        let t = Topology::new(7, &faces);
+        let mut r = t.neighbors(0).to_vec();
+        r.sort_unstable();
+        assert_eq!(r, vec![1, 2, 3, 4, 5, 6]);
+        assert_eq!(t.components().1, 1);
+    }
 }

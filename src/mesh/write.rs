@@ -303,4 +303,26 @@ mod tests {
         assert_eq!(colormap_range(&[-1.0, 0.5, 9.0], 0.0, 1.0)[2], [253, 231, 37]);
         assert_eq!(colormap_range(&[-1.0], 0.0, 1.0)[0], [68, 1, 84]);
     }
+
+    #[test]
+    fn bytes_match_files_and_write_mesh_picks_the_format() {
+        let d = test_dir("write-bytes");
+        let m = tetra();
+        write_obj(&d.join("a.obj"), &m).unwrap();
+        write_ply(&d.join("a.ply"), &m, None, None).unwrap();
+        assert_eq!(obj_bytes("a.obj", &m).unwrap(), std::fs::read(d.join("a.obj")).unwrap());
+        assert_eq!(ply_bytes("a.ply", &m).unwrap(), std::fs::read(d.join("a.ply")).unwrap());
+        for name in ["b.PLY", "b.off", "b.obj"] {
+            let p = d.join(name);
+            write_mesh(&p, &m).unwrap();
+            assert_eq!(read_mesh(&p).unwrap().mesh, m, "{name}");
+        }
+        assert!(write_mesh(&d.join("b.stl"), &m).is_err());
+        // Finite but too large for f32: refused.
+        let e = write_ply(&d.join("big.ply"), &m, None, Some(("d", &[0.0, 1e39, 0.0, 0.0]))).unwrap_err().to_string();
+        assert!(e.contains("vertex 1"), "{e}");
+        // A range other than 0..1 is scaled: t = 0.25 and 0.5 hit ramp anchors 2 and 4.
+        assert_eq!(colormap_range(&[0.5, 1.0], 0.0, 2.0), vec![[59, 81, 139], [33, 144, 141]]);
+        std::fs::remove_dir_all(&d).unwrap();
+    }
 }

@@ -351,7 +351,7 @@ fn write_response(w: &mut TcpStream, resp: &Response, keep_alive: bool, deadline
 fn serve_limited(stream: TcpStream, handle: &dyn Fn(&Request) -> Response, limits: &Limits, load: &Arc<Load>) {
     let _ = stream.set_nodelay(true);
     let Ok(mut writer) = stream.try_clone() else { return };
-    let mut reader = BufReader::new(DeadlineReader { stream, deadline: Instant::now() + limits.idle });
+    let mut reader = BufReader::new(DeadlineReader { stream, deadline: Instant::now() });
     loop {
         // Idle: wait for the first byte of the next request (nothing to answer if none comes).
         reader.get_mut().deadline = Instant::now() + limits.idle;
