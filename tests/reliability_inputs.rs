@@ -1159,3 +1159,37 @@ fn http_a_client_that_hangs_up_mid_response_frees_its_connection_at_once() {
     }
     eprintln!("slot free {:?} after the client hung up ({busy} requests answered 503 before)", t0.elapsed());
 }
+
+#[test]
+fn http_every_status_the_viewer_sends_has_its_reason_phrase() {
+    // The status line as a client reads it, for every status the viewer and its HTTP layer
+    // answer with (a 500 is a model call that panicked).
+    let statuses = [
+        (200, "OK"),
+        (400, "Bad Request"),
+        (404, "Not Found"),
+        (405, "Method Not Allowed"),
+        (408, "Request Timeout"),
+        (409, "Conflict"),
+        (411, "Length Required"),
+        (413, "Payload Too Large"),
+        (431, "Request Header Fields Too Large"),
+        (500, "Internal Server Error"),
+        (503, "Service Unavailable"),
+    ];
+    let listener = TcpListener::bind("127.0.0.1:0").unwrap();
+    let addr = listener.local_addr().unwrap().to_string();
+    std::thread::spawn(move || {
+        http::serve(listener, Limits::default(), |r: &Request| {
+            Response::error(r.path.trim_start_matches('/').parse().unwrap_or(404), "as asked")
+        })
+    });
+    for (status, phrase) in statuses {
+        let mut s = TcpStream::connect(&addr).unwrap();
+        s.write_all(format!("GET /{status} HTTP/1.1\r\nConnection: close\r\n\r\n").as_bytes()).unwrap();
+        let (raw, _) = read_until_closed(&mut s, Duration::from_secs(10));
+        let text = String::from_utf8_lossy(&raw);
+        assert!(text.starts_with(&format!("HTTP/1.1 {status} {phrase}\r\n")), "{text}");
+    }
+    eprintln!("http reason phrases: {}", statuses.len());
+}

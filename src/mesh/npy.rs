@@ -625,4 +625,184 @@ mod tests {
         assert!(e.contains("not finite"), "{e}");
         assert!(parse_frames(b"not numpy", "t.npy", 2).unwrap_err().to_string().contains("t.npy"));
     }
+
+    #[test]
+    fn npz_declared_size_bound_is_64_times_the_archive_or_1_mib() {
+        use std::io::Write;
+        let frames: Vec<Vec<Vec3>> = vec![vec![[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]]];
+        let mut zip = zip::ZipWriter::new(Cursor::new(Vec::new()));
+        let opts = zip::write::FileOptions::default().compression_method(zip::CompressionMethod::Stored);
+        zip.start_file("a.npy", opts).unwrap();
+        zip.write_all(&npy_image(&frames)).unwrap();
+        let bytes = zip.finish().unwrap().into_inner();
+        assert!(bytes.len() < 1 << 20);
+        // The member's uncompressed size as the central directory declares it (offset 24 of the
+        // `PK\x01\x02` record), rewritten: the reader goes by this size, the data stays as is.
+        let claim = |size: u32| {
+            let mut b = bytes.clone();
+            let at = b.windows(4).position(|w| w == b"PK\x01\x02").unwrap();
+            b[at + 24..at + 28].copy_from_slice(&size.to_le_bytes());
+            b
+        };
+        let path = Path::new("t.npz");
+        // A small archive may declare up to 64 × 1 MiB: exactly that is still read.
+        assert_eq!(npz_frames(path, &claim(64 << 20), "a", 2).unwrap(), frames);
+        // One byte more is refused before anything is inflated.
+        let e = npz_frames(path, &claim((64 << 20) + 1), "a", 2).unwrap_err().to_string();
+        assert!(e.contains("t.npz") && e.contains("implausible"), "{e}");
+    }
+
+    #[test]
+    fn header_of_exactly_numpys_limit_is_read() {
+        let mut text = "{'descr': '<f8', 'fortran_order': False, 'shape': (1, 2, 3), }".to_string();
+        while text.len() < MAX_HEADER_LEN - 1 {
+            text.push(' ');
+        }
+        text.push('\n');
+        let mut b = b"\x93NUMPY\x02\x00".to_vec();
+        b.extend_from_slice(&(text.len() as u32).to_le_bytes());
+        b.extend_from_slice(text.as_bytes());
+        for x in 0..6 {
+            b.extend_from_slice(&f64::from(x).to_le_bytes());
+        }
+        let frames = parse_frames(&b, "t.npy", 2).unwrap();
+        assert_eq!(frames, vec![vec![[0.0, 1.0, 2.0], [3.0, 4.0, 5.0]]]);
+    }
+
+    #[test]
+    fn header_grammar_edges() {
+        let h = |shape: &str| format!("{{'descr': '<f8', 'fortran_order': False, 'shape': {shape}, }}");
+        // Python 2's `L` suffix.
+        assert_eq!(parse_header_text(&h("(2L, 5L, 3L)")).unwrap().shape, [2, 5, 3]);
+        // Double-quoted strings read as single-quoted ones.
+        let dq = parse_header_text("{\"descr\": \"<f4\", \"fortran_order\": True, \"shape\": (2, 5, 3)}").unwrap();
+        assert_eq!((dq.item, dq.fortran, dq.shape), (4, true, vec![2, 5, 3]));
+        // NumPy's limit of 32 dimensions: 32 parse (check_shape refuses them later), 33 do not.
+        let dims = |k: usize| format!("({})", vec!["1"; k].join(", "));
+        assert_eq!(parse_header_text(&h(&dims(32))).unwrap().shape.len(), 32);
+        let e = parse_header_text(&h(&dims(33))).unwrap_err();
+        assert!(e.contains("more than 32 dimensions"), "{e}");
+        // A shape cut off by the end of the text, digits last: an error, not a panic.
+        let e = parse_header_text("{'descr': '<f8', 'fortran_order': False, 'shape': (1, 5, 3").unwrap_err();
+        assert!(e.contains("header"), "{e}");
+    }
+
+    #[test]
+    fn big_endian_values_are_byte_swapped() {
+        let vals = [1.5f64, -2.25, 3.0, 1024.0, 0.125, -7.0];
+        let be64: Vec<u8> = vals.iter().flat_map(|x| x.to_be_bytes()).collect();
+        let be32: Vec<u8> = vals.iter().flat_map(|&x| (x as f32).to_be_bytes()).collect();
+        for (descr, data) in [(">f8", be64), (">f4", be32)] {
+            let frames = parse_frames(&npy_bytes(descr, false, &[1, 2, 3], &data), "t.npy", 2).unwrap();
+            assert_eq!(frames, vec![vec![[1.5, -2.25, 3.0], [1024.0, 0.125, -7.0]]], "{descr}");
+        }
+    }
+
+    #[test]
+    fn headers_are_padded_to_64_bytes() {
+        let shapes: [(&str, bool, &[usize]); 4] = [
+            ("<f8", false, &[1, 2, 3]),
+            ("<f4", true, &[10, 5000, 3]),
+            ("<f8", false, &[123_456, 78, 3]),
+            ("<f8", false, &[7]),
+        ];
+        for (descr, fortran, shape) in shapes {
+            let h = npy_header(descr, fortran, shape);
+            assert_eq!(h.len() % 64, 0, "{descr} {shape:?}: {} bytes", h.len());
+            assert_eq!(h.last(), Some(&b'\n'));
+            assert_eq!(usize::from(u16::from_le_bytes([h[8], h[9]])), h.len() - 10);
+        }
+    }
+
+    #[test]
+    fn written_npy_and_npz_read_back_with_their_names() {
+        let d = crate::mesh::load::test_dir("npy-roundtrip");
+        let a: Vec<Vec<Vec3>> =
+            (0..3).map(|f| (0..2).map(|v| [f as f64, v as f64, 0.5 * (f + v) as f64]).collect()).collect();
+        let b: Vec<Vec<Vec3>> = vec![vec![[9.0, 8.0, 7.0], [6.0, 5.0, 4.0]]];
+        let faces = vec![[0, 1, 1]];
+        write_npy(&d.join("walk.npy"), &a).unwrap();
+        let seq = load_npy_with_faces(&d.join("walk.npy"), None, 2, faces.clone()).unwrap();
+        assert_eq!(seq.frames, a);
+        assert_eq!(seq.names, ["walk_1", "walk_2", "walk_3"]);
+        write_npz(&d.join("both.npz"), &[("a", &a[..]), ("b", &b[..])]).unwrap();
+        assert_eq!(load_npy_with_faces(&d.join("both.npz"), Some("a"), 2, faces.clone()).unwrap().frames, a);
+        assert_eq!(load_npy_with_faces(&d.join("both.npz"), Some("b"), 2, faces).unwrap().frames, b);
+        // Zero-padded to the width of the count.
+        let names = frame_names(Path::new("x/run.npy"), 12);
+        assert_eq!((names.len(), names[0].as_str(), names[11].as_str()), (12, "run_01", "run_12"));
+        std::fs::remove_dir_all(&d).unwrap();
+    }
+
+    #[test]
+    fn npy_frames_reads_single_frames_in_any_order() {
+        let d = crate::mesh::load::test_dir("npy-frames");
+        let p = d.join("walk.npy");
+        let frames: Vec<Vec<Vec3>> = (0..3)
+            .map(|f| (0..2).map(|v| [100.0 * f as f64 + 10.0 * v as f64, 1.0 + f as f64, 2.0 - v as f64]).collect())
+            .collect();
+        write_npy(&p, &frames).unwrap();
+        let nf = NpyFrames::open(&p, 2).unwrap().expect("a C-order .npy is read frame by frame");
+        assert_eq!((nf.n_frames(), nf.n_vertices()), (3, 2));
+        assert_eq!(nf.names(), ["walk_1", "walk_2", "walk_3"]);
+        for f in [2, 0, 1] {
+            assert_eq!(nf.read_frame(f).unwrap(), frames[f], "frame {f}");
+        }
+        let e = nf.read_frame(3).unwrap_err().to_string();
+        assert!(e.contains("walk.npy") && e.contains("out of range"), "{e}");
+        // Fortran order: `None` (a frame is scattered over the file).
+        let q = d.join("fortran.npy");
+        let mut fo = npy_header("<f8", true, &[3, 2, 3]);
+        for c in 0..3 {
+            for v in 0..2 {
+                for f in &frames {
+                    fo.extend_from_slice(&f[v][c].to_le_bytes());
+                }
+            }
+        }
+        std::fs::write(&q, fo).unwrap();
+        assert!(NpyFrames::open(&q, 2).unwrap().is_none());
+        std::fs::remove_dir_all(&d).unwrap();
+    }
+
+    #[test]
+    fn chunked_f32_writer_asks_for_each_frame_once_and_checks_values() {
+        let d = crate::mesh::load::test_dir("npy-chunked");
+        let frame = |f: usize| -> Vec<Vec3> { (0..2).map(|v| [f as f64, v as f64 + 0.5, -0.25 * f as f64]).collect() };
+        let p = d.join("five.npy");
+        let mut calls = Vec::new();
+        write_npy_f32_chunked(&p, 5, 2, 2, |start, len| {
+            calls.push((start, len));
+            if calls.len() > 10 || len == 0 || start + len > 5 {
+                return Err(Error::Invalid(format!("unexpected request ({start}, {len})")));
+            }
+            Ok((start..start + len).map(frame).collect())
+        })
+        .unwrap();
+        assert_eq!(calls, [(0, 2), (2, 2), (4, 1)]);
+        assert_eq!(std::fs::metadata(&p).unwrap().len(), npy_header("<f4", false, &[5, 2, 3]).len() as u64 + 5 * 24);
+        let seq = load_npy_with_faces(&p, None, 2, vec![]).unwrap();
+        assert_eq!(seq.frames, (0..5).map(frame).collect::<Vec<_>>());
+        // float32's largest value is written as is.
+        let m = d.join("max.npy");
+        let big = f64::from(f32::MAX);
+        write_npy_f32_chunked(&m, 1, 2, 4, |_, _| Ok(vec![vec![[big, -big, 0.0], [1.0; 3]]])).unwrap();
+        assert_eq!(load_npy_with_faces(&m, None, 2, vec![]).unwrap().frames[0][0], [big, -big, 0.0]);
+        // Past it, or not finite: the frame is named and nothing is left at the path.
+        for bad in [1e300, f64::NAN, f64::INFINITY] {
+            let q = d.join("bad.npy");
+            let e = write_npy_f32_chunked(&q, 2, 2, 4, |s, l| {
+                Ok((s..s + l).map(|f| if f == 1 { vec![[0.0, bad, 0.0], [0.0; 3]] } else { frame(f) }).collect())
+            })
+            .unwrap_err()
+            .to_string();
+            assert!(e.contains("frame 1 holds") && e.contains("not a finite float32"), "{bad}: {e}");
+            assert!(!q.exists(), "{bad}: a file was left");
+        }
+        let e = write_npy_f32_chunked(&d.join("wide.npy"), 1, 2, 4, |_, _| Ok(vec![vec![[0.0; 3]; 3]]))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("frame 0 has 3 vertices, expected 2"), "{e}");
+        std::fs::remove_dir_all(&d).unwrap();
+    }
 }

@@ -648,4 +648,89 @@ mod tests {
         assert!(e.contains("count.ply:3") && e.contains("`two`"), "{e}");
         std::fs::remove_dir_all(&dir).unwrap();
     }
+
+    /// A box cropping the shape at the bottom draws down to the last row and no further: box
+    /// (0, 0.5, 0)–(0.5, 1, 0), 180 pixels per unit about (0.25, 0.75): the triangle spans
+    /// (5, 185), (185, 185), (5, 5), cut by the bottom and right borders.
+    #[test]
+    fn a_box_cropping_the_bottom_stops_at_the_last_row() {
+        let bounds = Some(([0.0, 0.5, 0.0], [0.5, 1.0, 0.0]));
+        let opts = RenderOptions { width: 100, height: 100, bounds, ..Default::default() };
+        let img = render(&corner_triangle(), None, &opts).unwrap();
+        let want: Vec<(usize, usize)> =
+            (0..100).flat_map(|y| (0..100).map(move |x| (x, y))).filter(|&(x, y)| x >= 5 && x <= y).collect();
+        assert_eq!(inked(&img, 100), want);
+    }
+
+    /// Smooth shading: a roof of two steep faces (normals ∝ (∓4, 0, 1)) meeting at a ridge along
+    /// y (vertex normals +z there). Each pixel is shaded by the normal interpolated with its
+    /// barycentric weights, renormalised, lit from (−0.3, 0.4, 1).
+    #[test]
+    fn shading_interpolates_vertex_normals_across_a_face() {
+        let h = 4.0;
+        let roof = TriMesh {
+            positions: vec![[-1.0, 0.0, 0.0], [0.0, 0.0, h], [0.0, 1.0, h], [1.0, 0.0, 0.0]],
+            faces: vec![[0, 1, 2], [1, 3, 2]],
+        };
+        let img = render(&roof, None, &RenderOptions { width: 100, height: 100, ..Default::default() }).unwrap();
+        let light = crate::math::vec3::normalize([-0.3, 0.4, 1.0]);
+        let r = (h * h + 1.0f64).sqrt();
+        // 2 × 1 units in 100 × 100: 45 pixels a unit about (0, 0.5): x = 50 + 45 X, y = 72.5 − 45 Y.
+        for (x, y) in [(31usize, 58usize), (68, 58), (14, 70), (86, 70), (49, 40), (40, 66), (60, 66)] {
+            let cx = (x as f64 + 0.5 - 50.0) / 45.0;
+            // The eave vertex (±1, 0, 0) weighs |X|; the two ridge vertices (normal +z) the rest.
+            let t = cx.abs();
+            let n = [t * cx.signum() * h / r, 0.0, t / r + (1.0 - t)];
+            let want = (200.0 * (0.2 + 0.8 * dot(n, light).abs() / norm(n))).round() as i32;
+            let got = pixel(&img, 100, x, y);
+            assert!(got.iter().all(|&g| (g as i32 - want).abs() <= 1), "pixel ({x}, {y}): {got:?}, expected {want}");
+        }
+    }
+
+    /// Depth is interpolated across a face: a square tilted in depth (z = X, 0..2) crosses a flat
+    /// one at z = 1. From the front the flat red one shows for X < 1, the tilted blue one for X > 1.
+    #[test]
+    fn depth_is_interpolated_across_a_tilted_face() {
+        let positions = vec![
+            [0.0, 0.0, 1.0],
+            [2.0, 0.0, 1.0],
+            [2.0, 1.0, 1.0],
+            [0.0, 1.0, 1.0],
+            [0.0, 0.0, 0.0],
+            [2.0, 0.0, 2.0],
+            [2.0, 1.0, 2.0],
+            [0.0, 1.0, 0.0],
+        ];
+        let mesh = TriMesh { positions, faces: vec![[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7]] };
+        let colors = [[[255, 0, 0]; 4], [[0, 0, 255]; 4]].concat();
+        let opts = RenderOptions { width: 100, height: 50, ..Default::default() };
+        let img = render(&mesh, Some(&colors), &opts).unwrap();
+        // 2 × 1 units in 100 × 50: 45 pixels a unit, x = 5 + 45 X, y = 47.5 − 45 Y.
+        for y in 3..47 {
+            for x in 6..94 {
+                let cx = (x as f64 + 0.5 - 5.0) / 45.0;
+                if (cx - 1.0).abs() < 0.05 {
+                    continue;
+                }
+                let p = pixel(&img, 100, x, y);
+                if cx < 1.0 {
+                    assert!(p[0] > 0 && p[2] == 0, "pixel ({x}, {y}): {p:?}, expected red");
+                } else {
+                    assert!(p[2] > 0 && p[0] == 0, "pixel ({x}, {y}): {p:?}, expected blue");
+                }
+            }
+        }
+    }
+
+    /// A `property list` line in the vertex element is never a colour, even one cut to three words.
+    #[test]
+    fn a_list_property_is_never_a_colour() {
+        let dir = crate::mesh::load::test_dir("ply-list-colour");
+        let path = dir.join("list.ply");
+        let text = "ply\nformat ascii 1.0\nelement vertex 1\nproperty uchar red\nproperty uchar blue\n\
+                    property list green\nend_header\n1 2 3\n";
+        std::fs::write(&path, text).unwrap();
+        assert_eq!(vertex_colors_from_ply(&path).unwrap(), None);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
 }
