@@ -674,16 +674,23 @@ fn export_fps_is_bounded() {
 // The viewer's HTTP server (item 16)
 // ---------------------------------------------------------------------------------------------
 
-/// An echo server on a free loopback port within `limits`: answers the body's length.
-fn echo_server(limits: Limits) -> String {
+/// `http::serve` with `handle` on a free loopback port within `limits`, on its own thread:
+/// the address to connect to.
+fn serve_with<H>(limits: Limits, handle: H) -> String
+where
+    H: Fn(&Request) -> Response + Send + Sync + 'static,
+{
     let listener = TcpListener::bind("127.0.0.1:0").unwrap();
     let addr = listener.local_addr().unwrap().to_string();
-    std::thread::spawn(move || {
-        http::serve(listener, limits, |r: &Request| {
-            Response::new(200, "text/plain", format!("{} {} {}", r.method, r.path, r.body.len()).into_bytes())
-        })
-    });
+    std::thread::spawn(move || http::serve(listener, limits, handle));
     addr
+}
+
+/// An echo server on a free loopback port within `limits`: answers the body's length.
+fn echo_server(limits: Limits) -> String {
+    serve_with(limits, |r: &Request| {
+        Response::new(200, "text/plain", format!("{} {} {}", r.method, r.path, r.body.len()).into_bytes())
+    })
 }
 
 /// Reads what the server sends until it closes (or `limit`): (bytes, time until closed).
@@ -758,12 +765,7 @@ fn http_deadlines_cut_off_slow_clients() {
         assert!(took < Duration::from_secs(4), "{what}: open for {took:?}");
     }
     // A client that does not read a large response is cut off too (write deadline).
-    let big = {
-        let listener = TcpListener::bind("127.0.0.1:0").unwrap();
-        let a = listener.local_addr().unwrap().to_string();
-        std::thread::spawn(move || http::serve(listener, limits, |_: &Request| Response::binary(vec![7u8; 64 << 20])));
-        a
-    };
+    let big = serve_with(limits, |_: &Request| Response::binary(vec![7u8; 64 << 20]));
     let mut s = TcpStream::connect(&big).unwrap();
     s.write_all(b"GET / HTTP/1.1\r\n\r\n").unwrap();
     std::thread::sleep(Duration::from_secs(3));
@@ -1125,13 +1127,9 @@ fn http_a_client_that_hangs_up_mid_response_frees_its_connection_at_once() {
     // One connection at most, and 8 s to write a response: a server that kept writing to a
     // client that is gone would hold the only slot for those 8 s.
     let limits = Limits { max_connections: 1, request: Duration::from_secs(8), ..Limits::default() };
-    let listener = TcpListener::bind("127.0.0.1:0").unwrap();
-    let addr = listener.local_addr().unwrap().to_string();
-    std::thread::spawn(move || {
-        http::serve(listener, limits, |r: &Request| match r.path.as_str() {
-            "/big" => Response::binary(vec![7u8; 64 << 20]),
-            _ => Response::new(200, "text/plain", b"small".to_vec()),
-        })
+    let addr = serve_with(limits, |r: &Request| match r.path.as_str() {
+        "/big" => Response::binary(vec![7u8; 64 << 20]),
+        _ => Response::new(200, "text/plain", b"small".to_vec()),
     });
     let mut s = TcpStream::connect(&addr).unwrap();
     s.write_all(b"GET /big HTTP/1.1\r\n\r\n").unwrap();
@@ -1177,12 +1175,8 @@ fn http_every_status_the_viewer_sends_has_its_reason_phrase() {
         (500, "Internal Server Error"),
         (503, "Service Unavailable"),
     ];
-    let listener = TcpListener::bind("127.0.0.1:0").unwrap();
-    let addr = listener.local_addr().unwrap().to_string();
-    std::thread::spawn(move || {
-        http::serve(listener, Limits::default(), |r: &Request| {
-            Response::error(r.path.trim_start_matches('/').parse().unwrap_or(404), "as asked")
-        })
+    let addr = serve_with(Limits::default(), |r: &Request| {
+        Response::error(r.path.trim_start_matches('/').parse().unwrap_or(404), "as asked")
     });
     for (status, phrase) in statuses {
         let mut s = TcpStream::connect(&addr).unwrap();

@@ -371,4 +371,19 @@ mod tests {
         assert!(plain_face(b"f\t1 2 3", &mut p) && p == [0, 1, 2]);
         assert!(plain_face(b"f 1\t2\t3", &mut p) && p == [0, 1, 2]);
     }
+
+    /// Only `f` lines are faces: a polyline or a point element of three indices (`l 1 2 3`,
+    /// `p 1 2 3`) is counted and reported, never read as a triangle by the fast path.
+    #[test]
+    fn line_and_point_elements_of_three_indices_are_not_faces() {
+        let mut p = Vec::new();
+        for other in [&b"l 1 2 3"[..], b"p 1 2 3", b"s 1 2 3", b"g\t1 2 3"] {
+            assert!(!plain_face(other, &mut p), "{}", String::from_utf8_lossy(other));
+        }
+        let m = parse("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nl 1 2 3\nl 2 3 4\np 1 2 4\nf 1 2 3\n").unwrap();
+        assert_eq!(m.mesh.faces, vec![[0, 1, 2]]);
+        assert_eq!(m.warnings.len(), 2, "{:?}", m.warnings);
+        assert!(m.warnings[0].starts_with("t.obj:5: 2 line elements ('l') ignored"), "{}", m.warnings[0]);
+        assert!(m.warnings[1].starts_with("t.obj:7: 1 point elements ('p') ignored"), "{}", m.warnings[1]);
+    }
 }

@@ -392,6 +392,8 @@ mod tests {
     }
 
     const TRI: &str = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nf 1 2 3\nf 2 4 3\n";
+    /// One quad, split into two triangles with a warning.
+    const QUAD: &str = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\n";
 
     #[test]
     fn directory_glob_and_file_specs() {
@@ -441,9 +443,8 @@ mod tests {
     #[test]
     fn repeated_warnings_are_merged() {
         let d = test_dir("seq-warn");
-        let quad = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\n";
         for name in ["a.obj", "b.obj", "c.obj"] {
-            std::fs::write(d.join(name), quad).unwrap();
+            std::fs::write(d.join(name), QUAD).unwrap();
         }
         let s = read_sequence(d.to_str().unwrap()).unwrap();
         assert_eq!(s.warnings.len(), 1, "{:?}", s.warnings);
@@ -467,9 +468,8 @@ mod tests {
     #[test]
     fn mesh_files_read_one_frame_at_a_time() {
         let d = test_dir("seq-files");
-        let quad = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\n";
         for name in ["10.obj", "2.obj", "1.obj"] {
-            let body = if name == "10.obj" { quad.replace("v 1 1 0", "v 1 1 5") } else { quad.to_string() };
+            let body = if name == "10.obj" { QUAD.replace("v 1 1 0", "v 1 1 5") } else { QUAD.to_string() };
             std::fs::write(d.join(name), body).unwrap();
         }
         let files = MeshFiles::open(d.to_str().unwrap()).unwrap();
@@ -485,7 +485,7 @@ mod tests {
         assert!(merged[0].contains("1.obj:5: 1 polygon") && merged[0].ends_with("(and the same in 2 other frames)"));
         let e = files.read_frame(3).unwrap_err().to_string();
         assert!(e.contains("frame index 3 is out of range (3 frames)"), "{e}");
-        std::fs::write(d.join("2.obj"), format!("{quad}v 2 2 2\n")).unwrap();
+        std::fs::write(d.join("2.obj"), format!("{QUAD}v 2 2 2\n")).unwrap();
         let e = files.read_frame(1).unwrap_err().to_string();
         assert!(e.contains("2.obj: 5 vertices, but the first frame"), "{e}");
         std::fs::remove_dir_all(&d).unwrap();
