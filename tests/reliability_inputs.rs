@@ -1187,3 +1187,56 @@ fn http_every_status_the_viewer_sends_has_its_reason_phrase() {
     }
     eprintln!("http reason phrases: {}", statuses.len());
 }
+
+/// A signal that interrupts the server's blocked write (`EINTR`: a socket with a send timeout
+/// is never restarted, whatever `SA_RESTART` says) does not cut the response: the write is
+/// tried again. A client asks for 64 MiB and reads nothing for a while, so the server's write
+/// blocks; the connection's thread then gets twenty `SIGUSR1`s (a handler that does nothing);
+/// afterwards the client reads the whole body.
+#[cfg(target_os = "linux")]
+#[test]
+fn http_a_signal_during_a_blocked_write_does_not_cut_the_response() {
+    use std::sync::atomic::{AtomicI32, Ordering};
+    static WRITER: AtomicI32 = AtomicI32::new(0);
+    extern "C" fn nothing(_: libc::c_int) {}
+    // SAFETY: installs a handler that does nothing for a signal nothing else in this process
+    // uses; the struct is zeroed and then filled as sigaction(2) describes.
+    unsafe {
+        let mut action: libc::sigaction = std::mem::zeroed();
+        action.sa_sigaction = nothing as extern "C" fn(libc::c_int) as libc::sighandler_t;
+        action.sa_flags = libc::SA_RESTART;
+        libc::sigemptyset(&mut action.sa_mask);
+        assert_eq!(libc::sigaction(libc::SIGUSR1, &action, std::ptr::null_mut()), 0);
+    }
+    const SIZE: usize = 64 << 20;
+    // Not every signal finds the write blocked with nothing sent (some end a write early with
+    // a short count instead): 20 make an `EINTR` all but certain.
+    const SIGNALS: usize = 20;
+    let limits = Limits { request: Duration::from_secs(30), ..Limits::default() };
+    let addr = serve_with(limits, |_: &Request| {
+        // SAFETY: gettid has no preconditions.
+        WRITER.store(unsafe { libc::gettid() }, Ordering::SeqCst);
+        Response::binary(vec![7u8; SIZE])
+    });
+    let mut s = TcpStream::connect(&addr).unwrap();
+    s.write_all(b"GET /big HTTP/1.1\r\nConnection: close\r\n\r\n").unwrap();
+    std::thread::sleep(Duration::from_millis(500));
+    let tid = WRITER.load(Ordering::SeqCst);
+    assert!(tid > 0, "the request was not answered within 0.5 s");
+    // A thread that gave up on the connection is gone, and the next signal finds no thread.
+    let mut sent = 0;
+    for _ in 0..SIGNALS {
+        // SAFETY: sends SIGUSR1 (handled above, doing nothing) to the server's connection thread.
+        if unsafe { libc::syscall(libc::SYS_tgkill, libc::getpid(), tid, libc::SIGUSR1) } != 0 {
+            break;
+        }
+        sent += 1;
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let (raw, took) = read_until_closed(&mut s, Duration::from_secs(30));
+    let body_at = raw.windows(4).position(|w| w == b"\r\n\r\n").map(|i| i + 4).expect("no response head");
+    assert_eq!(status_of(&raw), 200);
+    assert_eq!(raw.len() - body_at, SIZE, "the response was cut after {sent} signal(s) (read for {took:?})");
+    assert_eq!(sent, SIGNALS, "the writing thread ended while the response was being written");
+    eprintln!("64 MiB read whole after {sent} signals to the writing thread, in {took:?}");
+}

@@ -762,3 +762,56 @@ fn queued_pose_requests_are_superseded_by_newer_ones() {
     eprintln!("pose requests at once: {solved} solved, {superseded} superseded");
     std::fs::remove_dir_all(&d).unwrap();
 }
+
+/// The segmentation's "everywhere" threshold is 10⁻⁶ of each component's peak, also where the
+/// peak is below 1 (a unit-norm PCA component spread over the 15 vertices that move has peak
+/// 0.26): two PCA components on a 4 × 4 sheet that move every vertex, one along x and one along
+/// y, each with one vertex that moves only 3·10⁻⁶ as far as the others. Each component is its
+/// own group; a threshold of 10⁻⁶ / peak would call neither everywhere and give one group.
+#[test]
+fn segmentation_counts_a_component_everywhere_relative_to_its_peak() {
+    let d = fresh_dir("view-api", "relative-peak");
+    let data = d.join("frames");
+    std::fs::create_dir_all(&data).unwrap();
+    let (rest, faces) = common::unit_grid(4, 4);
+    let (n, frames) = (rest.len(), 8);
+    let faint = 3e-6;
+    for t in 0..frames {
+        let phase = std::f64::consts::TAU * t as f64 / frames as f64;
+        let (a, b) = (0.02 * phase.cos(), 0.01 * phase.sin());
+        let mut text = String::new();
+        for (i, p) in rest.iter().enumerate() {
+            let fx = if i == 0 { faint } else { 1.0 };
+            let fy = if i == n - 1 { faint } else { 1.0 };
+            text.push_str(&format!("v {:e} {:e} {:e}\n", p[0] + a * fx, p[1] + b * fy, p[2]));
+        }
+        for f in &faces {
+            text.push_str(&format!("f {} {} {}\n", f[0] + 1, f[1] + 1, f[2] + 1));
+        }
+        std::fs::write(data.join(format!("{t}.obj")), text).unwrap();
+    }
+    let model = train(&d, "pca", data.to_str().unwrap(), "kind = \"pca\"\ncomponents = 2");
+    let m = load_model(&model).unwrap();
+    let comps = m.components().unwrap();
+    assert_eq!(comps.len(), 2);
+    // The case this test is for: every component is everywhere by the documented rule, and its
+    // smallest magnitude lies below 10⁻⁶ / peak (the peaks are below 1).
+    for c in &comps {
+        let peak = c.magnitudes.iter().cloned().fold(0.0, f64::max);
+        let least = c.magnitudes.iter().cloned().fold(f64::INFINITY, f64::min);
+        assert!(least > 1e-6 * peak && least < 1e-6 / peak, "component {}: peak {peak}, least {least}", c.index);
+        eprintln!("component {}: peak {peak:.3e}, least {least:.3e}", c.index);
+    }
+    let v = Viewer::start(&[model.to_str().unwrap()]);
+    let (s, _, body) = v.request("GET", "/api/model", b"");
+    assert_eq!(s, 200);
+    let desc: Value = serde_json::from_slice(&body).unwrap();
+    assert_eq!(desc["segmentation_groups"], json!(2));
+    let (s, _, seg) = v.request("GET", "/api/segmentation", b"");
+    assert_eq!(s, 200);
+    let labels: Vec<u32> = seg.chunks_exact(4).map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect();
+    assert_eq!((labels.clone(), 2), segmentation_by_definition(&comps, n));
+    let used: std::collections::BTreeSet<u32> = labels.iter().copied().collect();
+    assert_eq!(used.len(), 2, "labels {labels:?}");
+    std::fs::remove_dir_all(&d).unwrap();
+}
