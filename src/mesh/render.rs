@@ -733,4 +733,29 @@ mod tests {
         assert_eq!(vertex_colors_from_ply(&path).unwrap(), None);
         std::fs::remove_dir_all(&dir).unwrap();
     }
+
+    /// The zero-area cut-off is strict: a sliver whose doubled pixel area is exactly 10⁻¹² is
+    /// still drawn. Box (−36, −36)–(36, 36) in 80 × 80: 0.9 · 80 / 72 = 1 pixel a unit about the
+    /// origin, so pixel x = 40 + X, y = 40 − Y exactly. The sliver has a base of M = 10⁻¹² · 2⁴⁷
+    /// pixels along the row of centres y = 39.5 and a height of 2⁻⁴⁷ (all exact in binary), so
+    /// its area term is exactly −10⁻¹²; the centres on its base lie on an edge and are drawn.
+    #[test]
+    fn a_sliver_at_the_area_cut_off_is_still_drawn() {
+        let two47 = 140_737_488_355_328.0; // 2^47
+        let m = 1e-12 * two47;
+        let eps = 1.0 / two47;
+        let sliver = TriMesh {
+            positions: vec![[-29.5, 0.5, 0.0], [m - 29.5, 0.5, 0.0], [-29.5, 0.5 + eps, 0.0]],
+            faces: vec![[0, 1, 2]],
+        };
+        let opts = RenderOptions {
+            width: 80,
+            height: 80,
+            bounds: Some(([-36.0, -36.0, -1.0], [36.0, 36.0, 1.0])),
+            ..Default::default()
+        };
+        let ink = inked(&render(&sliver, None, &opts).unwrap(), 80);
+        assert!(!ink.is_empty(), "the sliver of area exactly 1e-12 was skipped");
+        assert!(ink.iter().all(|&(_, y)| y == 39), "{ink:?}");
+    }
 }
