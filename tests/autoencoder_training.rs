@@ -222,8 +222,8 @@ fn training_recovers_planted_local_deformations() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
-fn params(t: &Trainer) -> Vec<f32> {
-    let w = Weights::from_module(t.module()).unwrap();
+/// Every parameter as one vector: `C`, then each layer's point and neighbour weights and biases.
+fn flat_weights(w: &Weights) -> Vec<f32> {
     let mut v = w.c.clone();
     for l in &w.layers {
         v.extend(l.wp.iter().flatten());
@@ -232,6 +232,10 @@ fn params(t: &Trainer) -> Vec<f32> {
         v.extend(l.bd);
     }
     v
+}
+
+fn params(t: &Trainer) -> Vec<f32> {
+    flat_weights(&Weights::from_module(t.module()).unwrap())
 }
 
 /// The planted 9 × 8 grid problem: neighbour index, hop distances, training data.
@@ -296,6 +300,80 @@ fn learning_rate_norm_scales_every_step_size_by_the_features_norm() {
     let (_, unscaled) = run(AutoencoderConfig { learning_rate_norm: 0.0, ..base });
     assert_eq!(small, unscaled, "features below learning_rate_norm: the run is the unscaled one");
     assert!(diff(&scaled, &unscaled) > 1e-4, "the scaled run must differ: {}", diff(&scaled, &unscaled));
+}
+
+/// The optimiser's settings reach both Adams (Burn's, for the layers, and the fused one, for
+/// `C`) and the schedule's step size reaches every step, for both engines. With β1 = β2 = 0,
+/// Adam's step is `lr_t·g/(|g| + ε)` whatever the gradient, so with ε = 10⁻²⁰ every parameter
+/// moves by exactly the step size of its step, or not at all where its gradient is 0. A β left
+/// at Burn's default would mix in an earlier step's gradient (mini-batches of 2 of the 10
+/// shapes make consecutive gradients differ); a step size off by a step of the cosine schedule,
+/// or a scale, moves every parameter by the wrong amount. With ε = 10³ (far above any gradient
+/// here) every move is well below the step size, which an ε left at its default would not give.
+#[test]
+fn adam_settings_and_step_sizes_reach_every_parameter() {
+    use meshdeco::nn::config::Engine;
+    let (nb, dist, data) = planted_problem();
+    let base = AutoencoderConfig {
+        components: 10,
+        layers: 2,
+        iterations: 6,
+        batch_size: Some(2),
+        learning_rate: 2e-3,
+        learning_rate_final: Some(2e-4),
+        beta1: 0.0,
+        beta2: 0.0,
+        epsilon: 1e-20,
+        seed: 4,
+        checkpoint_every: 0,
+        ..Default::default()
+    };
+    let n_c = 10 * 9 * 72;
+    for engine in [Engine::Hand, Engine::Graph] {
+        let cfg = AutoencoderConfig { engine, ..base.clone() };
+        let mut t = Trainer::new(cfg.clone(), &data, &nb, &dist).unwrap();
+        assert_eq!(t.learning_rate_scale(), 1.0);
+        let mut before = flat_weights(t.weights());
+        assert_eq!(before.len() - n_c, 2 * (81 + 81 + 9 + 9));
+        for step in 0..cfg.iterations {
+            let lr = cfg.learning_rate_at(step);
+            t.step().unwrap();
+            let after = flat_weights(t.weights());
+            let (mut moved, mut still) = ([0usize; 2], [0usize; 2]);
+            for (i, (&a, &b)) in before.iter().zip(&after).enumerate() {
+                let d = (f64::from(b) - f64::from(a)).abs();
+                let part = usize::from(i >= n_c);
+                if d == 0.0 {
+                    still[part] += 1;
+                    continue;
+                }
+                let tol = 1e-4 * lr + 2.0 * f64::from(f32::EPSILON) * f64::from(a.abs().max(b.abs()));
+                assert!(
+                    (d - lr).abs() <= tol,
+                    "{engine:?}, step {step}: parameter {i} ({}) moved {d:.6e}, not the step size {lr:.6e}",
+                    if part == 0 { "C" } else { "a layer's" }
+                );
+                moved[part] += 1;
+            }
+            eprintln!(
+                "{engine:?}, step {step}: step size {lr:.3e}; C {} moved, {} still; layers {} moved, {} still",
+                moved[0], still[0], moved[1], still[1]
+            );
+            assert!(moved[0] > still[0] && moved[1] > still[1], "{engine:?}, step {step}: most parameters must move");
+            before = after;
+        }
+        // ε well above every gradient: every move is a small fraction of the step size.
+        let mut t = Trainer::new(AutoencoderConfig { epsilon: 1e3, ..cfg.clone() }, &data, &nb, &dist).unwrap();
+        let before = flat_weights(t.weights());
+        t.step().unwrap();
+        let largest =
+            before.iter().zip(&flat_weights(t.weights())).map(|(a, b)| f64::from((b - a).abs())).fold(0.0, f64::max);
+        eprintln!("{engine:?}, ε = 1e3: largest move {largest:.3e} against the step size {:.3e}", cfg.learning_rate);
+        assert!(
+            largest > 0.0 && largest < 0.1 * cfg.learning_rate,
+            "{engine:?}: ε = 1e3 must shrink every move: {largest:e}"
+        );
+    }
 }
 
 #[test]

@@ -906,6 +906,111 @@ mod tests {
         }
     }
 
+    /// One outer iteration's ADMM, by hand (dense, row-major) from the state the previous one
+    /// left (`Z` = C and the scaled dual `U`) and the weights and Λ this one chose: `iterations`
+    /// times `C = (WᵀW + ρI)⁻¹(WᵀX/s + ρ(Z − U))`, `Z = prox(C + U)` (each element's group shrunk
+    /// by Λ/ρ, or zero), `U += C − Z`; the objective returned is `‖X/s − W·Z‖² + Σ Λ·‖Z_g‖`.
+    /// Λ itself is `sparsity · ramp(distance to the centre)`. Catches ρ, the inner iteration
+    /// count or λ not reaching the solver, and a wrong threshold, dual update or objective.
+    #[test]
+    fn an_outer_iteration_runs_the_configured_admm() {
+        use crate::methods::support_map::support_ramp;
+        let (x, f, e, w) = two_bumps();
+        let p = Line { n: e, h: 0.025 };
+        for (rho, iterations, sparsity) in [(10.0, 1, 2.0), (3.0, 4, 0.5), (25.0, 2, 6.0)] {
+            let cfg = SplocsConfig {
+                components: 3,
+                sparsity,
+                support: [0.1, 0.3],
+                admm: AdmmConfig { rho, iterations },
+                ..Default::default()
+            };
+            let mut s = SplocsSolver::new(DataMatrix::new(&x, f, e, w).unwrap(), &p, &cfg).unwrap();
+            s.step().unwrap();
+            let (k, d) = (s.k, s.d);
+            let row = |s: &SplocsSolver<'_, Line>, b: &[f64]| {
+                let mut r = vec![0.0; k * d];
+                s.blocks.to_row_major(b, &mut r);
+                r
+            };
+            let (mut z, mut u) = (row(&s, &s.c), row(&s, &s.u));
+            let objective = s.step().unwrap();
+            let wts = &s.wts;
+            for kk in 0..k {
+                let dist = p.distances(&s.centers[kk]).unwrap();
+                for (el, &dv) in dist.iter().enumerate() {
+                    let want = sparsity * support_ramp(dv, 0.1, 0.3);
+                    assert!((s.lambda[kk * e + el] - want).abs() <= 1e-12 * sparsity, "Λ[{kk}, {el}]");
+                }
+            }
+            // (WᵀW + ρI)⁻¹ by Gauss–Jordan, and WᵀX/s.
+            let mut a = vec![0.0; k * 2 * k];
+            for i in 0..k {
+                for j in 0..k {
+                    a[i * 2 * k + j] = (0..f).map(|r| wts[r * k + i] * wts[r * k + j]).sum::<f64>();
+                }
+                a[i * 2 * k + i] += rho;
+                a[i * 2 * k + k + i] = 1.0;
+            }
+            for i in 0..k {
+                let piv = a[i * 2 * k + i];
+                a[i * 2 * k..(i + 1) * 2 * k].iter_mut().for_each(|v| *v /= piv);
+                for r in (0..k).filter(|&r| r != i) {
+                    let m = a[r * 2 * k + i];
+                    for c in 0..2 * k {
+                        a[r * 2 * k + c] -= m * a[i * 2 * k + c];
+                    }
+                }
+            }
+            let wx: Vec<f64> = (0..k * d)
+                .map(|i| (0..f).map(|r| wts[r * k + i / d] * x[r * d + i % d]).sum::<f64>() * s.inv_scale)
+                .collect();
+            for _ in 0..iterations {
+                let sv: Vec<f64> = (0..k * d).map(|i| wx[i] + rho * (z[i] - u[i])).collect();
+                let c: Vec<f64> =
+                    (0..k * d).map(|i| (0..k).map(|q| a[(i / d) * 2 * k + k + q] * sv[q * d + i % d]).sum()).collect();
+                for g in 0..k * e {
+                    let r = g * w..(g + 1) * w;
+                    let norm = r.clone().map(|i| (c[i] + u[i]).powi(2)).sum::<f64>().sqrt();
+                    let thr = s.lambda[g] / rho;
+                    for i in r {
+                        let zi = if norm > thr { (1.0 - thr / norm) * (c[i] + u[i]) } else { 0.0 };
+                        u[i] += c[i] - zi;
+                        z[i] = zi;
+                    }
+                }
+            }
+            let scale = z.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            let (got_z, got_u) = (row(&s, &s.c), row(&s, &s.u));
+            for i in 0..k * d {
+                assert!(
+                    (got_z[i] - z[i]).abs() <= 1e-9 * scale,
+                    "ρ {rho}, {iterations} iterations: Z[{i}] {} vs {}",
+                    got_z[i],
+                    z[i]
+                );
+                assert!(
+                    (got_u[i] - u[i]).abs() <= 1e-9 * scale,
+                    "ρ {rho}, {iterations} iterations: U[{i}] {} vs {}",
+                    got_u[i],
+                    u[i]
+                );
+            }
+            assert!(z.contains(&0.0) && z.iter().any(|&v| v != 0.0), "the prox must cut some groups, not all");
+            let mut want = 0.0;
+            for r in 0..f {
+                for j in 0..d {
+                    let fit: f64 = (0..k).map(|q| wts[r * k + q] * z[q * d + j]).sum();
+                    want += (x[r * d + j] * s.inv_scale - fit).powi(2);
+                }
+            }
+            for g in 0..k * e {
+                want += s.lambda[g] * (g * w..(g + 1) * w).map(|i| z[i] * z[i]).sum::<f64>().sqrt();
+            }
+            assert!((objective - want).abs() <= 1e-9 * want, "objective {objective} vs {want}");
+        }
+    }
+
     #[test]
     fn config_errors_name_the_value() {
         let bad = SplocsConfig { support: [0.8, 0.7], ..Default::default() };
