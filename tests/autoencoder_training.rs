@@ -328,11 +328,12 @@ fn adam_settings_and_step_sizes_reach_every_parameter() {
         checkpoint_every: 0,
         ..Default::default()
     };
-    let n_c = 10 * 9 * 72;
     for engine in [Engine::Hand, Engine::Graph] {
         let cfg = AutoencoderConfig { engine, ..base.clone() };
         let mut t = Trainer::new(cfg.clone(), &data, &nb, &dist).unwrap();
         assert_eq!(t.learning_rate_scale(), 1.0);
+        let n_c = t.weights().c.len();
+        assert_eq!(n_c, 10 * 9 * 72);
         let mut before = flat_weights(t.weights());
         assert_eq!(before.len() - n_c, 2 * (81 + 81 + 9 + 9));
         for step in 0..cfg.iterations {

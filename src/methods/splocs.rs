@@ -943,32 +943,22 @@ mod tests {
                     assert!((s.lambda[kk * e + el] - want).abs() <= 1e-12 * sparsity, "Λ[{kk}, {el}]");
                 }
             }
-            // (WᵀW + ρI)⁻¹ by Gauss–Jordan, and WᵀX/s.
-            let mut a = vec![0.0; k * 2 * k];
-            for i in 0..k {
-                for j in 0..k {
-                    a[i * 2 * k + j] = (0..f).map(|r| wts[r * k + i] * wts[r * k + j]).sum::<f64>();
-                }
-                a[i * 2 * k + i] += rho;
-                a[i * 2 * k + k + i] = 1.0;
-            }
-            for i in 0..k {
-                let piv = a[i * 2 * k + i];
-                a[i * 2 * k..(i + 1) * 2 * k].iter_mut().for_each(|v| *v /= piv);
-                for r in (0..k).filter(|&r| r != i) {
-                    let m = a[r * 2 * k + i];
-                    for c in 0..2 * k {
-                        a[r * 2 * k + c] -= m * a[i * 2 * k + c];
-                    }
+            // (WᵀW + ρI)⁻¹ (K = 3: the adjugate of `math::mat3`), and WᵀX/s.
+            let mut gram = [[0.0; 3]; 3];
+            for (i, gi) in gram.iter_mut().enumerate() {
+                for (j, gij) in gi.iter_mut().enumerate() {
+                    *gij =
+                        (0..f).map(|r| wts[r * k + i] * wts[r * k + j]).sum::<f64>() + if i == j { rho } else { 0.0 };
                 }
             }
+            let minv = crate::math::mat3::inverse(&gram).expect("WᵀW + ρI is positive definite");
             let wx: Vec<f64> = (0..k * d)
                 .map(|i| (0..f).map(|r| wts[r * k + i / d] * x[r * d + i % d]).sum::<f64>() * s.inv_scale)
                 .collect();
             for _ in 0..iterations {
                 let sv: Vec<f64> = (0..k * d).map(|i| wx[i] + rho * (z[i] - u[i])).collect();
                 let c: Vec<f64> =
-                    (0..k * d).map(|i| (0..k).map(|q| a[(i / d) * 2 * k + k + q] * sv[q * d + i % d]).sum()).collect();
+                    (0..k * d).map(|i| (0..k).map(|q| minv[i / d][q] * sv[q * d + i % d]).sum()).collect();
                 for g in 0..k * e {
                     let r = g * w..(g + 1) * w;
                     let norm = r.clone().map(|i| (c[i] + u[i]).powi(2)).sum::<f64>().sqrt();
