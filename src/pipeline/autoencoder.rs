@@ -73,8 +73,14 @@ pub struct AeHeader {
     pub components: usize,
     /// Names of the training frames (rows of `train_codes`).
     pub train_frames: Vec<String>,
-    /// Index (into the training frames) of the reference shape of the component analysis.
+    /// Index (into the training frames) of the reference shape of the component analysis (the
+    /// dial origin) when `rest_code` is absent (models trained before it).
     pub reference: usize,
+    /// The code of the rest mesh (`data.rest`), the encoder's with its residual passes and
+    /// vertex steps: the reference code Z_r of the component analysis and of synthesis (dials
+    /// 0 decode to the rest shape, whatever the training frames are).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rest_code: Option<Vec<f64>>,
     /// Component analysis: per latent dimension (index = dimension) the extreme code kept,
     /// the feature-space distance, its rank (0 = largest) and centre vertex.
     pub analysis: Vec<ComponentSummary>,
@@ -188,6 +194,15 @@ impl AeArtifact {
                 c.rank
             )));
         }
+        if let Some(z) = &header.rest_code
+            && (z.len() != k || z.iter().any(|x| !x.is_finite()))
+        {
+            return Err(Error::parse(
+                dir.join("model.json"),
+                None,
+                format!("`rest_code` has {} numbers (the model {k} dimensions) or a non-finite one", z.len()),
+            ));
+        }
         let train_codes = codes.chunks_exact(k.max(1)).map(<[f64]>::to_vec).collect();
         Ok(AeArtifact { header, rest, representation, model, train_codes })
     }
@@ -270,9 +285,13 @@ impl AeArtifact {
         Ok(frames)
     }
 
-    /// The reference shape's code Z_r.
+    /// The reference shape's code Z_r: the rest mesh's (models trained before it was stored:
+    /// the reference training frame's).
     pub fn reference_code(&self) -> &[f64] {
-        &self.train_codes[self.header.reference]
+        match &self.header.rest_code {
+            Some(z) => z,
+            None => &self.train_codes[self.header.reference],
+        }
     }
 
     /// Synthesis code: z_i = Z_r,i + (Z_h,i − Z_r,i)·w_i for the given (dimension, weight)
@@ -572,7 +591,7 @@ fn piece_summaries(
     representation: &Representation,
     k: usize,
     train_t: &[Vec<Vec3>],
-    reference: usize,
+    reference: &[f64],
 ) -> Vec<ComponentSummary> {
     let Some((placement, _)) = representation.pieces() else {
         return Vec::new();
@@ -589,7 +608,7 @@ fn piece_summaries(
             .unwrap_or(0);
         for axis in 0..3 {
             let values: Vec<f64> = train_t.iter().map(|t| t[p][axis]).collect();
-            let zr = values.get(reference).copied().unwrap_or(0.0);
+            let zr = reference.get(3 * j + axis).copied().unwrap_or(0.0);
             let (lo, hi) = values.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &v| (l.min(v), h.max(v)));
             let (lo, hi) = if lo <= hi { (lo, hi) } else { (0.0, 0.0) };
             let extreme = if (hi - zr).abs() >= (lo - zr).abs() { hi } else { lo };
@@ -880,23 +899,37 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
             codes
         }
     };
-    let analysis = model.analyze_codes(&train_codes, 0)?;
-    append_translations(&representation, &mut train_codes, &train_t);
+    // The dial origin: the rest mesh's own code (encoded as any shape is, residual passes and
+    // vertex steps included), so that all dials 0 decode to the rest shape.
+    let mut art = AeArtifact {
+        header: AeHeader {
+            method: MethodKind::Autoencoder.name().into(),
+            representation: RepresentationKind::Acap.name().into(),
+            consistency: m.consistency.name().into(),
+            scaling,
+            unit_box: prep.unit_box,
+            components: ae_cfg.components,
+            train_frames: prep.train_names(),
+            reference: 0,
+            rest_code: None,
+            analysis: Vec::new(),
+        },
+        rest: prep.rest.clone(),
+        representation,
+        model,
+        train_codes: Vec::new(),
+    };
+    let rest = art.rest_in_data_units();
+    let rest_code = art.encode_frames(&single_frame(&rest, &rest.positions)?)?.remove(0);
+    let k = ae_cfg.components;
+    let analysis = art.model.analyze_codes_around(&train_codes, &rest_code[..k])?;
+    append_translations(&art.representation, &mut train_codes, &train_t);
     let mut summaries: Vec<ComponentSummary> = analysis.components.iter().map(|c| c.summary.clone()).collect();
     summaries.sort_by_key(|c| c.dim);
-    summaries.extend(piece_summaries(&representation, ae_cfg.components, &train_t, 0));
-    let header = AeHeader {
-        method: MethodKind::Autoencoder.name().into(),
-        representation: RepresentationKind::Acap.name().into(),
-        consistency: m.consistency.name().into(),
-        scaling,
-        unit_box: prep.unit_box,
-        components: ae_cfg.components,
-        train_frames: prep.train_names(),
-        reference: 0,
-        analysis: summaries,
-    };
-    let art = AeArtifact { header, rest: prep.rest.clone(), representation, model, train_codes };
+    summaries.extend(piece_summaries(&art.representation, ae_cfg.components, &train_t, &art_rest_t(&rest_code, k)));
+    art.header.analysis = summaries;
+    art.header.rest_code = Some(rest_code);
+    art.train_codes = train_codes;
     let locality = component_locality_of(&art, &distances, [ae_cfg.d_min, ae_cfg.d_max]);
     Ok(Fitted {
         model: Box::new(art),
@@ -932,6 +965,11 @@ fn component_locality_of(art: &AeArtifact, distances: &GeodesicSupport, support:
             component_locality(center, &norms, &ramp)
         })
         .collect()
+}
+
+/// The piece translations of a full code (its values after the network's K).
+fn art_rest_t(code: &[f64], k: usize) -> Vec<f64> {
+    code.get(k..).map(<[f64]>::to_vec).unwrap_or_default()
 }
 
 /// Where a stopped or finished run keeps its checkpoint.

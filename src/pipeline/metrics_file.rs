@@ -63,6 +63,13 @@ pub struct Metrics {
     pub median_support_size: Option<f64>,
     /// Per-component locality, in component order.
     pub locality: Vec<ComponentLocality>,
+    /// Vertex-space locality: per component (index order), the vertices it moves by more than
+    /// 5 % of its peak, read around the rest shape ([`crate::model::component_fields`]).
+    #[serde(default)]
+    pub vertex_support: Vec<usize>,
+    /// Median over the components of that count as a share of the vertices.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub median_vertex_support: Option<f64>,
     /// Autoencoder only: root-mean-square norm per training shape of the scaled training
     /// features, and the factor it put on every step size (`learning_rate_norm`; 1: none).
     #[serde(default, skip_serializing_if = "Option::is_none")]
