@@ -398,6 +398,9 @@ pub struct AutoencoderMethod {
     pub encoder: EncoderKind,
     /// Weight of the decorrelation term on the rows of C (0: none).
     pub lambda_orthogonal: f64,
+    /// Weight of the code term: ℓ1 distance of the training codes from the rest shape's (0: none).
+    #[serde(skip_serializing_if = "network_default::lambda_code")]
+    pub lambda_code: f64,
     /// Weight of the vertex term (0: none).
     #[serde(skip_serializing_if = "network_default::lambda_vertex")]
     pub lambda_vertex: f64,
@@ -442,6 +445,7 @@ mod network_default {
         validate_every: usize,
         encoder: crate::nn::config::EncoderKind,
         lambda_vertex: f64,
+        lambda_code: f64,
         vertex_batch: usize,
         vertex_warmup: f64,
         vertex_clip: f64,
@@ -519,6 +523,7 @@ network_keys!(
     validate_every,
     encoder,
     lambda_orthogonal,
+    lambda_code,
     lambda_vertex,
     vertex_batch,
     vertex_warmup,

@@ -737,6 +737,13 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
         );
     }
     let (scaling, all, xs_train, train_t) = features;
+    // The rest shape's scaled features: the code term's lane (`lambda_code`) and the baseline of
+    // the check that a run trained at all.
+    let rest_features: Vec<f32> = {
+        let seq = single_frame(&prep.rest, &prep.rest.positions)?;
+        let (own, _) = representation.split_pieces(representation.encode(&seq)?)?;
+        scaling.apply(&own)?.data.iter().map(|&x| x as f32).collect()
+    };
     let representation_seconds = t_rep.elapsed().as_secs_f64();
 
     ctx.progress.stage("geodesics", 0);
@@ -791,6 +798,7 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
         if let Some(v) = &vertex_loss {
             trainer = trainer.with_output_loss(v);
         }
+        trainer = trainer.with_rest(&rest_features)?;
         Ok(trainer)
     };
     let mut trainer = make_trainer(ae_cfg.restarted(restart), resumed)?;
@@ -816,19 +824,26 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
     progress.step(trainer.iteration() as u64, "");
     let t_train = Instant::now();
     let mut log_error: Option<std::io::Error> = None;
+    // The reconstruction error of every step of the current attempt (the end-of-run check).
+    let mut recs: Vec<f64> = Vec::new();
+    let mut warning = None;
     let summary = loop {
         let stall_check = if restart < ae_cfg.stall_restarts { stall_check_step(ae_cfg.iterations) } else { None };
         let options = RunOptions { checkpoint: Some(checkpoint.clone()), stop: ctx.stop.clone(), stall_check };
         let summary = trainer.run(&options, |r| {
         let l = &r.loss;
+        recs.push(l.reconstruction);
         let line = format!(
-            "{{\"iteration\":{},\"loss\":{},\"reconstruction\":{},\"sparsity\":{},\"hinge\":{},\"orthogonality\":{},\"vertex\":{},\"step_seconds\":{},\"checkpoint\":{}}}\n",
-            r.iteration, l.total, l.reconstruction, l.sparsity, l.hinge, l.orthogonality, l.vertex, r.step_seconds, r.checkpointed
+            "{{\"iteration\":{},\"loss\":{},\"reconstruction\":{},\"sparsity\":{},\"hinge\":{},\"orthogonality\":{},\"vertex\":{},\"code\":{},\"step_seconds\":{},\"checkpoint\":{}}}\n",
+            r.iteration, l.total, l.reconstruction, l.sparsity, l.hinge, l.orthogonality, l.vertex, l.code, r.step_seconds, r.checkpointed
         );
         if let Err(e) = log.write_all(line.as_bytes()) {
             log_error.get_or_insert(e);
         }
-        let vertex = if l.vertex > 0.0 { format!(", vertex {:.4}", l.vertex) } else { String::new() };
+        let mut vertex = if l.vertex > 0.0 { format!(", vertex {:.4}", l.vertex) } else { String::new() };
+        if l.code > 0.0 {
+            vertex.push_str(&format!(", code {:.4}", l.code));
+        }
         progress.step(
             r.iteration as u64,
             &format!(
@@ -837,18 +852,62 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
             ),
         );
         })?;
-        if !summary.stalled {
-            break summary;
+        let mut why = None;
+        if summary.stalled {
+            why = Some(format!(
+                "training stalled (mean reconstruction error of the last {STALL_WINDOW} steps at step {} is at or \
+                 above the first step's)",
+                summary.iterations_done
+            ));
+        } else if !summary.stopped {
+            // A run that ended without learning the shapes: its decoding is no better than the
+            // rest shape's for every training shape.
+            let (err, base) = trainer.training_and_rest_error(&rest_features)?;
+            if err >= NOT_TRAINED_RATIO * base {
+                let improving = still_improving(&recs);
+                let text = format!(
+                    "the autoencoder did not train: after {} steps its decoding of the training shapes has a feature \
+                     error of {err:.4}, {:.0} % of decoding every shape as the rest shape ({base:.4})",
+                    summary.iterations_done,
+                    100.0 * err / base.max(f64::MIN_POSITIVE)
+                );
+                let line = format!("{{\"not_trained\":true,\"feature_error\":{err},\"rest_error\":{base}}}\n");
+                if let Err(e) = log.write_all(line.as_bytes()) {
+                    log_error.get_or_insert(e);
+                }
+                if !improving && restart < ae_cfg.stall_restarts {
+                    why = Some(text);
+                } else {
+                    let advice = if improving {
+                        format!(
+                            "its error was still falling at the last step: raise `method.iterations` (now {})",
+                            ae_cfg.iterations
+                        )
+                    } else {
+                        format!(
+                            "restarts with halved step sizes did not help (`method.stall_restarts` = {}): lower \
+                             `method.learning_rate` or raise `method.iterations`",
+                            ae_cfg.stall_restarts
+                        )
+                    };
+                    let w = format!("{text}; {advice}");
+                    eprintln!("warning: {w}");
+                    warning = Some(w);
+                }
+            }
         }
-        // Stalled: start again from the same initialisation with halved step sizes; the log
-        // restarts with it (no checkpoint of the stalled run was written after the check).
+        let Some(why) = why else {
+            break summary;
+        };
+        // Start again from the same initialisation with halved step sizes; the log restarts with
+        // it (no checkpoint of the failed attempt was written after the check).
         restart += 1;
+        recs.clear();
         let cfg = ae_cfg.restarted(restart);
         progress.finish_stage();
         eprintln!(
-            "note: training stalled (mean reconstruction error of the last {STALL_WINDOW} steps at step {} is at or \
-             above the first step's): restart {restart} of at most {} with step sizes halved (learning_rate {:e})",
-            summary.iterations_done, ae_cfg.stall_restarts, cfg.learning_rate
+            "note: {why}: restart {restart} of at most {} with step sizes halved (learning_rate {:e})",
+            ae_cfg.stall_restarts, cfg.learning_rate
         );
         log.set_len(0).map_err(|e| Error::io(&log_path, e))?;
         log.seek(std::io::SeekFrom::Start(0)).map_err(|e| Error::io(&log_path, e))?;
@@ -942,6 +1001,7 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
             locality,
             refine_test: m.fit_test,
             feature_norm: Some((feature_norm, scale)),
+            warning,
         },
         method: MethodConfig::Autoencoder(m.clone()),
     })
@@ -970,6 +1030,22 @@ fn component_locality_of(art: &AeArtifact, distances: &GeodesicSupport, support:
 /// The piece translations of a full code (its values after the network's K).
 fn art_rest_t(code: &[f64], k: usize) -> Vec<f64> {
     code.get(k..).map(<[f64]>::to_vec).unwrap_or_default()
+}
+
+/// A run whose encode–decode feature error on the training shapes is at least this share of
+/// decoding every shape as the rest shape did not train (healthy runs end at a few per cent).
+pub const NOT_TRAINED_RATIO: f64 = 0.8;
+
+/// Whether the reconstruction error was still falling at the end of a run: the mean of its last
+/// tenth of steps is below 90 % of the tenth before.
+fn still_improving(recs: &[f64]) -> bool {
+    let w = (recs.len() / 10).max(1);
+    if recs.len() < 2 * w {
+        return true;
+    }
+    let mean = |s: &[f64]| s.iter().sum::<f64>() / s.len() as f64;
+    let n = recs.len();
+    mean(&recs[n - w..]) < 0.9 * mean(&recs[n - 2 * w..n - w])
 }
 
 /// Where a stopped or finished run keeps its checkpoint.

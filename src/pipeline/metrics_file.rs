@@ -76,6 +76,10 @@ pub struct Metrics {
     pub feature_norm: Option<f64>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub learning_rate_scale: Option<f64>,
+    /// A warning about the fit (the autoencoder: a run whose decoding is no better than the rest
+    /// shape), also printed by `meshdeco train`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub training_warning: Option<String>,
 }
 
 /// Median of a slice (mean of the two middle values for even lengths); `None` when empty.

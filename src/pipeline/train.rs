@@ -208,6 +208,7 @@ fn fit_measure_write(
         median_vertex_support: median(&vertex_shares),
         feature_norm: stats.feature_norm.map(|(n, _)| n),
         learning_rate_scale: stats.feature_norm.map(|(_, s)| s),
+        training_warning: stats.warning.clone(),
     };
 
     crate::timing::record("measure", t.elapsed().as_secs_f64());
