@@ -61,7 +61,10 @@ pub enum Faces<'a> {
 /// or float64) with the faces from `faces`.
 pub fn load_hdf5_sequence(path: &Path, dataset: &str, faces: Faces<'_>) -> Result<MeshSequence> {
     crate::timing::timed("load hdf5", || {
-        let file = open(path)?;
+        let file = open(path).map_err(|e| match e {
+            Error::Invalid(m) => Error::Invalid(format!("{m} (reading dataset `{dataset}`)")),
+            other => other,
+        })?;
         let frames = read_frames(&file, path, dataset)?;
         let n = frames.first().map_or(0, |f| f.len());
         let faces = match faces {
