@@ -130,7 +130,11 @@ fn same_model_from_npy_and_hdf5(d: &Path, method: &str) {
         let scale = w0.iter().flatten().fold(0.0f64, |m, x| m.max(x.abs()));
         let worst = w.iter().flatten().zip(w0.iter().flatten()).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
         assert!(worst <= 1e-12 * scale, "{name}: weights differ from the .npy's by {worst} (largest weight {scale})");
-        eprintln!("{}: {name}: train Erms {erms} (npy {erms0}); weights within {:.1e} relative", d.display(), worst / scale);
+        eprintln!(
+            "{}: {name}: train Erms {erms} (npy {erms0}); weights within {:.1e} relative",
+            d.display(),
+            worst / scale
+        );
     }
     // Frame names follow the dataset.
     let names = std::fs::read_to_string(d.join("dfaust_h5/weights.csv")).unwrap();
@@ -281,7 +285,12 @@ fn bad_hdf5_files_are_refused_naming_file_and_dataset() {
         eprintln!("{file}: {}", text.lines().find(|l| l.contains("error")).unwrap_or(&text));
     }
     // A DFAUST file has no faces: the error names data.template.
-    let o = train(&d, "nofaces", "path = \"dfaust.h5\"\ndataset = \"50002_jumping_jacks\"", "kind = \"pca\"\ncomponents = 3");
+    let o = train(
+        &d,
+        "nofaces",
+        "path = \"dfaust.h5\"\ndataset = \"50002_jumping_jacks\"",
+        "kind = \"pca\"\ncomponents = 3",
+    );
     assert_eq!(o.status.code(), Some(1));
     assert!(output_text(&o).contains("data.template") && output_text(&o).contains("dfaust.h5"), "{}", output_text(&o));
     // data.dataset on a non-HDF5 path, and twice.

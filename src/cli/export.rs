@@ -180,7 +180,12 @@ fn page_or_hdf5(a: &ExportArgs, html: bool) -> Result<()> {
         fit_regularisation: a.fit_regularisation,
         ..ExportOptions::default()
     };
-    let r = meshdeco::view::standalone::export_html(model.as_ref(), &a.model, &a.out, &opts)?;
+    let r = meshdeco::view::standalone::export_html(
+        model.as_ref(),
+        &meshdeco::view::standalone::page_name(&a.model),
+        &a.out,
+        &opts,
+    )?;
     outln!(
         "wrote {} ({} bytes): a standalone viewer page, {} blend targets ({}), {} training frames; open it in a browser (no server)",
         a.out.display(),

@@ -55,7 +55,7 @@ fn flat(p: &[Vec3]) -> Vec<f64> {
 fn layout(model: &dyn Model) -> Result<(Layout, f64)> {
     if model.representation() != RepresentationKind::Displacement || model.kind().name() == "autoencoder" {
         return Err(Error::Invalid(format!(
-            "--out *.h5 (the SPLOCS reference's layout) holds components that add to vertex positions: a {} model on the {} representation is not one (export .glb or .html: fitted blendshapes)",
+            "--out *.h5 (the SPLOCS reference's layout) holds components that add to vertex positions: {} on the {} representation is not one (export .glb or .html: fitted blendshapes)",
             model.kind().name(),
             model.representation().name()
         )));

@@ -25,7 +25,7 @@ use std::path::Path;
 use serde_json::{Value, json};
 
 use crate::error::{Error, Result};
-use crate::export::gltf::{ExportOptions, TargetFit, prepare};
+use crate::export::gltf::{ExportOptions, prepare};
 use crate::math::mat3::{mat_vec, transpose};
 use crate::mesh::Vec3;
 use crate::model::Model;
@@ -218,16 +218,16 @@ pub fn page(model: &dyn Model, name: &str, options: &ExportOptions) -> Result<(S
     Ok((html, report))
 }
 
-/// Writes [`page`] of `model` (named after `model_path`'s directory) to `path`, atomically.
-pub fn export_html(model: &dyn Model, model_path: &Path, path: &Path, options: &ExportOptions) -> Result<PageReport> {
-    let (html, report) = page(model, &super::model_name(&crate::artifact::model_dir(model_path)), options)?;
-    crate::artifact::write_atomic(path, html.as_bytes())?;
-    Ok(report)
+/// The name a page shows for the model at `model_path` (a directory, or its `model.json`).
+pub fn page_name(model_path: &Path) -> String {
+    super::model_name(&crate::artifact::model_dir(model_path))
 }
 
-/// The default options of a page: fitted targets, as the glTF export.
-pub fn default_options() -> ExportOptions {
-    ExportOptions { targets: TargetFit::Fitted, ..ExportOptions::default() }
+/// Writes [`page`] of `model`, titled `name`, to `path`, atomically.
+pub fn export_html(model: &dyn Model, name: &str, path: &Path, options: &ExportOptions) -> Result<PageReport> {
+    let (html, report) = page(model, name, options)?;
+    crate::artifact::write_atomic(path, html.as_bytes())?;
+    Ok(report)
 }
 
 /// The page: the live viewer's `index.html` with the data and both scripts inline.
