@@ -19,28 +19,12 @@ mod common;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use common::{fresh_dir, json_lines, meshdeco, output_text};
+use common::{fresh_dir, json_lines, meshdeco, output_text, weights_csv};
 use meshdeco::mesh::MeshSequence;
 use serde_json::Value;
 
 fn h5py_python() -> Option<PathBuf> {
-    let candidates = [
-        std::env::var_os("MESHDECO_PYTHON").map(PathBuf::from),
-        Some(PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("py-venv/bin/python")),
-    ];
-    for p in candidates.into_iter().flatten() {
-        if Command::new(&p).args(["-c", "import h5py, numpy"]).output().is_ok_and(|o| o.status.success()) {
-            return Some(p);
-        }
-    }
-    assert!(
-        std::env::var_os("CI").is_none(),
-        "CI: no Python with h5py (MESHDECO_PYTHON or {}/py-venv; .ci/run installs it)",
-        env!("CARGO_TARGET_TMPDIR")
-    );
-    eprintln!("SKIPPED: no Python with h5py and numpy (pip install h5py; MESHDECO_PYTHON)");
-    common::record_skip("python with h5py");
-    None
+    common::python_with("MESHDECO_PYTHON", "py-venv", "h5py, numpy")
 }
 
 const SCRIPT: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/python/hdf5_files.py");
@@ -88,11 +72,6 @@ fn train(d: &Path, name: &str, data: &str, method: &str) -> std::process::Output
 fn train_erms(model: &Path) -> f64 {
     let m: Value = serde_json::from_str(&std::fs::read_to_string(model.join("metrics.json")).unwrap()).unwrap();
     m["train_erms"].as_f64().unwrap()
-}
-
-fn weights_csv(model: &Path) -> Vec<Vec<f64>> {
-    let text = std::fs::read_to_string(model.join("weights.csv")).unwrap();
-    text.lines().skip(1).map(|l| l.split(',').skip(1).map(|x| x.trim().parse().unwrap()).collect()).collect()
 }
 
 /// Asserts that `a` and `b` agree to 1e-12 of their largest magnitude (at least 1).
@@ -177,12 +156,7 @@ fn h5py_scape_trains_as_the_same_frames_from_npy() {
 fn splocs_layout_export_reads_back_in_h5py_as_the_model() {
     let Some(py) = h5py_python() else { return };
     let d = fresh_dir("hdf5", "export");
-    let model = common::train_cli(
-        &d,
-        "tube-splocs",
-        "path = \"synthetic:tube\"\ntrain = \"every:2\"",
-        "kind = \"splocs\"\ncomponents = 6\nmax_iterations = 3",
-    );
+    let model = common::train_tube(&d, "tube-splocs", "kind = \"splocs\"\ncomponents = 6\nmax_iterations = 3");
     let o = meshdeco(&["export", model.to_str().unwrap(), "--out", "m.h5"], &d);
     assert!(o.status.success(), "{}", output_text(&o));
     let h = python(&py, &["read-export", d.join("m.h5").to_str().unwrap()]);
@@ -245,10 +219,9 @@ fn splocs_layout_export_reads_back_in_h5py_as_the_model() {
     assert_eq!(tris, seq.faces.iter().flatten().copied().collect::<Vec<_>>());
 
     // A model that is not linear in vertex positions is refused, nothing written.
-    let grad = common::train_cli(
+    let grad = common::train_tube(
         &d,
         "tube-grad",
-        "path = \"synthetic:tube\"\ntrain = \"every:2\"",
         "kind = \"splocs\"\nrepresentation = \"triangle-gradient\"\ncomponents = 4\nmax_iterations = 2",
     );
     let o = meshdeco(&["export", grad.to_str().unwrap(), "--out", "g.h5"], &d);

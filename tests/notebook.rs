@@ -15,46 +15,17 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use common::{fresh_dir, output_text};
-use serde_json::Value;
-use view_support::cdp::{Browser, find_chromium};
+use view_support::cdp::Browser;
+use view_support::{chromium_or_skip, num as f};
 
 fn notebook_python() -> Option<PathBuf> {
-    let candidates = [
-        std::env::var_os("MESHDECO_PYTHON").map(PathBuf::from),
-        Some(PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("py-venv/bin/python")),
-    ];
-    for p in candidates.into_iter().flatten() {
-        let ok = Command::new(&p)
-            .args(["-c", "import meshdeco, nbconvert, ipykernel"])
-            .output()
-            .is_ok_and(|o| o.status.success());
-        if ok {
-            return Some(p);
-        }
-    }
-    assert!(
-        std::env::var_os("CI").is_none(),
-        "CI: no Python with meshdeco, nbconvert and ipykernel (MESHDECO_PYTHON or {}/py-venv; .ci/run installs them)",
-        env!("CARGO_TARGET_TMPDIR")
-    );
-    eprintln!("SKIPPED: no Python with meshdeco, nbconvert and ipykernel (MESHDECO_PYTHON)");
-    common::record_skip("python with meshdeco, nbconvert, ipykernel");
-    None
-}
-
-fn f(v: &Value) -> f64 {
-    v.as_f64().unwrap_or_else(|| panic!("not a number: {v}"))
+    common::python_with("MESHDECO_PYTHON", "py-venv", "meshdeco, nbconvert, ipykernel")
 }
 
 #[test]
 fn model_show_in_an_executed_notebook_renders_and_a_slider_moves_the_mesh() {
     let Some(py) = notebook_python() else { return };
-    let Some(chromium) = find_chromium() else {
-        assert!(std::env::var_os("CI").is_none(), "CI is set but no Chromium is installed");
-        eprintln!("SKIPPED: no Chromium");
-        common::record_skip("chromium (not installed)");
-        return;
-    };
+    let Some(chromium) = chromium_or_skip() else { return };
     let d = fresh_dir("notebook", "scape");
     let nb = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/notebooks/scape.ipynb");
     let t0 = std::time::Instant::now();
@@ -124,19 +95,11 @@ fn model_show_in_an_executed_notebook_renders_and_a_slider_moves_the_mesh() {
         sel = sel.replace('"', "\\\"")
     ));
     let (x0, y, w) = (fx + f(&r[0]), fy + f(&r[1]) + f(&r[3]) / 2.0, f(&r[2]));
-    let before = b.eval(&format!("Array.from({m}.S.pos)"));
+    let before = view_support::page_positions(&mut b, &m);
     b.drag((x0 + 0.5 * w, y), (x0 + 0.9 * w, y), 8);
-    std::thread::sleep(std::time::Duration::from_millis(50));
-    b.wait_for(&format!("{m}.idle()"), 60);
+    view_support::settle(&mut b, &m);
     let dial = f(&b.eval(&format!("{m}.S.dials[{k}]")));
-    let after = b.eval(&format!("Array.from({m}.S.pos)"));
-    let moved = before
-        .as_array()
-        .unwrap()
-        .iter()
-        .zip(after.as_array().unwrap())
-        .map(|(a, b)| (f(a) - f(b)).abs())
-        .fold(0.0, f64::max);
+    let moved = view_support::max_diff(&before, &view_support::page_positions(&mut b, &m));
     eprintln!("slider {k} dragged to dial {dial}: the mesh moved by up to {moved:.3e}");
     assert!(dial != 0.0, "the slider did not move its dial");
     assert!(moved > 1e-3, "the mesh did not move ({moved})");

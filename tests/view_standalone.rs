@@ -13,41 +13,19 @@
 mod common;
 mod view_support;
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
-use common::{fresh_dir, meshdeco, output_text};
-use serde_json::{Value, json};
-use view_support::cdp::{Browser, find_chromium};
-
-fn chromium_or_skip() -> Option<PathBuf> {
-    if let Some(p) = find_chromium() {
-        return Some(p);
-    }
-    let test = std::thread::current().name().unwrap_or("?").to_string();
-    assert!(std::env::var_os("CI").is_none(), "CI is set but no Chromium is installed (needed by {test})");
-    eprintln!("SKIPPED {test}: no chromium-headless-shell / chromium on the PATH");
-    common::record_skip("chromium (not installed)");
-    None
-}
-
-fn f(v: &Value) -> f64 {
-    v.as_f64().unwrap_or_else(|| panic!("not a number: {v}"))
-}
+use common::{fresh_dir, meshdeco, output_text, weights_csv};
+use serde_json::json;
+use view_support::cdp::Browser;
+use view_support::{chromium_or_skip, num as f};
 
 fn positions(b: &mut Browser) -> Vec<[f64; 3]> {
-    let p = b.eval("Array.from(meshdeco.S.pos)");
-    p.as_array().unwrap().chunks(3).map(|c| [f(&c[0]), f(&c[1]), f(&c[2])]).collect()
+    view_support::page_positions(b, "meshdeco")
 }
 
 fn settle(b: &mut Browser) {
-    std::thread::sleep(std::time::Duration::from_millis(50));
-    b.wait_for("meshdeco.idle()", 120);
-}
-
-/// The rows of a model's `weights.csv` (header skipped, first column the frame name).
-fn weights_csv(model: &Path) -> Vec<Vec<f64>> {
-    let text = std::fs::read_to_string(model.join("weights.csv")).unwrap();
-    text.lines().skip(1).map(|l| l.split(',').skip(1).map(|x| x.trim().parse().unwrap()).collect()).collect()
+    view_support::settle(b, "meshdeco");
 }
 
 /// What the page check measured.
@@ -166,57 +144,43 @@ fn check_page(chromium: &Path, d: &Path, model: &Path, k: usize) -> Checked {
 fn standalone_page_of_the_tube_draws_dials_steps_frames_offline() {
     let Some(chromium) = chromium_or_skip() else { return };
     let d = fresh_dir("standalone", "tube");
-    let model = common::train_cli(
-        &d,
-        "tube-splocs",
-        "path = \"synthetic:tube\"\ntrain = \"every:2\"",
-        "kind = \"splocs\"\ncomponents = 6\nmax_iterations = 3",
-    );
+    let model = common::train_tube(&d, "tube-splocs", "kind = \"splocs\"\ncomponents = 6\nmax_iterations = 3");
     let c = check_page(&chromium, &d, &model, 1);
     assert!(c.slider_error <= 1e-4 * c.diagonal);
 }
 
-#[test]
-fn standalone_page_of_scape_splocs_k50() {
+/// Trains the shipped `config` (its data in ../shared/`data`) and checks its page (dragging
+/// slider `k`), which must stay under `max_bytes`.
+fn shipped_config_page(config: &str, data: &str, k: usize, max_bytes: u64) {
     let Some(chromium) = chromium_or_skip() else { return };
-    if common::shared_or_skip("data/scape").is_none() {
+    if common::shared_or_skip(data).is_none() {
         return;
     }
-    let d = fresh_dir("standalone", "scape");
+    let name = Path::new(config).file_stem().unwrap().to_str().unwrap();
+    let d = fresh_dir("standalone", name);
+    let model = d.join(name);
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let model = d.join("scape-splocs");
-    let o = meshdeco(&["train", "--config", "configs/scape-splocs.toml", "--out", model.to_str().unwrap()], root);
+    let o = meshdeco(&["train", "--config", config, "--out", model.to_str().unwrap()], root);
     assert!(o.status.success(), "{}", output_text(&o));
-    let c = check_page(&chromium, &d, &model, 3);
-    eprintln!("SCAPE SPLOCS K 50: view.html {} bytes", c.bytes);
-    assert!(c.bytes < 4_000_000, "SCAPE's page is {} bytes", c.bytes);
+    let c = check_page(&chromium, &d, &model, k);
+    eprintln!("{config}: view.html {} bytes", c.bytes);
+    assert!(c.bytes < max_bytes, "{config}: the page is {} bytes", c.bytes);
+}
+
+#[test]
+fn standalone_page_of_scape_splocs_k50() {
+    shipped_config_page("configs/scape-splocs.toml", "data/scape", 3, 4_000_000);
 }
 
 #[test]
 fn standalone_page_of_the_face_region_pca() {
-    let Some(chromium) = chromium_or_skip() else { return };
-    if common::shared_or_skip("data/face-poses").is_none() {
-        return;
-    }
-    let d = fresh_dir("standalone", "face");
-    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let model = d.join("face-region");
-    let o = meshdeco(&["train", "--config", "configs/face-poses-region.toml", "--out", model.to_str().unwrap()], root);
-    assert!(o.status.success(), "{}", output_text(&o));
-    let c = check_page(&chromium, &d, &model, 5);
-    eprintln!("face region PCA K 78: view.html {} bytes", c.bytes);
-    assert!(c.bytes < 12_000_000, "the face's page is {} bytes", c.bytes);
+    shipped_config_page("configs/face-poses-region.toml", "data/face-poses", 5, 12_000_000);
 }
 
 #[test]
 fn standalone_page_refuses_gltf_flags_and_writes_nothing() {
     let d = fresh_dir("standalone", "flags");
-    let model = common::train_cli(
-        &d,
-        "tube-pca",
-        "path = \"synthetic:tube\"\ntrain = \"every:2\"",
-        "kind = \"pca\"\ncomponents = 4",
-    );
+    let model = common::train_tube(&d, "tube-pca", "kind = \"pca\"\ncomponents = 4");
     for (flag, out) in [("--animation", "v.html"), ("--bake", "v.html"), ("--colors", "m.h5")] {
         let o = meshdeco(&["export", model.to_str().unwrap(), "--out", out, flag], &d);
         assert_eq!(o.status.code(), Some(1), "{}", output_text(&o));
