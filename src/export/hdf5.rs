@@ -95,7 +95,7 @@ fn layout(model: &dyn Model) -> Result<(Layout, f64)> {
             blend_error = blend_error.max(crate::mesh::dist(*a, *b) / diagonal);
         }
     }
-    if !(blend_error <= 1e-9) {
+    if blend_error.is_nan() || blend_error > 1e-9 {
         return Err(Error::Invalid(format!(
             "--out *.h5: the {} model's decoding is not default + Σ weights × components (largest difference {blend_error:.2e} of the diagonal): not a linear model",
             model.kind().name()
