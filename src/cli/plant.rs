@@ -13,7 +13,7 @@ pub struct PlantArgs {
     /// The mesh to plant the deformations on (.obj, .ply, .off): its shape is the rest shape.
     pub mesh: PathBuf,
     /// Output directory (written all at once): frames.npy, template.obj, fields.npy,
-    /// weights.csv, truth.json, eval.toml, overview.png.
+    /// weights.csv, truth.json, eval.toml, manifest.json (checksums of the others).
     #[arg(long, short)]
     pub out: PathBuf,
     /// Number of planted deformations D (1 ..= 500).

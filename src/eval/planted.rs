@@ -12,7 +12,7 @@
 //! - **hinge**: a local rotation of the disc about a hinge line, as a jaw, an eyelid or a limb
 //!   turns: the vertex p turns by the angle w·θ·s about the axis a through the pivot h, where
 //!   h = c + 0.6·r·t lies towards the rest of the mesh (t the tangent direction at c towards
-//!   the mesh's centroid) and a = n × t; |θ| ∈ [15°, 30°]. Not linear in w: a linear method
+//!   the mesh's centroid) and a = n × t; |θ| ∈ [12°, 24°]. Not linear in w: a linear method
 //!   needs a second component for the arc;
 //! - **stretch**: the disc stretches (or squashes) along a tangent direction t:
 //!   w·α·s·((p − c)·t)·t, |α| ∈ [0.4, 0.7].
@@ -21,7 +21,7 @@
 //!
 //! Left/right pairs: when the rest mesh is mirror-symmetric (a plane through the centroid
 //! perpendicular to a coordinate or principal axis maps it onto itself within 2 % of the
-//! diagonal), a quarter of the deformations are planted in pairs, the second at the mirror image
+//! diagonal), D/4 pairs of deformations are planted, the second at the mirror image
 //! of the first's centre with mirrored directions (`_l` / `_r`). Centres are spread by farthest
 //! points; every fifth single deformation shares the centre of an earlier one with another kind
 //! (overlapping supports).
