@@ -106,8 +106,12 @@ pub struct RunOptions {
     pub stall_check: Option<usize>,
 }
 
-/// Shapes per encode–decode run of [`Trainer::training_and_rest_error`].
+/// Shapes per encode–decode run of [`Trainer::training_rest_and_linear_error`].
 const TRAINING_ERROR_RUN: usize = 64;
+
+/// Training shapes whose best K-dimensional linear fit is the reference of
+/// [`Trainer::training_rest_and_linear_error`] (at most; evenly spread over the set).
+pub const LINEAR_CHECK_SHAPES: usize = 128;
 
 /// Steps whose mean reconstruction error the stall check compares with the first step's.
 pub const STALL_WINDOW: usize = 10;
@@ -443,11 +447,15 @@ impl<'a> Trainer<'a> {
         Ok(self)
     }
 
-    /// The encode–decode feature error of the current parameters on the training shapes, and
-    /// the error of decoding every shape as the rest shape (`features`, as [`Self::with_rest`]
-    /// takes them): means over the shapes of the squared error, in scaled units. A run whose
-    /// decoding is no better than the rest shape did not train.
-    pub fn training_and_rest_error(&mut self, rest: &[f32]) -> Result<(f64, f64)> {
+    /// The encode–decode feature error of the current parameters on the training shapes, the
+    /// error of decoding every shape as the rest shape (`features`, as [`Self::with_rest`] takes
+    /// them), and the error the best K linear components around the rest shape leave (K the
+    /// run's components; measured on up to [`LINEAR_CHECK_SHAPES`] evenly spread training
+    /// shapes and scaled to the whole set by its share of the rest error there): means over the
+    /// shapes of the squared error, in scaled units. A run whose decoding gains little of what
+    /// K linear components gain over the rest shape did not train. (The linear reference keeps
+    /// the check fair on noisy data, where no model gets far below the rest shape's error.)
+    pub fn training_rest_and_linear_error(&mut self, rest: &[f32]) -> Result<(f64, f64, f64)> {
         let n_shapes = self.data.n_shapes();
         let bp = padded_width(TRAINING_ERROR_RUN.min(n_shapes));
         let mut ws = Workspace::new(self.data.n_vertices(), self.config.components, self.config.layers, bp);
@@ -464,7 +472,40 @@ impl<'a> Trainer<'a> {
                 }
             }
         }
-        Ok((model / n_shapes.max(1) as f64, base / n_shapes.max(1) as f64))
+        let n = n_shapes.max(1) as f64;
+        let (model, base) = (model / n, base / n);
+        // Gram matrix of the sampled shapes' differences from the rest shape: its eigenvalues
+        // beyond the K largest are what the best K-dimensional subspace leaves.
+        let m = n_shapes.min(LINEAR_CHECK_SHAPES);
+        let idx: Vec<usize> = (0..m).map(|j| j * n_shapes / m.max(1)).collect();
+        let bm = padded_width(m.max(1));
+        let x = self.data.batch_vcb_width(&idx, bm)?;
+        let mut gram = faer::Mat::<f64>::zeros(m, m);
+        let mut d = vec![0.0f64; m];
+        for (row, &r) in rest.iter().enumerate() {
+            for (j, dj) in d.iter_mut().enumerate() {
+                *dj = (x[row * bm + j] - r) as f64;
+            }
+            for i in 0..m {
+                if d[i] != 0.0 {
+                    for j in i..m {
+                        gram[(i, j)] += d[i] * d[j];
+                    }
+                }
+            }
+        }
+        for i in 0..m {
+            for j in 0..i {
+                gram[(i, j)] = gram[(j, i)];
+            }
+        }
+        let total: f64 = (0..m).map(|i| gram[(i, i)]).sum();
+        let eig = gram
+            .self_adjoint_eigenvalues(faer::Side::Lower)
+            .map_err(|e| Error::Numerical(format!("linear reference of the training check: {e:?}")))?;
+        let kept: f64 = eig.iter().rev().take(self.config.components).map(|v| v.max(0.0)).sum();
+        let share = if total > 0.0 { ((total - kept) / total).clamp(0.0, 1.0) } else { 0.0 };
+        Ok((model, base, share * base))
     }
 
     /// Gives the run held-out shapes (`config.validation > 0`): every `validate_every` steps
