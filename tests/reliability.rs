@@ -150,3 +150,109 @@ fn non_regular_files_are_named_as_such() {
     }
     std::fs::remove_dir_all(&d).unwrap();
 }
+
+/// Runs the binary with `args` in `cwd` under an address-space limit of `bytes` (as
+/// `prlimit --as`).
+#[cfg(unix)]
+fn meshdeco_within(bytes: u64, args: &[&str], cwd: &Path) -> Output {
+    use std::os::unix::process::CommandExt;
+    let mut c = Command::new(env!("CARGO_BIN_EXE_meshdeco"));
+    c.args(args).current_dir(cwd).stdin(Stdio::null());
+    // SAFETY: only setrlimit, which is async-signal-safe, runs between fork and exec.
+    unsafe {
+        c.pre_exec(move || {
+            let limit = libc::rlimit { rlim_cur: bytes, rlim_max: bytes };
+            if libc::setrlimit(libc::RLIMIT_AS, &limit) != 0 {
+                return Err(std::io::Error::last_os_error());
+            }
+            Ok(())
+        });
+    }
+    c.output().unwrap()
+}
+
+/// Issue 55, cause 1: `pose` with 20 000 pins on a 22 801-vertex grid under a 4 GB address
+/// space. Overlapping pins (the default spread) are refused at once with a clear error naming
+/// the constraints file and the bound (before: a dense 20 000² system, an allocation failure,
+/// exit 101); pins whose corrections do not overlap (a tiny spread and residual) are answered,
+/// each landing.
+#[cfg(unix)]
+#[test]
+fn pose_with_20000_pins_under_4_gb_is_refused_or_answered_never_a_crash() {
+    let d = tmp("many-pins");
+    let (nx, ny) = (151, 151);
+    let (rest, faces) = common::unit_grid(nx, ny);
+    let bump = |p: &[f64; 3], cx: f64, cy: f64| (-((p[0] - cx).powi(2) + (p[1] - cy).powi(2)) / 0.02).exp();
+    let data = d.join("grid");
+    std::fs::create_dir_all(&data).unwrap();
+    for f in 0..3 {
+        let frame: Vec<[f64; 3]> =
+            rest.iter().map(|p| [p[0], p[1], [0.0, 0.1 * bump(p, 0.3, 0.3), 0.1 * bump(p, 0.7, 0.6)][f]]).collect();
+        meshdeco::mesh::write_obj(
+            &data.join(format!("{}.obj", f + 1)),
+            &meshdeco::mesh::TriMesh::new(frame, faces.clone()),
+        )
+        .unwrap();
+    }
+    let model = common::train_cli(
+        &d,
+        "grid-pca",
+        &format!("path = {:?}", data.to_str().unwrap()),
+        "kind = \"pca\"\ncomponents = 1",
+    );
+    let n = nx * ny;
+    // 20 000 distinct vertices (7919 is prime to 151²).
+    let pins: Vec<usize> = (0..20_000).map(|i| i * 7919 % n).collect();
+    // Targets: the training mean (PCA's start, which its one component cannot leave by much
+    // for such small moves) lifted by up to 6 × `lift`.
+    let target = |v: usize, lift: f64| {
+        let p = &rest[v];
+        [p[0], p[1], 0.1 * (bump(p, 0.3, 0.3) + bump(p, 0.7, 0.6)) / 3.0 + lift * ((v % 13) as f64 - 6.0)]
+    };
+    let write_pins = |name: &str, lift: f64| {
+        let map: serde_json::Map<String, serde_json::Value> =
+            pins.iter().map(|&v| (v.to_string(), serde_json::json!(target(v, lift)))).collect();
+        let path = d.join(name);
+        std::fs::write(&path, serde_json::Value::Object(map).to_string()).unwrap();
+        path
+    };
+    let m = model.to_str().unwrap();
+    let out = d.join("posed.obj");
+    let o = out.to_str().unwrap();
+    let overlapping = write_pins("overlapping.json", 1e-3);
+    let r =
+        meshdeco_within(4_000_000_000, &["pose", m, "--constraints", overlapping.to_str().unwrap(), "--out", o], &d);
+    let t = output_text(&r);
+    assert_eq!(r.status.code(), Some(1), "{t}");
+    for needle in ["more than 10000 of them", "overlapping.json", "--spread 0.2", "spread 0"] {
+        assert!(t.contains(needle), "`{needle}` not in: {t}");
+    }
+    assert!(!t.contains("panicked") && !t.contains("memory allocation"), "{t}");
+    assert!(!out.exists(), "a refused pose wrote {o}");
+    // Far apart (a radius below the edge length, residuals of at most 6e-5): one group per pin.
+    let apart = write_pins("apart.json", 1e-5);
+    let r = meshdeco_within(
+        4_000_000_000,
+        &[
+            "pose",
+            m,
+            "--constraints",
+            apart.to_str().unwrap(),
+            "--out",
+            o,
+            "--spread",
+            "0.001",
+            "--local-radius",
+            "0.01",
+        ],
+        &d,
+    );
+    assert!(r.status.success(), "{}", output_text(&r));
+    let posed = common::obj_vertices(&out);
+    for &v in pins.iter().step_by(97) {
+        let target = target(v, 1e-5);
+        let miss = (0..3).map(|k| (posed[v][k] - target[k]).powi(2)).sum::<f64>().sqrt();
+        assert!(miss < 1e-6, "pin {v} missed its target by {miss}");
+    }
+    std::fs::remove_dir_all(&d).unwrap();
+}
