@@ -256,3 +256,79 @@ fn pose_with_20000_pins_under_4_gb_is_refused_or_answered_never_a_crash() {
     }
     std::fs::remove_dir_all(&d).unwrap();
 }
+
+/// Issue 55, cause 3: `meshdeco generate` never writes over its own output or an input, never
+/// adds a frame to its source, writes the template in the format its extension names (or
+/// refuses it), and leaves nothing behind when it fails.
+#[test]
+fn generate_never_overwrites_an_input_or_itself_and_is_all_or_nothing() {
+    let d = tmp("generate");
+    // A source folder of six frames.
+    let src = d.join("c");
+    std::fs::create_dir_all(&src).unwrap();
+    let seq = meshdeco::synthetic::load("synthetic:bumps").unwrap();
+    for f in 0..6 {
+        let m = meshdeco::mesh::TriMesh::new(seq.frames[f].clone(), seq.faces.clone());
+        meshdeco::mesh::write_obj(&src.join(format!("{}.obj", f + 1)), &m).unwrap();
+    }
+    let frame5 = std::fs::read(src.join("5.obj")).unwrap();
+    std::fs::create_dir_all(d.join("sub")).unwrap();
+    std::fs::create_dir_all(d.join("dir.obj")).unwrap();
+    std::fs::write(d.join("t.obj"), "v 0 0 0\n").unwrap();
+    std::os::unix::fs::symlink("t.obj", d.join("link.npy")).unwrap();
+    let abs = d.join("y.npy");
+    let listing = |dir: &Path| {
+        let mut v: Vec<String> =
+            std::fs::read_dir(dir).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
+        v.sort();
+        v
+    };
+    let before = listing(&d);
+    let cases: Vec<(Vec<&str>, &str)> = vec![
+        // Its own output, spelt two ways (the template is never a .npy), or reached by a link.
+        (vec!["synthetic:tube", "--out", "x.npy", "--template", "sub/../x.npy"], "--template sub/../x.npy"),
+        (vec!["synthetic:tube", "--out", "y.npy", "--template", abs.to_str().unwrap()], "as .obj, .ply or .off"),
+        (vec!["synthetic:tube", "--out", "link.npy", "--template", "sub/../t.obj"], "the same file as --out link.npy"),
+        // A frame of the source (the default template beside the output), or a new one.
+        (vec!["c", "--out", "c/5.npy"], "a frame of the source c"),
+        (vec!["c/*.obj", "--out", "z.npy", "--template", "c/../c/3.obj"], "a frame of the source c/*.obj"),
+        (vec!["c", "--out", "z.npy", "--template", "c/new.ply"], "would read it as one more frame"),
+        (vec!["c/*.obj", "--out", "z.npy", "--template", "c/new.obj"], "would read it as one more frame"),
+        // Formats the template cannot be written in.
+        (vec!["synthetic:tube", "--out", "z.npy", "--template", "t.stl"], "--template t.stl"),
+        (vec!["synthetic:tube", "--out", "z.npy", "--template", "t"], "--template t:"),
+        (vec!["synthetic:tube", "--out", "z.stl.npy", "--template", "z.stl"], "as .obj, .ply or .off"),
+        // A template that cannot be written: nothing is left, not even the frames.
+        (vec!["synthetic:tube", "--out", "z.npy", "--template", "dir.obj"], "dir.obj"),
+        (vec!["synthetic:tube", "--out", "z.npy", "--template", "no/such/t.obj"], "no/such"),
+    ];
+    for (args, says) in &cases {
+        let mut a = vec!["generate"];
+        a.extend(args);
+        a.extend(["--frames", "5"]);
+        let o = meshdeco(&a, &d);
+        fails_with(&o, says);
+        assert_eq!(listing(&d), before, "{a:?} left files behind");
+        assert_eq!(listing(&src), ["1.obj", "2.obj", "3.obj", "4.obj", "5.obj", "6.obj"], "{a:?}");
+        assert_eq!(std::fs::read(src.join("5.obj")).unwrap(), frame5, "{a:?} changed a frame");
+        assert_eq!(std::fs::read(d.join("t.obj")).unwrap(), b"v 0 0 0\n", "{a:?} changed t.obj");
+    }
+    // The template in the format its extension names, read back as the source's first frame.
+    for (name, head) in [("t.ply", "ply\n"), ("t.off", "OFF"), ("t.OBJ", "v ")] {
+        let o = meshdeco(&["generate", "c", "--frames", "5", "--out", "g.npy", "--template", name], &d);
+        assert!(o.status.success(), "{}", output_text(&o));
+        let text = String::from_utf8_lossy(&std::fs::read(d.join(name)).unwrap()).into_owned();
+        assert!(
+            text.starts_with(head) || (head == "v " && text.lines().any(|l| l.starts_with(head))),
+            "{name}: {text:.60}"
+        );
+        let back = meshdeco::mesh::load_mesh(&d.join(name)).unwrap();
+        assert_eq!(back.faces, seq.faces, "{name}");
+        let moved =
+            back.positions.iter().zip(&seq.frames[0]).map(|(p, q)| meshdeco::mesh::dist(*p, *q)).fold(0.0, f64::max);
+        assert!(moved < 1e-6, "{name}: {moved}");
+    }
+    assert!(d.join("g.npy").is_file());
+    eprintln!("generate cases: {}", cases.len() + 3);
+    std::fs::remove_dir_all(&d).unwrap();
+}
