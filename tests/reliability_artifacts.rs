@@ -637,3 +637,107 @@ fn readers_while_a_training_holds_the_lock() {
     assert_eq!(cases, 7);
     std::fs::remove_dir_all(&d).unwrap();
 }
+
+/// The JSON header of the feature-cache file at `path`, edited by `edit` with its checksum
+/// re-recorded (as the format defines it: CRC-32 of the key's length and bytes, F, E and W,
+/// the frame checksums, then `<` and the minima, `>` and the maxima, each list after its
+/// length), as a tool that "fixes" a cache file would. The data and the offset stay.
+fn rerecord_cache_header(path: &Path, edit: impl FnOnce(&mut serde_json::Value)) {
+    let bytes = std::fs::read(path).unwrap();
+    let at = u64::from_le_bytes(bytes[bytes.len() - 8..].try_into().unwrap()) as usize;
+    let mut h: serde_json::Value = serde_json::from_slice(&bytes[at..bytes.len() - 8]).unwrap();
+    edit(&mut h);
+    if h.get("header_crc32").is_some() {
+        let mut c = crc32fast::Hasher::new();
+        let key = h["key"].as_str().unwrap();
+        c.update(&(key.len() as u64).to_le_bytes());
+        c.update(key.as_bytes());
+        for n in ["n_frames", "n_elements", "width"] {
+            c.update(&h[n].as_u64().unwrap().to_le_bytes());
+        }
+        for f in h["frame_crc32"].as_array().unwrap() {
+            c.update(&(f.as_u64().unwrap() as u32).to_le_bytes());
+        }
+        for (list, tag) in [("min_bits", b'<'), ("max_bits", b'>')] {
+            let v = h[list].as_array().unwrap();
+            c.update(&[tag]);
+            c.update(&(v.len() as u64).to_le_bytes());
+            for b in v {
+                c.update(&b.as_u64().unwrap().to_le_bytes());
+            }
+        }
+        h["header_crc32"] = c.finalize().into();
+    }
+    let mut out = bytes[..at].to_vec();
+    out.extend(serde_json::to_vec(&h).unwrap());
+    out.extend((at as u64).to_le_bytes());
+    std::fs::write(path, out).unwrap();
+}
+
+/// Issue 55, cause 2: the feature cache's per-dimension ranges (which scale the autoencoder's
+/// features) changed behind a re-recorded checksum — halved, ±1e300, NaN — or a header byte
+/// changed without one: the file is named, recomputed, and the autoencoder trained from it is
+/// the one trained from a clean cache (before: halving the ranges trained another model, exit
+/// 0; ±1e300 and NaN failed without naming the file, and it was never recomputed).
+#[test]
+fn feature_cache_ranges_changed_behind_a_rerecorded_checksum_are_recomputed() {
+    let d = tmp("cache-ranges");
+    let cache = d.join("cache");
+    let toml = AE.replace("test = \"rest\"\n", &format!("test = \"rest\"\ncache = {:?}\n", cache.to_str().unwrap()));
+    let clean_model = train(&d, "clean", &toml);
+    let clean_bin = std::fs::read(clean_model.join("model.bin")).unwrap();
+    // (autoencoder.bpk holds each parameter's random id: it differs between runs.)
+    let clean_weights = std::fs::read(clean_model.join("weights.csv")).unwrap();
+    let files: Vec<PathBuf> = std::fs::read_dir(&cache).unwrap().map(|e| e.unwrap().path()).collect();
+    assert_eq!(files.len(), 1, "{files:?}");
+    let file = files[0].clone();
+    let clean = std::fs::read(&file).unwrap();
+    let half = |v: &serde_json::Value| serde_json::Value::from((f64::from_bits(v.as_u64().unwrap()) / 2.0).to_bits());
+    type Edit = Box<dyn Fn(&mut serde_json::Value)>;
+    let cases: Vec<(&str, Edit)> = vec![
+        (
+            "halved ranges",
+            Box::new(move |h| {
+                for list in ["min_bits", "max_bits"] {
+                    let halved: Vec<serde_json::Value> = h[list].as_array().unwrap().iter().map(half).collect();
+                    h[list] = halved.into();
+                }
+            }),
+        ),
+        ("a huge maximum", Box::new(|h| h["max_bits"][4] = 1e300f64.to_bits().into())),
+        ("a huge negative minimum", Box::new(|h| h["min_bits"][0] = (-1e300f64).to_bits().into())),
+        ("a NaN minimum", Box::new(|h| h["min_bits"][2] = f64::NAN.to_bits().into())),
+    ];
+    let mut n = 0;
+    for (what, edit) in &cases {
+        rerecord_cache_header(&file, edit);
+        let out = d.join(format!("run{n}"));
+        let o = train_into(&d, &out, &format!("run{n}"), &toml, &[]);
+        let t = output_text(&o);
+        assert!(o.status.success(), "{what}: {t}");
+        for needle in ["recomputing the cached features", file.to_str().unwrap(), "recorded range"] {
+            assert!(t.contains(needle), "{what}: `{needle}` not in {t}");
+        }
+        assert!(std::fs::read(out.join("model.bin")).unwrap() == clean_bin, "{what}: another model was trained");
+        assert!(std::fs::read(out.join("weights.csv")).unwrap() == clean_weights, "{what}: other codes");
+        assert!(std::fs::read(&file).unwrap() == clean, "{what}: the cache file was not recomputed");
+        n += 1;
+    }
+    // A header byte changed without re-recording: named and recomputed too.
+    let mut bytes = clean.clone();
+    let at = u64::from_le_bytes(bytes[bytes.len() - 8..].try_into().unwrap()) as usize;
+    let json = String::from_utf8(bytes[at..bytes.len() - 8].to_vec()).unwrap();
+    let pos = at + json.find("\"max_bits\":[").unwrap() + 12;
+    bytes[pos] = if bytes[pos] == b'1' { b'2' } else { b'1' };
+    std::fs::write(&file, &bytes).unwrap();
+    let out = d.join("run-byte");
+    let o = train_into(&d, &out, "run-byte", &toml, &[]);
+    let t = output_text(&o);
+    assert!(o.status.success() && t.contains(file.to_str().unwrap()) && t.contains("recomputing"), "{t}");
+    assert!(std::fs::read(out.join("model.bin")).unwrap() == clean_bin, "a changed header byte trained another model");
+    assert!(std::fs::read(&file).unwrap() == clean);
+    n += 1;
+    eprintln!("feature cache ranges: {n} cases");
+    assert_eq!(n, cases.len() + 1);
+    std::fs::remove_dir_all(&d).unwrap();
+}
