@@ -741,3 +741,26 @@ fn feature_cache_ranges_changed_behind_a_rerecorded_checksum_are_recomputed() {
     assert_eq!(n, cases.len() + 1);
     std::fs::remove_dir_all(&d).unwrap();
 }
+
+/// Issue 55, cause 6: `--resume` of a run that has no steps left writes the same `objective`
+/// to the bit (its last loss comes from the checkpoint's JSON header, which now stores floats
+/// exactly). With seed 3 this run's objective, 146.25613565452593, is one that a plain JSON
+/// read gives back one unit in the last place off (before: 146.2561356545259).
+#[test]
+fn a_resume_after_the_last_step_keeps_the_objective_to_the_bit() {
+    let d = tmp("resume-exact");
+    let toml = AE.replace("fit_test = false\n", "fit_test = false\nseed = 3\n");
+    let ae = train(&d, "ae", &toml);
+    let objective = |dir: &Path| {
+        let text = std::fs::read_to_string(dir.join("metrics.json")).unwrap();
+        let at = text.find("\"objective\":").expect("objective in metrics.json");
+        text[at..].split([',', '\n', '}']).next().unwrap().to_string()
+    };
+    let first = objective(&ae);
+    for attempt in 0..2 {
+        let o = train_into(&d, &ae, "ae", &toml, &["--resume"]);
+        assert!(o.status.success(), "{}", output_text(&o));
+        assert_eq!(objective(&ae), first, "resume {attempt}");
+    }
+    std::fs::remove_dir_all(&d).unwrap();
+}
