@@ -764,3 +764,51 @@ fn a_resume_after_the_last_step_keeps_the_objective_to_the_bit() {
     }
     std::fs::remove_dir_all(&d).unwrap();
 }
+
+/// Issue 55, cause 4: autoencoder.bpk edited behind a re-recorded manifest — 8 bytes
+/// duplicated inside it (at the start of the tensor data, in its middle, near its end, or
+/// appended), 8 bytes cut out, or 256 bytes appended — is refused by the loader itself, naming
+/// the file (before: `synthesize` read shifted parameters and exited 0). The untouched file
+/// loads.
+#[test]
+fn rerecorded_autoencoder_bpk_with_bytes_duplicated_or_cut_is_refused() {
+    let d = tmp("bpk");
+    let ae = train(&d, "ae", AE);
+    let bpk = ae.join("autoencoder.bpk");
+    let good = std::fs::read(&bpk).unwrap();
+    let len = good.len();
+    // The tensor data starts at the first 256-byte boundary after the header and metadata.
+    let metadata = u32::from_le_bytes(good[6..10].try_into().unwrap()) as usize;
+    let data = (10 + metadata).div_ceil(256) * 256;
+    assert!(data + 64 < len, "{data} {len}");
+    let duplicated = |at: usize| {
+        let mut b = good[..at + 8].to_vec();
+        b.extend_from_slice(&good[at..]);
+        b
+    };
+    let mut cut = good.clone();
+    cut.drain(len / 2..len / 2 + 8);
+    let mut appended = good.clone();
+    appended.extend(std::iter::repeat_n(0u8, 256));
+    let cases: Vec<(String, Vec<u8>)> = vec![
+        ("8 bytes duplicated at the data's start".into(), duplicated(data)),
+        ("8 bytes duplicated in the middle".into(), duplicated((data + len) / 2)),
+        ("8 bytes duplicated near the end".into(), duplicated(len - 16)),
+        ("the last 8 bytes appended again".into(), duplicated(len - 8)),
+        ("8 bytes cut out of the middle".into(), cut),
+        ("256 zero bytes appended".into(), appended),
+    ];
+    let mut n = 0;
+    for (what, bytes) in &cases {
+        std::fs::write(&bpk, bytes).unwrap();
+        rerecord(&ae);
+        n += all_refuse(&ae, &d, &["autoencoder.bpk"], what);
+    }
+    std::fs::write(&bpk, &good).unwrap();
+    rerecord(&ae);
+    let o = meshdeco(&["synthesize", ae.to_str().unwrap(), "--weights", "0:1", "--out", "s.obj"], &d);
+    assert!(o.status.success(), "the untouched file: {}", output_text(&o));
+    eprintln!("autoencoder.bpk layouts: {n} cases");
+    assert_eq!(n, 2 * cases.len());
+    std::fs::remove_dir_all(&d).unwrap();
+}
