@@ -332,3 +332,29 @@ fn generate_never_overwrites_an_input_or_itself_and_is_all_or_nothing() {
     eprintln!("generate cases: {}", cases.len() + 3);
     std::fs::remove_dir_all(&d).unwrap();
 }
+
+/// Issue 55, cause 7: `data.validation` beside the autoencoder's `method.validation` is
+/// refused before any work, naming both keys (before: both accepted without a word); each
+/// alone is accepted.
+#[test]
+fn data_and_method_validation_together_are_refused_naming_both() {
+    let d = tmp("validation");
+    let data = "[data]\npath = \"synthetic:tube\"\ntrain = \"1-30\"\n";
+    let ae = "[method]\nkind = \"autoencoder\"\ncomponents = 3\niterations = 10\n";
+    let both = format!("{data}validation = \"28-30\"\n{ae}validation = 2\n");
+    let cfg = d.join("both.toml");
+    std::fs::write(&cfg, &both).unwrap();
+    let out = d.join("out");
+    let o = meshdeco(&["train", "--config", cfg.to_str().unwrap(), "--out", out.to_str().unwrap()], &d);
+    fails_with(&o, "data.validation");
+    for needle in ["method.validation = 2", "`28-30`", "keep one", "both.toml"] {
+        assert!(output_text(&o).contains(needle), "`{needle}` not in {}", output_text(&o));
+    }
+    assert!(!out.exists(), "a refused config created {}", out.display());
+    assert!(meshdeco::config::Config::from_toml(&format!("{data}validation = \"28-30\"\n{ae}")).is_ok());
+    assert!(meshdeco::config::Config::from_toml(&format!("{data}{ae}validation = 2\n")).is_ok());
+    // Another method has no method.validation: data.validation is its only one.
+    let pca = format!("{data}validation = \"28-30\"\n[method]\nkind = \"pca\"\ncomponents = 3\n");
+    assert!(meshdeco::config::Config::from_toml(&pca).is_ok());
+    std::fs::remove_dir_all(&d).unwrap();
+}

@@ -42,7 +42,7 @@ fn train(d: &Path, name: &str, toml: &str) -> PathBuf {
 }
 
 /// Asserts a clean refusal: exit status 1 (not a panic's 101, not an abort's signal), every
-/// needle in the message, no panic text.
+/// needle in the message, no panic text, and a lock message said once (not nested in itself).
 fn refused(o: &Output, needles: &[&str], what: &str) {
     let t = output_text(o);
     assert_eq!(o.status.code(), Some(1), "{what}: status {:?} (expected a refusal): {t}", o.status);
@@ -50,6 +50,7 @@ fn refused(o: &Output, needles: &[&str], what: &str) {
     for n in needles {
         assert!(t.contains(n), "{what}: `{n}` not in: {t}");
     }
+    assert!(t.matches("being written").count() <= 1 && t.matches("reading it gave").count() <= 1, "{what}: {t}");
 }
 
 /// Re-records `dir`'s manifest after an edit, as a user "fixing" it (or another tool) would.
@@ -810,5 +811,58 @@ fn rerecorded_autoencoder_bpk_with_bytes_duplicated_or_cut_is_refused() {
     assert!(o.status.success(), "the untouched file: {}", output_text(&o));
     eprintln!("autoencoder.bpk layouts: {n} cases");
     assert_eq!(n, 2 * cases.len());
+    std::fs::remove_dir_all(&d).unwrap();
+}
+
+/// Issue 55, cause 7: readers while retrains commit new models into the directory again and
+/// again (PCA with K = 3 and K = 4 in turn, each a separate `meshdeco train`): every read gets
+/// a whole model, the old or the new one (its K and its files agree), or an error naming the
+/// writer — never "changed or damaged" for a file a commit replaced (before: 2 of 155 reads).
+#[test]
+fn readers_during_retrains_get_a_whole_model_or_the_writer() {
+    let d = tmp("retrains");
+    let pca = train(&d, "pca", PCA);
+    std::fs::write(d.join("pca3.toml"), PCA).unwrap();
+    std::fs::write(d.join("pca4.toml"), PCA4).unwrap();
+    let done = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let writer = std::thread::spawn({
+        let (d, pca, done) = (d.clone(), pca.clone(), done.clone());
+        move || {
+            for i in 0..12 {
+                let cfg = d.join(if i % 2 == 0 { "pca4.toml" } else { "pca3.toml" });
+                let o = Command::new(env!("CARGO_BIN_EXE_meshdeco"))
+                    .args(["train", "--config", cfg.to_str().unwrap(), "--out", pca.to_str().unwrap()])
+                    .current_dir(&d)
+                    .output()
+                    .unwrap();
+                assert!(o.status.success(), "retrain {i}: {}", output_text(&o));
+            }
+            done.store(true, std::sync::atomic::Ordering::SeqCst);
+        }
+    });
+    let (mut whole, mut named) = (0, 0);
+    while !done.load(std::sync::atomic::Ordering::SeqCst) {
+        match meshdeco::pipeline::load_model(&pca) {
+            Ok(model) => {
+                let k = model.n_components();
+                assert!(k == 3 || k == 4, "K = {k}");
+                // Its weights and components are one model's: decoding the first training
+                // frame's weights gives a shape of the rest mesh's size.
+                let w = model.train_weights().expect("a linear model's training weights");
+                assert!(w.iter().all(|row| row.len() == k), "weights of K = {k}");
+                assert_eq!(model.decode(&w[..1]).unwrap()[0].len(), model.rest().n_vertices());
+                whole += 1;
+            }
+            Err(e) => {
+                let t = e.to_string();
+                assert!(t.contains("is being written by meshdeco process"), "a read during a retrain: {t}");
+                assert_eq!(t.matches("being written").count(), 1, "{t}");
+                named += 1;
+            }
+        }
+    }
+    writer.join().unwrap();
+    eprintln!("reads during 12 retrains: {whole} whole models, {named} errors naming the writer");
+    assert!(whole > 12, "{whole} reads");
     std::fs::remove_dir_all(&d).unwrap();
 }
