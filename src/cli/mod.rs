@@ -14,6 +14,7 @@ mod features;
 mod generate;
 mod geodesic;
 mod inspect;
+mod plant;
 mod pose;
 mod progress;
 mod render;
@@ -60,6 +61,9 @@ pub enum Command {
     Eval(eval::EvalArgs),
     /// Pose a trained model by dragging vertices: constraints JSON {"vertex": [x, y, z]} → mesh.
     Pose(pose::PoseArgs),
+    /// Plant known localized deformations on a mesh and mix them into frames (ground truth for
+    /// `eval`'s recovery scores).
+    Plant(plant::PlantArgs),
     /// Drag benchmark: pins moved to their places in test frames; landing, collateral motion, Erms.
     DragBench(pose::DragBenchArgs),
     /// Picture of a mesh as PNG (z-buffer, Lambert shading × vertex colours of a PLY).
@@ -115,6 +119,7 @@ fn dispatch(command: Command) -> Result<()> {
         Command::Inspect(a) => inspect::run(a),
         Command::Train(a) => train::run(a),
         Command::Eval(a) => eval::run(a),
+        Command::Plant(a) => plant::run(a),
         Command::Pose(a) => pose::run(a),
         Command::Render(a) => render::run(a),
         Command::View(a) => view::run(a),

@@ -179,6 +179,9 @@ pub struct SplocsMethod {
     pub support: [f64; 2],
     /// `nonnegative` (Eq. 4) | `signed` (Eq. 3).
     pub weights: WeightConstraint,
+    /// Relative soft threshold of the weights (0: none, the reference).
+    #[serde(skip_serializing_if = "is_zero_f64")]
+    pub weight_sparsity: f64,
     pub max_iterations: usize,
     pub admm: AdmmConfig,
     /// Convergence: mean relative objective change over the last 5 iterations (0: never stop early).
@@ -226,7 +229,11 @@ macro_rules! splocs_keys {
     };
 }
 
-splocs_keys!(components, sparsity, support, weights, max_iterations, admm, tolerance, seed, threads);
+splocs_keys!(components, sparsity, support, weights, weight_sparsity, max_iterations, admm, tolerance, seed, threads);
+
+fn is_zero_f64(x: &f64) -> bool {
+    *x == 0.0
+}
 
 impl Default for SplocsMethod {
     fn default() -> Self {
@@ -398,6 +405,9 @@ pub struct AutoencoderMethod {
     pub encoder: EncoderKind,
     /// Weight of the decorrelation term on the rows of C (0: none).
     pub lambda_orthogonal: f64,
+    /// Weight of the code term: ℓ1 distance of the training codes from the rest shape's (0: none).
+    #[serde(skip_serializing_if = "network_default::lambda_code")]
+    pub lambda_code: f64,
     /// Weight of the vertex term (0: none).
     #[serde(skip_serializing_if = "network_default::lambda_vertex")]
     pub lambda_vertex: f64,
@@ -442,6 +452,7 @@ mod network_default {
         validate_every: usize,
         encoder: crate::nn::config::EncoderKind,
         lambda_vertex: f64,
+        lambda_code: f64,
         vertex_batch: usize,
         vertex_warmup: f64,
         vertex_clip: f64,
@@ -519,6 +530,7 @@ network_keys!(
     validate_every,
     encoder,
     lambda_orthogonal,
+    lambda_code,
     lambda_vertex,
     vertex_batch,
     vertex_warmup,

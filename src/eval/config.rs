@@ -43,8 +43,13 @@ pub struct EvalDataset {
     pub ordered: bool,
     /// The validated `[data]` section.
     pub data: DataConfig,
-    /// The data table as written (without `name` and `ordered`), for the cells' configs.
+    /// The data table as written (without `name`, `ordered` and `truth`), for the cells'
+    /// configs.
     pub table: toml::Table,
+    /// `truth = "DIR"`: a planted set (`meshdeco plant`) whose true deformations the cells'
+    /// components are scored against (`path`, `template`, `rest`, `train`, `test` and `align`
+    /// default to the set's).
+    pub truth: Option<std::path::PathBuf>,
 }
 
 /// One method of the evaluation.
@@ -166,6 +171,24 @@ fn rekey(e: Error, section: &str, prefix: &str) -> Error {
     }
 }
 
+/// Fills a planted set's data keys that the dataset table leaves out: its frames, template (also
+/// the rest shape), training and test ranges, and no alignment (the frames do not move as a
+/// whole, and aligning them would change the true fields).
+fn planted_defaults(t: &mut toml::Table, dir: &Path) -> Result<()> {
+    let file: crate::eval::planted::TruthFile =
+        crate::artifact::read_json(&dir.join(crate::eval::planted::TRUTH_FILE))?;
+    let s = |p: &str| dir.join(p).display().to_string();
+    t.entry("path").or_insert_with(|| s("frames.npy").into());
+    t.entry("template").or_insert_with(|| s("template.obj").into());
+    t.entry("rest").or_insert_with(|| s("template.obj").into());
+    t.entry("train").or_insert_with(|| format!("1-{}", file.train).into());
+    if file.test > 0 {
+        t.entry("test").or_insert_with(|| format!("{}-{}", file.train + 1, file.train + file.test).into());
+    }
+    t.entry("align").or_insert_with(|| "none".into());
+    Ok(())
+}
+
 /// Builds the `meshdeco train` config text of a dataset table and a method table.
 pub fn train_config_text(name: &str, data: &toml::Table, method: &toml::Table) -> String {
     let mut root = toml::Table::new();
@@ -217,6 +240,11 @@ impl EvalConfig {
                             ));
                         }
                     };
+                    let truth = take_string(&mut t, "truth", &format!("{prefix}.truth"))?.map(std::path::PathBuf::from);
+                    if let Some(dir) = &truth {
+                        planted_defaults(&mut t, dir)
+                            .map_err(|e| Error::config(format!("{prefix}.truth"), e.to_string()))?;
+                    }
                     // The papers align frames rigidly before decomposing them (SPLOCS, paper 000
                     // § 3: "rigid alignment through global translation and rotation is performed
                     // before assembling the animation matrix"): an evaluation does so unless the
@@ -232,7 +260,7 @@ impl EvalConfig {
                             "is required: the evaluation measures on the test split",
                         ));
                     }
-                    datasets.push(EvalDataset { name: dname, ordered, data: c.data, table: t });
+                    datasets.push(EvalDataset { name: dname, ordered, data: c.data, table: t, truth });
                 }
             }
             Some(_) => return Err(Error::config("dataset", "must be an array of tables ([[dataset]])")),

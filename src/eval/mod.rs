@@ -35,6 +35,7 @@
 pub mod config;
 pub mod control_points;
 pub mod drag;
+pub mod planted;
 pub mod plots;
 pub mod report;
 
@@ -128,6 +129,13 @@ pub struct CellResult {
     /// Erms over the validation frames (`data.validation`), encoded as the test frames are.
     #[serde(default)]
     pub validation_erms: Option<f64>,
+    /// Median over the components of the share of vertices each moves by more than 5 % of its
+    /// peak, read in vertex space around the rest shape ([`crate::model::component_fields`]).
+    #[serde(default)]
+    pub vertex_support: Option<f64>,
+    /// Recovery of the true deformations of a planted dataset (`truth = "DIR"`).
+    #[serde(default)]
+    pub recovery: Option<CellRecovery>,
     /// Version of the autoencoder's encoding the numbers were measured with
     /// ([`ENCODER_VERSION`]); a cached autoencoder cell of an older one is trained and measured again.
     #[serde(default)]
@@ -143,6 +151,88 @@ pub struct CellResult {
 /// that stalls restarts with halved step sizes (`stall_restarts`); cells cached with
 /// another version are trained and measured again.
 pub const ENCODER_VERSION: u32 = 5;
+
+/// How a cell's components recover the true deformations of a planted dataset
+/// ([`crate::metrics::recovery`]; per deformation in the cell's `recovery.json`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct CellRecovery {
+    /// Identifiable true deformations (the ones counted), and all.
+    pub counted: usize,
+    pub total: usize,
+    /// Identifiable ones with a component of |cos| ≥ 0.9, and of all.
+    pub found: usize,
+    pub found_all: usize,
+    /// Medians over the identifiable ones of the best |cos| and of its support IoU.
+    pub median_abs_cos: f64,
+    pub median_iou: f64,
+    /// Share of the identifiable ones whose best component's dial moves the right way (cos > 0).
+    pub positive: f64,
+    /// The planted set the numbers belong to ([`truth_key`]).
+    pub truth_key: String,
+}
+
+/// One true deformation's best match (a row of a cell's `recovery.json`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DeformationMatch {
+    pub name: String,
+    pub kind: String,
+    pub identifiable: bool,
+    #[serde(flatten)]
+    pub best: crate::metrics::recovery::Match,
+}
+
+/// File of a cell's per-deformation recovery.
+pub const RECOVERY_FILE: &str = "recovery.json";
+
+/// The key of a planted set's data and truth: the checksums of its frames and fields as its
+/// manifest records them (a set planted again gives another key; its cells are measured again).
+pub fn truth_key(dir: &Path) -> Result<String> {
+    let m: artifact::Manifest = artifact::read_json(&dir.join(artifact::MANIFEST_FILE))?;
+    let crc = |n: &str| {
+        m.files.get(n).map(|e| e.crc32.clone()).ok_or_else(|| {
+            Error::Invalid(format!("{}: does not list `{n}`", dir.join(artifact::MANIFEST_FILE).display()))
+        })
+    };
+    Ok(format!("frames {} fields {}", crc("frames.npy")?, crc(planted::FIELDS_FILE)?))
+}
+
+/// Scores a model's components against a planted set's true deformations.
+pub fn recovery_of(
+    model: &dyn crate::model::Model,
+    truth: &planted::Truth,
+) -> Result<(CellRecovery, Vec<DeformationMatch>)> {
+    use crate::metrics::recovery::{best_matches, summarize};
+    let fields = crate::model::component_fields(model)?;
+    let matches = best_matches(&truth.fields, &fields)?;
+    let counted = truth.counted();
+    let s = summarize(&matches, &counted);
+    let all = summarize(&matches, &[]);
+    let positive =
+        matches.iter().zip(&counted).filter(|(m, c)| **c && m.cos > 0.0).count() as f64 / s.counted.max(1) as f64;
+    let rows = matches
+        .into_iter()
+        .zip(&truth.file.deformations)
+        .map(|(best, d)| DeformationMatch {
+            name: d.name.clone(),
+            kind: format!("{:?}", d.kind).to_lowercase(),
+            identifiable: d.identifiable,
+            best,
+        })
+        .collect();
+    Ok((
+        CellRecovery {
+            counted: s.counted,
+            total: all.counted,
+            found: s.found,
+            found_all: all.found,
+            median_abs_cos: s.median_abs_cos,
+            median_iou: s.median_iou,
+            positive,
+            truth_key: truth_key(&truth.dir)?,
+        },
+        rows,
+    ))
+}
 
 /// A cell whose training or measuring failed: recorded, shown in the tables and the report,
 /// retried by the next run; the cells after it still run.
@@ -208,6 +298,8 @@ struct DatasetData {
     prep: Prepared,
     test: Vec<Vec<Vec3>>,
     sted: Sted,
+    /// The true deformations of a planted dataset.
+    truth: Option<planted::Truth>,
 }
 
 impl DatasetData {
@@ -224,7 +316,19 @@ impl DatasetData {
         let test = frames_in_data_units(&prep, &prep.test)?;
         let names = prep.test.iter().map(|&f| prep.sequence.name(f).to_string()).collect();
         let sted = Sted::new(prep.rest.n_vertices(), &prep.rest.faces, StedParams::default())?.with_frame_names(names);
-        Ok(DatasetData { prep, test, sted })
+        let truth = d.truth.as_deref().map(planted::Truth::load).transpose()?;
+        if let Some(t) = &truth
+            && t.file.n_vertices != prep.rest.n_vertices()
+        {
+            return Err(Error::Invalid(format!(
+                "dataset {}: truth {} has {} vertices, the data {}",
+                d.name,
+                t.dir.display(),
+                t.file.n_vertices,
+                prep.rest.n_vertices()
+            )));
+        }
+        Ok(DatasetData { prep, test, sted, truth })
     }
 }
 
@@ -247,7 +351,12 @@ fn check_finite(what: &str, cell: &str, x: f64) -> Result<f64> {
 /// Measures a trained cell on its dataset: Erms and locality as training measured them (the
 /// same numbers as `metrics.json`), STED of the training's test reconstruction, support sizes
 /// and regions of the model's components.
-fn measure(cell: &Cell, cfg: &EvalConfig, ds: &DatasetData, trained: &TrainOutcome) -> Result<CellResult> {
+fn measure(
+    cell: &Cell,
+    cfg: &EvalConfig,
+    ds: &DatasetData,
+    trained: &TrainOutcome,
+) -> Result<(CellResult, Option<Vec<DeformationMatch>>)> {
     let d = &cfg.datasets[cell.dataset];
     let m = &cfg.methods[cell.method];
     let name = format!("{}/{}/K{}", d.name, m.label, cell.k);
@@ -280,7 +389,14 @@ fn measure(cell: &Cell, cfg: &EvalConfig, ds: &DatasetData, trained: &TrainOutco
         sizes.push(s.size as f64);
         regions.push(s.regions as f64);
     }
-    Ok(CellResult {
+    let (recovery, matches) = match &ds.truth {
+        Some(t) => {
+            let (r, m) = recovery_of(model, t)?;
+            (Some(r), Some(m))
+        }
+        None => (None, None),
+    };
+    let result = CellResult {
         config_text: cell.config_text.clone(),
         dataset: d.name.clone(),
         method: m.label.clone(),
@@ -315,7 +431,10 @@ fn measure(cell: &Cell, cfg: &EvalConfig, ds: &DatasetData, trained: &TrainOutco
             .and_then(|s| s.temporal)
             .map(|t| check_finite("fitted temporal STED", &name, t))
             .transpose()?,
-    })
+        vertex_support: metrics.median_vertex_support,
+        recovery,
+    };
+    Ok((result, matches))
 }
 
 fn read_cached(dir: &Path, text: &str) -> Option<CellResult> {
@@ -403,7 +522,25 @@ pub fn run(
         let label = format!("{}/{}/K{}", d.name, m.label, cell.k);
         sweep.step(i as u64, &label);
         let dir = cell_dir(out, &d.name, &m.label, cell.k);
-        if let Some(r) = read_cached(&dir, &cell.config_text) {
+        if let Some(mut r) = read_cached(&dir, &cell.config_text) {
+            // A planted dataset's truth added or planted again since: score the cached model.
+            if let Some(truth_dir) = &d.truth {
+                let key = truth_key(truth_dir)?;
+                if r.recovery.as_ref().is_none_or(|x| x.truth_key != key) {
+                    if opts.replot {
+                        return Err(Error::Invalid(format!(
+                            "--replot: cell {label} has no recovery scores for {} (run without --replot)",
+                            truth_dir.display()
+                        )));
+                    }
+                    let truth = planted::Truth::load(truth_dir)?;
+                    let (rec, rows) = recovery_of(load_model(&dir)?.as_ref(), &truth)?;
+                    r.recovery = Some(rec);
+                    artifact::write_json(&dir.join(RECOVERY_FILE), &rows)?;
+                    artifact::write_json(&dir.join(CELL_FILE), &r)?;
+                    r = artifact::read_json(&dir.join(CELL_FILE))?;
+                }
+            }
             results.push(r);
             reused += 1;
             continue;
@@ -422,7 +559,15 @@ pub fn run(
             measure(cell, cfg, ds, &outcome)
         });
         let r = match attempt {
-            Ok(r) => r,
+            Ok((r, rows)) => {
+                match rows {
+                    Some(rows) => artifact::write_json(&dir.join(RECOVERY_FILE), &rows)?,
+                    None => {
+                        let _ = std::fs::remove_file(dir.join(RECOVERY_FILE));
+                    }
+                }
+                r
+            }
             Err(_) if stopped(opts) => return Err(interrupted()),
             Err(e) => {
                 // Record the failure in the cell and go on with the next cell.

@@ -12,7 +12,7 @@ use crate::artifact::write_atomic;
 use crate::error::Result;
 
 /// Header of `results.csv`.
-pub const RESULTS_HEADER: &str = "dataset,method,representation,K,train_erms,test_erms,alignment,sted_spatial,sted_temporal,in_support_share,support_size,support_regions,seconds,test_erms_fitted,sted_spatial_fitted,sted_temporal_fitted,test_erms_one_pass,test_erms_network,validation_erms";
+pub const RESULTS_HEADER: &str = "dataset,method,representation,K,train_erms,test_erms,alignment,sted_spatial,sted_temporal,in_support_share,support_size,support_regions,seconds,test_erms_fitted,sted_spatial_fitted,sted_temporal_fitted,test_erms_one_pass,test_erms_network,validation_erms,vertex_support,recovery_found,recovery_counted,recovery_found_all,recovery_total,recovery_median_abs_cos,recovery_median_iou";
 
 /// Header of `control_points.csv`.
 pub const CONTROL_POINTS_HEADER: &str = "dataset,method,K,n,erms_mean,erms_min,erms_max,trials";
@@ -27,7 +27,7 @@ pub fn results_csv(results: &[CellResult]) -> String {
     for r in results {
         let _ = writeln!(
             s,
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
             r.dataset,
             r.method,
             r.representation,
@@ -46,7 +46,14 @@ pub fn results_csv(results: &[CellResult]) -> String {
             opt(r.sted_temporal_fitted),
             opt(r.test_erms_one_pass),
             opt(r.test_erms_network),
-            opt(r.validation_erms)
+            opt(r.validation_erms),
+            opt(r.vertex_support),
+            r.recovery.as_ref().map(|x| x.found.to_string()).unwrap_or_default(),
+            r.recovery.as_ref().map(|x| x.counted.to_string()).unwrap_or_default(),
+            r.recovery.as_ref().map(|x| x.found_all.to_string()).unwrap_or_default(),
+            r.recovery.as_ref().map(|x| x.total.to_string()).unwrap_or_default(),
+            opt(r.recovery.as_ref().map(|x| x.median_abs_cos)),
+            opt(r.recovery.as_ref().map(|x| x.median_iou))
         );
     }
     s
@@ -92,6 +99,86 @@ fn f(x: f64, digits: usize) -> String {
 
 fn fo(x: Option<f64>, digits: usize) -> String {
     x.map(|v| f(v, digits)).unwrap_or_else(|| "–".into())
+}
+
+/// The recovery table and plot of a planted dataset (`truth = "DIR"`).
+fn recovery_section(
+    md: &mut String,
+    files: &mut Vec<PathBuf>,
+    out: &Path,
+    d: &crate::eval::EvalDataset,
+    rows: &[&CellResult],
+) -> Result<()> {
+    let truth: Option<crate::eval::planted::TruthFile> =
+        d.truth.as_ref().and_then(|t| crate::artifact::read_json(&t.join(crate::eval::planted::TRUTH_FILE)).ok());
+    let _ = writeln!(
+        md,
+        "### {}: recovery of the planted deformations
+",
+        d.name
+    );
+    if let Some(t) = &truth {
+        let _ = writeln!(
+            md,
+            "{} deformations planted on `{}` ({} vertices), {} identifiable; noise {} of the diagonal. Test Erms of \
+             the rest shape {:.3}; of the least-squares fit by the true fields (the oracle) {:.3}.\n",
+            t.deformations.len(),
+            t.source,
+            t.n_vertices,
+            t.identifiable,
+            t.noise,
+            t.rest_test_erms,
+            t.oracle_test_erms
+        );
+    }
+    md.push_str(
+        "Per true deformation, the component whose vertex field (around the rest shape, dial +1) has the largest \
+         |cos| with it; *found*: |cos| ≥ 0.9; medians over the identifiable ones; *sign*: share whose best \
+         component's dial moves the way the deformation does; *vertex support*: median share of vertices a \
+         component moves by more than 5 % of its peak.\n\n\
+         | method | K | test Erms | found / identifiable | found / all | median \\|cos\\| | median IoU | sign | vertex support |\n\
+         |---|---:|---:|---:|---:|---:|---:|---:|---:|\n",
+    );
+    let mut series = Vec::new();
+    for r in rows {
+        let Some(x) = &r.recovery else { continue };
+        let _ = writeln!(
+            md,
+            "| {} | {} | {} | {} / {} | {} / {} | {} | {} | {} | {} |",
+            r.method,
+            r.k,
+            f(r.test_erms, 3),
+            x.found,
+            x.counted,
+            x.found_all,
+            x.total,
+            f(x.median_abs_cos, 3),
+            f(x.median_iou, 3),
+            f(x.positive, 2),
+            r.vertex_support.map_or("–".into(), |v| format!("{:.1} %", 100.0 * v))
+        );
+        let path = crate::eval::cell_dir(out, &r.dataset, &r.method, r.k).join(crate::eval::RECOVERY_FILE);
+        if let Ok(m) = crate::artifact::read_json::<Vec<crate::eval::DeformationMatch>>(&path) {
+            let mut c: Vec<f64> = m.iter().filter(|m| m.identifiable).map(|m| m.best.abs_cos).collect();
+            c.sort_by(|a, b| b.total_cmp(a));
+            let points = c.iter().enumerate().map(|(i, v)| ((i + 1) as f64, *v)).collect();
+            series.push(Series { label: format!("{} (K = {})", r.method, r.k), points });
+        }
+    }
+    if !series.is_empty() {
+        let png = format!("recovery_{}.png", d.name);
+        line_plot(
+            &out.join(&png),
+            &format!("{}: best |cos| per true deformation, sorted", d.name),
+            "true deformations (sorted)",
+            "best |cos|",
+            &series,
+        )?;
+        let _ = writeln!(md, "\n![recovery]({png})\n");
+        files.push(out.join(png));
+    }
+    md.push('\n');
+    Ok(())
 }
 
 /// Writes results.csv, control_points.csv (when there are rows), the plots and report.md into
@@ -262,6 +349,10 @@ pub fn write_all(
         }
         files.push(out.join(erms_png));
         files.push(out.join(sted_png));
+
+        if rows.iter().any(|r| r.recovery.is_some()) {
+            recovery_section(&mut md, &mut files, out, d, &rows)?;
+        }
 
         let cps: Vec<&ControlPointRow> = cp.iter().filter(|r| r.dataset == d.name).collect();
         if !cps.is_empty() {

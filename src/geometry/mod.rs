@@ -1,6 +1,7 @@
 //! Geometry operators on triangle meshes, in `f64` with faer; one operator per file.
 
 pub mod cotan_laplacian;
+pub mod decimate;
 pub mod farthest_point_sampling;
 pub mod graph_distance;
 pub mod heat_geodesics;

@@ -16,8 +16,11 @@
 //!   `max_regions`); or a fixed `regions` count. A cluster is compact when every one of its
 //!   vertices belongs to a triangle whose three vertices are all in the cluster, and those
 //!   triangles form one connected set (triangles sharing a vertex count as connected; on a mesh
-//!   in several pieces, one set per piece the cluster touches). If
-//!   already k = 2 is not compact the whole mesh is one region. Before the test, single-vertex
+//!   in several pieces, one set per piece the cluster touches). If already k = 2 is not compact
+//!   (the paper's rule would make the whole mesh one region: holistic PCA), the search goes on
+//!   up to `max_regions` and keeps the largest k whose clusters are all compact, as
+//!   `keep_searching` does ([`Segmentation::searched_on`] says so); only when no k is compact
+//!   is the mesh one region. Before the test, single-vertex
 //!   spurs along cluster borders are handed to the neighbouring cluster (see `remove_spurs`).
 //!
 //! **Large meshes.** The affinity is dense (every pair may be correlated), so clustering runs on
@@ -136,6 +139,9 @@ pub struct Segmentation {
     pub n_nodes: usize,
     /// The r actually used (mesh length units).
     pub r: f64,
+    /// Whether the automatic search went past the paper's stopping rule because k = 2 was
+    /// already not compact (see the module docs).
+    pub searched_on: bool,
 }
 
 impl Segmentation {
@@ -278,24 +284,28 @@ pub fn segment(
         }
         relabel(&l)
     };
+    let mut searched_on = false;
     let labels = match config.regions {
         Some(_) => cluster(k_max),
         None => {
-            let mut best = vec![0; n];
+            let mut best: Option<Vec<usize>> = None;
             for k in 2..=k_max {
                 let l = cluster(k);
                 let m = l.iter().max().map_or(0, |&m| m + 1);
                 if m == k && all_compact(&l, m, faces) {
-                    best = l;
-                } else if !config.keep_searching {
+                    best = Some(l);
+                } else if !config.keep_searching && best.is_some() {
                     break;
+                } else if !config.keep_searching {
+                    // k = 2 is not compact: rather than one region, look further.
+                    searched_on = true;
                 }
             }
-            best
+            best.unwrap_or_else(|| vec![0; n])
         }
     };
     let regions = share_boundaries(&labels, &topo);
-    Ok(Segmentation { labels, regions, n_nodes, r })
+    Ok(Segmentation { labels, regions, n_nodes, r, searched_on })
 }
 
 /// Reassigns *spur* vertices — vertices in no triangle whose three vertices share their label

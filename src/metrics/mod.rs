@@ -14,3 +14,4 @@ pub use edge_distortion::{EdgeDistortion, EdgeDistortionMeter, edge_length_disto
 pub use erms::{Alignment, Erms, erms, frame_squared_error};
 pub use sted::{FrameOrder, Sted, StedParams, StedReport, sted};
 pub mod locality;
+pub mod recovery;

@@ -214,6 +214,45 @@ pub fn synthesize(model: &dyn Model, dials: &[f64]) -> Result<Vec<Vec3>> {
     Ok(model.decode(&[w])?.remove(0))
 }
 
+/// Every component as a vertex displacement field (N × 3, data units) around the rest shape:
+/// the shape of the rest mesh's own weights ([`Model::start_weights`] of the rest positions:
+/// for the autoencoder the rest shape's code) with the component's dial raised by 1, minus the
+/// shape of those weights alone. Linear models on displacements give their components exactly;
+/// nonlinear ones their change of shape at dial 1 (the autoencoder: its extreme code's offset,
+/// `Z_h − Z_r`, added to the rest code). Models that drop translation (centroid-aligned Erms)
+/// have each field's median translation removed
+/// ([`crate::metrics::recovery::remove_median_translation`]), so a local change reads as local.
+/// Index order.
+pub fn component_fields(model: &dyn Model) -> Result<Vec<Vec<Vec3>>> {
+    let rest = model.rest();
+    let w0 = model.start_weights(Some(&rest.positions))?;
+    let d0 = model.dials(&w0)?;
+    let k = model.n_components();
+    let base = model.decode(std::slice::from_ref(&w0))?.remove(0);
+    let mut fields = Vec::with_capacity(k);
+    // A few components at a time: the decoded shapes of all K are never held at once.
+    for start in (0..k).step_by(16) {
+        let codes = (start..(start + 16).min(k))
+            .map(|i| {
+                let mut d = d0.clone();
+                d[i] += 1.0;
+                // Only dimension i moves (the dials map dimension by dimension).
+                let mut w = w0.clone();
+                w[i] = model.synthesis_weights(&d)?[i];
+                Ok(w)
+            })
+            .collect::<Result<Vec<_>>>()?;
+        for shape in model.decode(&codes)? {
+            let mut f: Vec<Vec3> = shape.iter().zip(&base).map(|(a, b)| crate::math::vec3::sub(*a, *b)).collect();
+            if model.alignment() == Alignment::Centroid {
+                crate::metrics::recovery::remove_median_translation(&mut f);
+            }
+            fields.push(f);
+        }
+    }
+    Ok(fields)
+}
+
 /// `steps` shapes (≥ 2, both ends included) along the straight line between the weights of two
 /// shapes (data units): encoded, interpolated linearly, decoded.
 pub fn interpolate(model: &dyn Model, from: &[Vec3], to: &[Vec3], steps: usize) -> Result<Vec<Vec<Vec3>>> {

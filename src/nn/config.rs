@@ -94,6 +94,14 @@ pub struct AutoencoderConfig {
     /// (0: none, the paper). With near-orthogonal rows the tied encoder `z = C·f` inverts the
     /// decoder `f̂ = Cᵀz` for every code, not only the training shapes' codes.
     pub lambda_orthogonal: f64,
+    /// Weight λc of the code term `(1/B) Σ_b Σ_k |z_bk − z_rest,k|`: the ℓ1 distance of every
+    /// training shape's code from the rest shape's code (0: none, the paper). The rest shape
+    /// (`data.rest`) rides along in every step as one more lane (reconstructed like a training
+    /// shape), and the term pulls every other code towards it: each shape is explained by few
+    /// components, which singles out the deformations that occur separately in the data from
+    /// the rotations of them that reconstruct equally well. The trainer needs the rest shape's
+    /// features for it ([`super::Trainer::with_rest`]).
+    pub lambda_code: f64,
     /// Weight λv of the vertex term: the squared distance between the ACAP reconstructions of
     /// each decoded shape and of its input, summed over the vertices, in units of the rest
     /// bounding-box diagonal (0: none, the paper, which measures the error in feature space
@@ -219,6 +227,7 @@ impl Default for AutoencoderConfig {
             validation: 0,
             validate_every: 50,
             lambda_orthogonal: 0.0,
+            lambda_code: 0.0,
             lambda_vertex: 0.0,
             vertex_batch: 0,
             vertex_warmup: 0.0,
@@ -345,6 +354,7 @@ impl AutoencoderConfig {
         nonneg("lambda1", self.lambda1)?;
         nonneg("lambda2", self.lambda2)?;
         nonneg("lambda_orthogonal", self.lambda_orthogonal)?;
+        nonneg("lambda_code", self.lambda_code)?;
         nonneg("lambda_vertex", self.lambda_vertex)?;
         nonneg("vertex_clip", self.vertex_clip)?;
         nonneg("input_noise", self.input_noise)?;

@@ -468,6 +468,8 @@ struct Partial {
     /// The least-squares encoder's `−(u·zᵀ + z·uᵀ)` (`[K, K]`), whose product with `C` is part
     /// of `∂L/∂C`.
     sym: Option<Vec<f32>>,
+    /// The code term (0 unless `lambda_code > 0`).
+    code: f64,
 }
 
 /// The loss and every gradient except `∂L/∂C`, in the order of the reference: forward pass,
@@ -586,6 +588,33 @@ fn backward_except_components(
         }
     }
     hinge /= k as f64;
+    // Code term (`lambda_code`): the last lane is the rest shape; every other lane's code is
+    // pulled towards its code, and its code towards theirs.
+    let mut code = 0.0f64;
+    if cfg.lambda_code > 0.0 && b_real > 1 {
+        let rest = b_real - 1;
+        let g = (cfg.lambda_code / rest as f64) as f32;
+        for kk in 0..k {
+            let (zrow, drow) = (&ws.zt[kk * bp..kk * bp + b_real], &mut ws.dzt[kk * bp..kk * bp + b_real]);
+            let zr = zrow[rest];
+            let mut pull = 0.0f32;
+            for j in 0..rest {
+                let d = zrow[j] - zr;
+                code += d.abs() as f64;
+                let s = g * if d > 0.0 {
+                    1.0
+                } else if d < 0.0 {
+                    -1.0
+                } else {
+                    0.0
+                };
+                drow[j] += s;
+                pull += s;
+            }
+            drow[rest] -= pull;
+        }
+        code /= rest as f64;
+    }
     // Least-squares encoder z = P⁻¹·C·f (P = C·Cᵀ + εI): with u = P⁻¹·dz, the encoder's part of
     // dC is u·fᵀ − (u·zᵀ + z·uᵀ)·C and dF = Cᵀ·u. ws.dzt becomes u; the −(…)·C part is
     // added with the rest of dC.
@@ -634,7 +663,7 @@ fn backward_except_components(
             std::mem::swap(&mut ws.d_a, &mut ws.d_b);
         }
     }
-    Partial { reconstruction, hinge, vertex, vertex_weight, sym }
+    Partial { reconstruction, hinge, vertex, vertex_weight, sym, code }
 }
 
 /// Loss and gradients for one batch.
@@ -668,12 +697,14 @@ fn terms(cfg: &AutoencoderConfig, part: &Partial, sparsity: f64, orthogonality: 
             + cfg.lambda1 * sparsity
             + cfg.lambda2 * part.hinge
             + cfg.lambda_orthogonal * orthogonality
-            + part.vertex_weight * part.vertex,
+            + part.vertex_weight * part.vertex
+            + cfg.lambda_code * part.code,
         reconstruction: part.reconstruction,
         sparsity,
         hinge: part.hinge,
         orthogonality,
         vertex: part.vertex,
+        code: part.code,
     }
 }
 
@@ -734,6 +765,7 @@ pub struct PartialLoss {
     hinge: f64,
     vertex: f64,
     vertex_weight: f64,
+    code: f64,
 }
 
 /// The loss of one batch (but its sparsity term) and the gradients of the layers, with `∂L/∂C`
@@ -765,6 +797,7 @@ pub fn loss_and_layer_grads(
         hinge: part.hinge,
         vertex: part.vertex,
         vertex_weight: part.vertex_weight,
+        code: part.code,
     }
 }
 
@@ -777,6 +810,7 @@ pub fn finish_loss(p: PartialLoss, maps: &SupportMaps, cfg: &AutoencoderConfig) 
         vertex: p.vertex,
         vertex_weight: p.vertex_weight,
         sym: None,
+        code: p.code,
     };
     terms(cfg, &part, sparsity_from_norms(maps), 0.0)
 }

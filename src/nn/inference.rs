@@ -113,7 +113,8 @@ pub struct ComponentExtreme {
 /// Result of the component analysis.
 #[derive(Debug, Clone, Serialize)]
 pub struct ComponentAnalysis {
-    /// Index of the reference shape in the analysed data.
+    /// Index of the reference shape in the analysed data (`usize::MAX`: a code given by the caller,
+    /// [`Autoencoder::analyze_codes_around`]).
     pub reference: usize,
     /// Code of the reference shape `Z_r` (K values).
     pub z_reference: Vec<f64>,
@@ -387,15 +388,34 @@ impl Autoencoder {
     /// [`Autoencoder::analyze_components`] from the training shapes' codes (what
     /// [`Autoencoder::encode`] gives), so that a caller who has them does not encode again.
     pub fn analyze_codes(&self, z: &[Vec<f64>], reference: usize) -> Result<ComponentAnalysis> {
-        let k = self.weights.k;
-        let n = self.weights.n;
         if reference >= z.len() {
             return Err(Error::Invalid(format!("reference frame {reference} is out of range ({} codes)", z.len())));
+        }
+        let mut a = self.analyze_codes_around(z, &z[reference])?;
+        a.reference = reference;
+        Ok(a)
+    }
+
+    /// [`Autoencoder::analyze_codes`] around a given reference code `zr` (K values: e.g. the
+    /// code of a rest shape that is not one of the analysed shapes; `reference` is then
+    /// `usize::MAX`). The extremes are still the codes' per-dimension minima and maxima.
+    pub fn analyze_codes_around(&self, z: &[Vec<f64>], zr: &[f64]) -> Result<ComponentAnalysis> {
+        let k = self.weights.k;
+        let n = self.weights.n;
+        let reference = usize::MAX;
+        if z.is_empty() {
+            return Err(Error::Invalid("component analysis: no codes".into()));
         }
         if let Some(i) = z.iter().position(|c| c.len() != k) {
             return Err(Error::Invalid(format!("code {i} has {} values, the model has {k} components", z[i].len())));
         }
-        let zr = z[reference].clone();
+        if zr.len() != k || zr.iter().any(|x| !x.is_finite()) {
+            return Err(Error::Invalid(format!(
+                "the reference code has {} values (the model {k}) or is not finite",
+                zr.len()
+            )));
+        }
+        let zr = zr.to_vec();
         let mut codes = vec![zr.clone()];
         let mut ranges = Vec::with_capacity(k);
         for kk in 0..k {

@@ -142,6 +142,10 @@ pub struct LossTerms {
     /// `lambda_vertex > 0`).
     #[serde(default)]
     pub vertex: f64,
+    /// `(1/B) Σ_b Σ_k |z_bk − z_rest,k|` over the lanes but the rest shape's (computed only when
+    /// `lambda_code > 0`).
+    #[serde(default)]
+    pub code: f64,
 }
 
 impl LossTerms {
@@ -153,6 +157,7 @@ impl LossTerms {
             && self.hinge.is_finite()
             && self.orthogonality.is_finite()
             && self.vertex.is_finite()
+            && self.code.is_finite()
     }
 }
 
@@ -420,9 +425,18 @@ pub fn reference_loss(
     let c = module.components_tensor().reshape([k, n, 9]);
     let norms = c.square().sum_dim(2).reshape([k, n]).clamp_min(NORM_EPS * NORM_EPS).sqrt();
     let sparsity = (norms * maps.to_tensor(&device)).sum().div_scalar(k as f32);
-    let hinge = z.abs().max_dim(0).sub_scalar(cfg.theta as f32).clamp_min(0.0).sum().div_scalar(k as f32);
+    let hinge = z.clone().abs().max_dim(0).sub_scalar(cfg.theta as f32).clamp_min(0.0).sum().div_scalar(k as f32);
     let mut total =
         recon.clone() + sparsity.clone().mul_scalar(cfg.lambda1 as f32) + hinge.clone().mul_scalar(cfg.lambda2 as f32);
+    // The code term: the last lane is the rest shape ([`AutoencoderConfig::lambda_code`]).
+    let mut code = None;
+    if cfg.lambda_code > 0.0 && b > 1 {
+        let others = z.clone().slice([0..b - 1, 0..k]);
+        let rest = z.slice([b - 1..b, 0..k]);
+        let c = (others - rest).abs().sum().div_scalar((b - 1) as f32);
+        total = total + c.clone().mul_scalar(cfg.lambda_code as f32);
+        code = Some(c);
+    }
     let mut orthogonality = None;
     if cfg.lambda_orthogonal > 0.0 {
         let c2 = module.components_tensor();
@@ -445,6 +459,7 @@ pub fn reference_loss(
         hinge: scalar(hinge.detach()),
         orthogonality: orthogonality.map(|o| scalar(o.detach())).unwrap_or(0.0),
         vertex: 0.0,
+        code: code.map(|c| scalar(c.detach())).unwrap_or(0.0),
     };
     (total, terms)
 }

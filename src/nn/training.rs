@@ -106,6 +106,9 @@ pub struct RunOptions {
     pub stall_check: Option<usize>,
 }
 
+/// Shapes per encode–decode run of [`Trainer::training_and_rest_error`].
+const TRAINING_ERROR_RUN: usize = 64;
+
 /// Steps whose mean reconstruction error the stall check compares with the first step's.
 pub const STALL_WINDOW: usize = 10;
 
@@ -218,6 +221,15 @@ pub struct Trainer<'a> {
     epoch_order: Option<(usize, Vec<usize>)>,
     /// [`feature_norm`] of the training data (sets [`Self::learning_rate_scale`]).
     feature_norm: f64,
+    /// The rest shape's scaled features (`9N`, vertex-major), the last lane of every batch when
+    /// `lambda_code > 0` ([`Self::with_rest`]).
+    rest: Option<Vec<f32>>,
+}
+
+/// Lanes a batch has besides its shapes and synthetic shapes: the rest shape's, when the code
+/// term needs it.
+fn rest_lanes(config: &AutoencoderConfig) -> usize {
+    usize::from(config.lambda_code > 0.0)
 }
 
 /// Root-mean-square over the training shapes of each shape's Euclidean norm of its scaled
@@ -328,7 +340,7 @@ impl<'a> Trainer<'a> {
     ) -> Result<Self> {
         let n = data.n_vertices();
         let b = config.batch_size.unwrap_or(data.n_shapes()).min(data.n_shapes());
-        let bp = padded_width(b + config.augment);
+        let bp = padded_width(b + config.augment + rest_lanes(&config));
         let workspace = Workspace::new(n, config.components, config.layers, bp);
         let full_batch =
             if b == data.n_shapes() { Some(data.batch_vcb_width(&(0..b).collect::<Vec<_>>(), bp)?) } else { None };
@@ -377,6 +389,7 @@ impl<'a> Trainer<'a> {
             vertex_lanes: Vec::new(),
             epoch_order: None,
             feature_norm: norm,
+            rest: None,
         })
     }
 
@@ -402,6 +415,56 @@ impl<'a> Trainer<'a> {
     pub fn with_output_loss(mut self, loss: &'a dyn OutputLoss) -> Self {
         self.output_loss = Some(loss);
         self
+    }
+
+    /// Gives the run the rest shape's scaled features (`9N`, vertex-major, as
+    /// [`TrainingData::shape`] gives a shape), which every batch carries as its last lane when
+    /// `lambda_code > 0` ([`AutoencoderConfig::lambda_code`]).
+    pub fn with_rest(mut self, features: &[f32]) -> Result<Self> {
+        let n = self.data.n_vertices();
+        if features.len() != 9 * n || features.iter().any(|x| !x.is_finite()) {
+            return Err(Error::Invalid(format!(
+                "the rest shape's features have {} values (the mesh {}) or a non-finite one",
+                features.len(),
+                9 * n
+            )));
+        }
+        self.rest = Some(features.to_vec());
+        if let Some(x) = self.full_batch.as_mut()
+            && rest_lanes(&self.config) > 0
+        {
+            let bp = self.workspace.width();
+            let lane =
+                self.config.batch_size.unwrap_or(self.data.n_shapes()).min(self.data.n_shapes()) + self.config.augment;
+            for (row, &v) in features.iter().enumerate() {
+                x[row * bp + lane] = v;
+            }
+        }
+        Ok(self)
+    }
+
+    /// The encode–decode feature error of the current parameters on the training shapes, and
+    /// the error of decoding every shape as the rest shape (`features`, as [`Self::with_rest`]
+    /// takes them): means over the shapes of the squared error, in scaled units. A run whose
+    /// decoding is no better than the rest shape did not train.
+    pub fn training_and_rest_error(&mut self, rest: &[f32]) -> Result<(f64, f64)> {
+        let n_shapes = self.data.n_shapes();
+        let bp = padded_width(TRAINING_ERROR_RUN.min(n_shapes));
+        let mut ws = Workspace::new(self.data.n_vertices(), self.config.components, self.config.layers, bp);
+        self.check_parameters()?;
+        let (mut model, mut base) = (0.0f64, 0.0f64);
+        for start in (0..n_shapes).step_by(TRAINING_ERROR_RUN) {
+            let idx: Vec<usize> = (start..(start + TRAINING_ERROR_RUN).min(n_shapes)).collect();
+            let x = self.data.batch_vcb_width(&idx, bp)?;
+            model += feature_error(&mut ws, &self.weights, self.neighbors, &x, idx.len()) * idx.len() as f64;
+            for (row, &r) in rest.iter().enumerate() {
+                for j in 0..idx.len() {
+                    let d = (x[row * bp + j] - r) as f64;
+                    base += d * d;
+                }
+            }
+        }
+        Ok((model / n_shapes.max(1) as f64, base / n_shapes.max(1) as f64))
     }
 
     /// Gives the run held-out shapes (`config.validation > 0`): every `validate_every` steps
@@ -625,6 +688,15 @@ impl<'a> Trainer<'a> {
                 aug.draw(&|s| data.shape(s), n_shapes, &mut self.rng, |row, v| x[row * bp + b + j] = v)?;
             }
         }
+        let r = rest_lanes(&self.config);
+        if r > 0 {
+            let rest = self.rest.as_ref().ok_or_else(|| {
+                Error::config("lambda_code", "needs the rest shape's features (Trainer::with_rest)".to_string())
+            })?;
+            for (row, &v) in rest.iter().enumerate() {
+                x[row * bp + b + m] = v;
+            }
+        }
         // Denoising: the encoder reads the batch plus fresh Gaussian noise on its real lanes; the
         // decoding is compared with the clean batch.
         let sigma = self.config.input_noise;
@@ -660,7 +732,7 @@ impl<'a> Trainer<'a> {
                 let encoded = std::mem::take(&mut self.encoded_ahead);
                 let (rows, partial) = rayon::join(
                     || SupportMaps::query_rows(&plan, n, cfg, dist),
-                    || engine::loss_and_layer_grads(ws, w, nb, x, target, b + m, cfg, grads, encoded, output_term),
+                    || engine::loss_and_layer_grads(ws, w, nb, x, target, b + m + r, cfg, grads, encoded, output_term),
                 );
                 self.maps.apply_update(plan, rows)?;
                 engine::finish_loss(partial, &self.maps, &self.config)
@@ -671,7 +743,7 @@ impl<'a> Trainer<'a> {
                 self.neighbors,
                 x,
                 target,
-                b + m,
+                b + m + r,
                 &self.maps,
                 &self.config,
                 &mut self.grads,
@@ -744,22 +816,36 @@ impl<'a> Trainer<'a> {
         let layers = self.layers.take().expect("layers present between steps");
         let components = AutoencoderModule::component_blocks(&self.weights.c, self.weights.n, &self.device);
         let module = AutoencoderModule { layers, components };
-        let x = match &self.augmenter {
-            None => self.data.batch_tensor(idx, &self.device)?,
-            Some(aug) => {
-                let (n, m) = (self.data.n_vertices(), self.config.augment);
-                let mut v = Vec::with_capacity((idx.len() + m) * n * 9);
+        let rest = if rest_lanes(&self.config) > 0 {
+            Some(self.rest.clone().ok_or_else(|| {
+                Error::config("lambda_code", "needs the rest shape's features (Trainer::with_rest)".to_string())
+            })?)
+        } else {
+            None
+        };
+        let x = match (&self.augmenter, rest) {
+            (None, None) => self.data.batch_tensor(idx, &self.device)?,
+            (aug, rest) => {
+                let n = self.data.n_vertices();
+                let m = if aug.is_some() { self.config.augment } else { 0 };
+                let lanes = idx.len() + m + usize::from(rest.is_some());
+                let mut v = Vec::with_capacity(lanes * n * 9);
                 for &s in idx {
                     v.extend_from_slice(&self.data.shape(s)?);
                 }
                 let data = self.data;
-                for _ in 0..m {
-                    let start = v.len();
-                    v.resize(start + n * 9, 0.0);
-                    let dst = &mut v[start..];
-                    aug.draw(&|s| data.shape(s), data.n_shapes(), &mut self.rng, |row, x| dst[row] = x)?;
+                if let Some(aug) = aug {
+                    for _ in 0..m {
+                        let start = v.len();
+                        v.resize(start + n * 9, 0.0);
+                        let dst = &mut v[start..];
+                        aug.draw(&|s| data.shape(s), data.n_shapes(), &mut self.rng, |row, x| dst[row] = x)?;
+                    }
                 }
-                Tensor::from_data(TensorData::new(v, [idx.len() + m, n, 9]), &self.device)
+                if let Some(r) = rest {
+                    v.extend_from_slice(&r);
+                }
+                Tensor::from_data(TensorData::new(v, [lanes, n, 9]), &self.device)
             }
         };
         let (loss, terms) = reference_loss(&module, x, nb, &self.maps, &self.config);

@@ -73,8 +73,14 @@ pub struct AeHeader {
     pub components: usize,
     /// Names of the training frames (rows of `train_codes`).
     pub train_frames: Vec<String>,
-    /// Index (into the training frames) of the reference shape of the component analysis.
+    /// Index (into the training frames) of the reference shape of the component analysis (the
+    /// dial origin) when `rest_code` is absent (models trained before it).
     pub reference: usize,
+    /// The code of the rest mesh (`data.rest`), the encoder's with its residual passes and
+    /// vertex steps: the reference code Z_r of the component analysis and of synthesis (dials
+    /// 0 decode to the rest shape, whatever the training frames are).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rest_code: Option<Vec<f64>>,
     /// Component analysis: per latent dimension (index = dimension) the extreme code kept,
     /// the feature-space distance, its rank (0 = largest) and centre vertex.
     pub analysis: Vec<ComponentSummary>,
@@ -188,6 +194,15 @@ impl AeArtifact {
                 c.rank
             )));
         }
+        if let Some(z) = &header.rest_code
+            && (z.len() != k || z.iter().any(|x| !x.is_finite()))
+        {
+            return Err(Error::parse(
+                dir.join("model.json"),
+                None,
+                format!("`rest_code` has {} numbers (the model {k} dimensions) or a non-finite one", z.len()),
+            ));
+        }
         let train_codes = codes.chunks_exact(k.max(1)).map(<[f64]>::to_vec).collect();
         Ok(AeArtifact { header, rest, representation, model, train_codes })
     }
@@ -270,9 +285,13 @@ impl AeArtifact {
         Ok(frames)
     }
 
-    /// The reference shape's code Z_r.
+    /// The reference shape's code Z_r: the rest mesh's (models trained before it was stored:
+    /// the reference training frame's).
     pub fn reference_code(&self) -> &[f64] {
-        &self.train_codes[self.header.reference]
+        match &self.header.rest_code {
+            Some(z) => z,
+            None => &self.train_codes[self.header.reference],
+        }
     }
 
     /// Synthesis code: z_i = Z_r,i + (Z_h,i − Z_r,i)·w_i for the given (dimension, weight)
@@ -572,7 +591,7 @@ fn piece_summaries(
     representation: &Representation,
     k: usize,
     train_t: &[Vec<Vec3>],
-    reference: usize,
+    reference: &[f64],
 ) -> Vec<ComponentSummary> {
     let Some((placement, _)) = representation.pieces() else {
         return Vec::new();
@@ -589,7 +608,7 @@ fn piece_summaries(
             .unwrap_or(0);
         for axis in 0..3 {
             let values: Vec<f64> = train_t.iter().map(|t| t[p][axis]).collect();
-            let zr = values.get(reference).copied().unwrap_or(0.0);
+            let zr = reference.get(3 * j + axis).copied().unwrap_or(0.0);
             let (lo, hi) = values.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &v| (l.min(v), h.max(v)));
             let (lo, hi) = if lo <= hi { (lo, hi) } else { (0.0, 0.0) };
             let extreme = if (hi - zr).abs() >= (lo - zr).abs() { hi } else { lo };
@@ -718,6 +737,13 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
         );
     }
     let (scaling, all, xs_train, train_t) = features;
+    // The rest shape's scaled features: the code term's lane (`lambda_code`) and the baseline of
+    // the check that a run trained at all.
+    let rest_features: Vec<f32> = {
+        let seq = single_frame(&prep.rest, &prep.rest.positions)?;
+        let (own, _) = representation.split_pieces(representation.encode(&seq)?)?;
+        scaling.apply(&own)?.data.iter().map(|&x| x as f32).collect()
+    };
     let representation_seconds = t_rep.elapsed().as_secs_f64();
 
     ctx.progress.stage("geodesics", 0);
@@ -772,6 +798,7 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
         if let Some(v) = &vertex_loss {
             trainer = trainer.with_output_loss(v);
         }
+        trainer = trainer.with_rest(&rest_features)?;
         Ok(trainer)
     };
     let mut trainer = make_trainer(ae_cfg.restarted(restart), resumed)?;
@@ -797,19 +824,26 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
     progress.step(trainer.iteration() as u64, "");
     let t_train = Instant::now();
     let mut log_error: Option<std::io::Error> = None;
+    // The reconstruction error of every step of the current attempt (the end-of-run check).
+    let mut recs: Vec<f64> = Vec::new();
+    let mut warning = None;
     let summary = loop {
         let stall_check = if restart < ae_cfg.stall_restarts { stall_check_step(ae_cfg.iterations) } else { None };
         let options = RunOptions { checkpoint: Some(checkpoint.clone()), stop: ctx.stop.clone(), stall_check };
         let summary = trainer.run(&options, |r| {
         let l = &r.loss;
+        recs.push(l.reconstruction);
         let line = format!(
-            "{{\"iteration\":{},\"loss\":{},\"reconstruction\":{},\"sparsity\":{},\"hinge\":{},\"orthogonality\":{},\"vertex\":{},\"step_seconds\":{},\"checkpoint\":{}}}\n",
-            r.iteration, l.total, l.reconstruction, l.sparsity, l.hinge, l.orthogonality, l.vertex, r.step_seconds, r.checkpointed
+            "{{\"iteration\":{},\"loss\":{},\"reconstruction\":{},\"sparsity\":{},\"hinge\":{},\"orthogonality\":{},\"vertex\":{},\"code\":{},\"step_seconds\":{},\"checkpoint\":{}}}\n",
+            r.iteration, l.total, l.reconstruction, l.sparsity, l.hinge, l.orthogonality, l.vertex, l.code, r.step_seconds, r.checkpointed
         );
         if let Err(e) = log.write_all(line.as_bytes()) {
             log_error.get_or_insert(e);
         }
-        let vertex = if l.vertex > 0.0 { format!(", vertex {:.4}", l.vertex) } else { String::new() };
+        let mut vertex = if l.vertex > 0.0 { format!(", vertex {:.4}", l.vertex) } else { String::new() };
+        if l.code > 0.0 {
+            vertex.push_str(&format!(", code {:.4}", l.code));
+        }
         progress.step(
             r.iteration as u64,
             &format!(
@@ -818,18 +852,62 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
             ),
         );
         })?;
-        if !summary.stalled {
-            break summary;
+        let mut why = None;
+        if summary.stalled {
+            why = Some(format!(
+                "training stalled (mean reconstruction error of the last {STALL_WINDOW} steps at step {} is at or \
+                 above the first step's)",
+                summary.iterations_done
+            ));
+        } else if !summary.stopped {
+            // A run that ended without learning the shapes: its decoding is no better than the
+            // rest shape's for every training shape.
+            let (err, base) = trainer.training_and_rest_error(&rest_features)?;
+            if err >= NOT_TRAINED_RATIO * base {
+                let improving = still_improving(&recs);
+                let text = format!(
+                    "the autoencoder did not train: after {} steps its decoding of the training shapes has a feature \
+                     error of {err:.4}, {:.0} % of decoding every shape as the rest shape ({base:.4})",
+                    summary.iterations_done,
+                    100.0 * err / base.max(f64::MIN_POSITIVE)
+                );
+                let line = format!("{{\"not_trained\":true,\"feature_error\":{err},\"rest_error\":{base}}}\n");
+                if let Err(e) = log.write_all(line.as_bytes()) {
+                    log_error.get_or_insert(e);
+                }
+                if !improving && restart < ae_cfg.stall_restarts {
+                    why = Some(text);
+                } else {
+                    let advice = if improving {
+                        format!(
+                            "its error was still falling at the last step: raise `method.iterations` (now {})",
+                            ae_cfg.iterations
+                        )
+                    } else {
+                        format!(
+                            "restarts with halved step sizes did not help (`method.stall_restarts` = {}): lower \
+                             `method.learning_rate` or raise `method.iterations`",
+                            ae_cfg.stall_restarts
+                        )
+                    };
+                    let w = format!("{text}; {advice}");
+                    eprintln!("warning: {w}");
+                    warning = Some(w);
+                }
+            }
         }
-        // Stalled: start again from the same initialisation with halved step sizes; the log
-        // restarts with it (no checkpoint of the stalled run was written after the check).
+        let Some(why) = why else {
+            break summary;
+        };
+        // Start again from the same initialisation with halved step sizes; the log restarts with
+        // it (no checkpoint of the failed attempt was written after the check).
         restart += 1;
+        recs.clear();
         let cfg = ae_cfg.restarted(restart);
         progress.finish_stage();
         eprintln!(
-            "note: training stalled (mean reconstruction error of the last {STALL_WINDOW} steps at step {} is at or \
-             above the first step's): restart {restart} of at most {} with step sizes halved (learning_rate {:e})",
-            summary.iterations_done, ae_cfg.stall_restarts, cfg.learning_rate
+            "note: {why}: restart {restart} of at most {} with step sizes halved (learning_rate {:e})",
+            ae_cfg.stall_restarts, cfg.learning_rate
         );
         log.set_len(0).map_err(|e| Error::io(&log_path, e))?;
         log.seek(std::io::SeekFrom::Start(0)).map_err(|e| Error::io(&log_path, e))?;
@@ -880,23 +958,37 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
             codes
         }
     };
-    let analysis = model.analyze_codes(&train_codes, 0)?;
-    append_translations(&representation, &mut train_codes, &train_t);
+    // The dial origin: the rest mesh's own code (encoded as any shape is, residual passes and
+    // vertex steps included), so that all dials 0 decode to the rest shape.
+    let mut art = AeArtifact {
+        header: AeHeader {
+            method: MethodKind::Autoencoder.name().into(),
+            representation: RepresentationKind::Acap.name().into(),
+            consistency: m.consistency.name().into(),
+            scaling,
+            unit_box: prep.unit_box,
+            components: ae_cfg.components,
+            train_frames: prep.train_names(),
+            reference: 0,
+            rest_code: None,
+            analysis: Vec::new(),
+        },
+        rest: prep.rest.clone(),
+        representation,
+        model,
+        train_codes: Vec::new(),
+    };
+    let rest = art.rest_in_data_units();
+    let rest_code = art.encode_frames(&single_frame(&rest, &rest.positions)?)?.remove(0);
+    let k = ae_cfg.components;
+    let analysis = art.model.analyze_codes_around(&train_codes, &rest_code[..k])?;
+    append_translations(&art.representation, &mut train_codes, &train_t);
     let mut summaries: Vec<ComponentSummary> = analysis.components.iter().map(|c| c.summary.clone()).collect();
     summaries.sort_by_key(|c| c.dim);
-    summaries.extend(piece_summaries(&representation, ae_cfg.components, &train_t, 0));
-    let header = AeHeader {
-        method: MethodKind::Autoencoder.name().into(),
-        representation: RepresentationKind::Acap.name().into(),
-        consistency: m.consistency.name().into(),
-        scaling,
-        unit_box: prep.unit_box,
-        components: ae_cfg.components,
-        train_frames: prep.train_names(),
-        reference: 0,
-        analysis: summaries,
-    };
-    let art = AeArtifact { header, rest: prep.rest.clone(), representation, model, train_codes };
+    summaries.extend(piece_summaries(&art.representation, ae_cfg.components, &train_t, &art_rest_t(&rest_code, k)));
+    art.header.analysis = summaries;
+    art.header.rest_code = Some(rest_code);
+    art.train_codes = train_codes;
     let locality = component_locality_of(&art, &distances, [ae_cfg.d_min, ae_cfg.d_max]);
     Ok(Fitted {
         model: Box::new(art),
@@ -909,6 +1001,7 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
             locality,
             refine_test: m.fit_test,
             feature_norm: Some((feature_norm, scale)),
+            warning,
         },
         method: MethodConfig::Autoencoder(m.clone()),
     })
@@ -932,6 +1025,27 @@ fn component_locality_of(art: &AeArtifact, distances: &GeodesicSupport, support:
             component_locality(center, &norms, &ramp)
         })
         .collect()
+}
+
+/// The piece translations of a full code (its values after the network's K).
+fn art_rest_t(code: &[f64], k: usize) -> Vec<f64> {
+    code.get(k..).map(<[f64]>::to_vec).unwrap_or_default()
+}
+
+/// A run whose encode–decode feature error on the training shapes is at least this share of
+/// decoding every shape as the rest shape did not train (healthy runs end at a few per cent).
+pub const NOT_TRAINED_RATIO: f64 = 0.8;
+
+/// Whether the reconstruction error was still falling at the end of a run: the mean of its last
+/// tenth of steps is below 90 % of the tenth before.
+fn still_improving(recs: &[f64]) -> bool {
+    let w = (recs.len() / 10).max(1);
+    if recs.len() < 2 * w {
+        return true;
+    }
+    let mean = |s: &[f64]| s.iter().sum::<f64>() / s.len() as f64;
+    let n = recs.len();
+    mean(&recs[n - w..]) < 0.9 * mean(&recs[n - 2 * w..n - w])
 }
 
 /// Where a stopped or finished run keeps its checkpoint.

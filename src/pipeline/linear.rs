@@ -437,6 +437,7 @@ pub fn fit_splocs(m: &SplocsMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -
             locality: fit.locality,
             refine_test: false,
             feature_norm: None,
+            warning: None,
         },
         method: MethodConfig::Splocs(m.clone()),
     })

@@ -63,12 +63,23 @@ pub struct Metrics {
     pub median_support_size: Option<f64>,
     /// Per-component locality, in component order.
     pub locality: Vec<ComponentLocality>,
+    /// Vertex-space locality: per component (index order), the vertices it moves by more than
+    /// 5 % of its peak, read around the rest shape ([`crate::model::component_fields`]).
+    #[serde(default)]
+    pub vertex_support: Vec<usize>,
+    /// Median over the components of that count as a share of the vertices.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub median_vertex_support: Option<f64>,
     /// Autoencoder only: root-mean-square norm per training shape of the scaled training
     /// features, and the factor it put on every step size (`learning_rate_norm`; 1: none).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub feature_norm: Option<f64>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub learning_rate_scale: Option<f64>,
+    /// A warning about the fit (the autoencoder: a run whose decoding is no better than the rest
+    /// shape), also printed by `meshdeco train`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub training_warning: Option<String>,
 }
 
 /// Median of a slice (mean of the two middle values for even lengths); `None` when empty.

@@ -197,6 +197,26 @@ pub fn fit(m: &RegionPcaMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> Re
     let train_seconds = t.elapsed().as_secs_f64();
     ctx.progress.step(1, &format!("{} regions", seg.n_regions()));
     ctx.progress.finish_stage();
+    let how = match (sc.regions, seg.searched_on) {
+        (Some(k), _) => format!("the `regions` = {k} asked for"),
+        (None, false) if sc.keep_searching => {
+            format!("the largest compact k up to `max_regions` = {}", sc.max_regions)
+        }
+        (None, false) => format!("k grew until a region was not compact, at most `max_regions` = {}", sc.max_regions),
+        (None, true) => format!(
+            "k = 2 was not compact, so the search went on to `max_regions` = {} and kept the largest compact k",
+            sc.max_regions
+        ),
+    };
+    eprintln!("note: region-pca segmented the mesh into {} regions ({how})", seg.n_regions());
+    if seg.n_regions() == 1 && sc.regions.is_none() {
+        eprintln!(
+            "warning: region-pca found a single region, which is holistic PCA: no k up to `max_regions` = {} gave \
+             compact regions on these training frames. Set `method.regions` to a count, raise `method.max_regions`, \
+             or loosen the segmentation (`method.min_piece` 0.3, `method.threshold`, `method.lambda`, `method.r`)",
+            sc.max_regions
+        );
+    }
 
     let mut artifact = RegionArtifact {
         header: RegionHeader {

@@ -48,6 +48,9 @@ pub struct FitStats {
     /// Autoencoder: the training features' root-mean-square norm per shape and the factor it
     /// put on every step size (`learning_rate_norm`).
     pub feature_norm: Option<(f64, f64)>,
+    /// A warning about the fit that the artefact keeps (`metrics.json`'s `training_warning`):
+    /// the autoencoder's run that did not train.
+    pub warning: Option<String>,
 }
 
 /// A fitted model with its statistics and the resolved method config (every default written

@@ -173,6 +173,13 @@ fn fit_measure_write(
         let codes = model.encode(&v)?;
         Some(erms(&v.frames, &model.decode(&codes)?, alignment)?)
     };
+    // Vertex-space locality: each component's field around the rest shape.
+    let vertex_support: Vec<usize> = crate::model::component_fields(model.as_ref())?
+        .iter()
+        .map(|f| crate::metrics::recovery::support_size(f))
+        .collect();
+    let n_vertices = prep.rest.n_vertices().max(1) as f64;
+    let vertex_shares: Vec<f64> = vertex_support.iter().map(|&s| s as f64 / n_vertices).collect();
     let shares: Vec<f64> = stats.locality.iter().map(|l| l.energy_share).collect();
     let sizes: Vec<f64> = stats.locality.iter().map(|l| l.support_size as f64).collect();
     let metrics = Metrics {
@@ -197,8 +204,11 @@ fn fit_measure_write(
         median_energy_share: median(&shares),
         median_support_size: median(&sizes),
         locality: stats.locality,
+        vertex_support,
+        median_vertex_support: median(&vertex_shares),
         feature_norm: stats.feature_norm.map(|(n, _)| n),
         learning_rate_scale: stats.feature_norm.map(|(_, s)| s),
+        training_warning: stats.warning.clone(),
     };
 
     crate::timing::record("measure", t.elapsed().as_secs_f64());

@@ -1,0 +1,213 @@
+//! Ground truth for the components (issue 53): `meshdeco plant` writes a set with known
+//! localized deformations, `meshdeco eval` scores every cell's components against them, the
+//! autoencoder's dials start at the rest shape's code, region PCA says how many regions it found.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+
+use common::{fresh_dir, meshdeco, output_text, png_ink};
+
+/// A capped-free tube (open cylinder) written as OBJ: the mesh the deformations are planted on.
+fn tube(dir: &Path) -> PathBuf {
+    let m = meshdeco::mesh::primitives::cylinder(32, 40, 0.3, 2.0);
+    let p = dir.join("tube.obj");
+    meshdeco::mesh::write_obj(&p, &m).unwrap();
+    p
+}
+
+fn plant(dir: &Path, out: &str, extra: &[&str]) -> std::process::Output {
+    let t = tube(dir);
+    let mut args = vec!["plant", t.to_str().unwrap(), "--out", out];
+    args.extend_from_slice(extra);
+    meshdeco(&args, dir)
+}
+
+fn csv_rows(path: &Path) -> Vec<std::collections::HashMap<String, String>> {
+    let text = std::fs::read_to_string(path).unwrap();
+    let mut lines = text.lines();
+    let head: Vec<String> = lines.next().unwrap().split(',').map(str::to_string).collect();
+    lines.map(|l| head.iter().cloned().zip(l.split(',').map(str::to_string)).collect()).collect()
+}
+
+#[test]
+fn eval_scores_the_components_against_the_planted_deformations() {
+    let d = fresh_dir("planted", "eval");
+    let o = plant(
+        &d,
+        "set",
+        &["--deformations", "6", "--train", "80", "--test", "20", "--noise", "0", "--radius", "0.1,0.2", "--seed", "3"],
+    );
+    assert!(o.status.success(), "{}", output_text(&o));
+    let text = output_text(&o);
+    assert!(text.contains("6 deformations") && text.contains("identifiable"), "{text}");
+    for f in ["frames.npy", "template.obj", "fields.npy", "weights.csv", "truth.json", "eval.toml", "manifest.json"] {
+        assert!(d.join("set").join(f).is_file(), "{f} missing");
+    }
+    let truth: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(d.join("set/truth.json")).unwrap()).unwrap();
+    assert_eq!(truth["deformations"].as_array().unwrap().len(), 6);
+    assert_eq!(truth["train"], 80);
+    // Without noise, the true fields reconstruct every pull and stretch exactly; hinges are arcs.
+    let oracle = truth["oracle_test_erms"].as_f64().unwrap();
+    assert!(oracle < 0.5 * truth["rest_test_erms"].as_f64().unwrap(), "oracle {oracle}");
+
+    std::fs::write(
+        d.join("eval.toml"),
+        "name = \"planted\"\n[[dataset]]\nname = \"tube\"\ntruth = \"set\"\n\
+         [[method]]\nlabel = \"pca\"\nkind = \"pca\"\n\
+         [[method]]\nlabel = \"splocs\"\nkind = \"splocs\"\n\
+         [sweep]\ncomponents = [7]\n",
+    )
+    .unwrap();
+    let o = meshdeco(&["eval", "--config", "eval.toml", "--out", "ev"], &d);
+    assert!(o.status.success(), "{}", output_text(&o));
+    let rows = csv_rows(&d.join("ev/results.csv"));
+    let get = |m: &str, col: &str| -> f64 {
+        rows.iter().find(|r| r["method"] == m).unwrap()[col].parse().unwrap_or_else(|_| panic!("{m} {col}"))
+    };
+    // Localized components find the planted deformations; PCA's global ones do not.
+    let (found_s, found_p) = (get("splocs", "recovery_found"), get("pca", "recovery_found"));
+    assert_eq!(get("splocs", "recovery_total"), 6.0);
+    assert!(found_s >= 4.0, "SPLOCS found {found_s} of 6");
+    assert!(found_s > found_p, "SPLOCS {found_s} vs PCA {found_p}");
+    assert!(get("splocs", "recovery_median_abs_cos") > get("pca", "recovery_median_abs_cos"));
+    assert!(get("splocs", "vertex_support") < get("pca", "vertex_support"), "SPLOCS components should be local");
+    // Per deformation, in the cell; the report's table and plot.
+    let rec: Vec<serde_json::Value> =
+        serde_json::from_str(&std::fs::read_to_string(d.join("ev/cells/tube/splocs/K7/recovery.json")).unwrap())
+            .unwrap();
+    assert_eq!(rec.len(), 6);
+    assert!(rec.iter().all(|r| r["abs_cos"].as_f64().unwrap() <= 1.0 + 1e-12 && r["component"].as_u64().unwrap() < 7));
+    let report = std::fs::read_to_string(d.join("ev/report.md")).unwrap();
+    assert!(report.contains("recovery of the planted deformations"), "{report}");
+    let (_, _, ink, _) = png_ink(&d.join("ev/recovery_tube.png"));
+    assert!(ink > 0.01);
+    // metrics.json of every cell has the vertex-space locality.
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(d.join("ev/cells/tube/pca/K7/metrics.json")).unwrap()).unwrap();
+    assert_eq!(m["vertex_support"].as_array().unwrap().len(), 7);
+
+    // Planting again (another seed) changes the truth: the cached cells are scored again.
+    let o = plant(&d, "set", &["--deformations", "6", "--train", "80", "--test", "20", "--seed", "4"]);
+    assert!(o.status.success(), "{}", output_text(&o));
+    let o = meshdeco(&["eval", "--config", "eval.toml", "--out", "ev"], &d);
+    assert!(o.status.success(), "{}", output_text(&o));
+    let key = |s: &str| s.to_string();
+    let cell: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(d.join("ev/cells/tube/pca/K7/cell.json")).unwrap()).unwrap();
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(d.join("set/manifest.json")).unwrap()).unwrap();
+    assert!(
+        cell["recovery"]["truth_key"]
+            .as_str()
+            .unwrap()
+            .contains(&key(m["files"]["fields.npy"]["crc32"].as_str().unwrap())),
+        "the cell was not scored against the new truth"
+    );
+    let _ = std::fs::remove_dir_all(&d);
+}
+
+#[test]
+fn plant_refuses_bad_flags_and_a_damaged_truth() {
+    let d = fresh_dir("planted", "bad");
+    for (args, flag) in [
+        (vec!["--noise=-1"], "--noise"),
+        (vec!["--max-active", "0"], "--max-active"),
+        (vec!["--radius", "0.3,0.1"], "--radius"),
+        (vec!["--radius", "x"], "--radius"),
+        (vec!["--deformations", "0"], "--deformations"),
+        (vec!["--mirror", "w"], "--mirror"),
+        (vec!["--vertices", "10"], "--vertices"),
+    ] {
+        let o = plant(&d, "bad", &args);
+        assert_eq!(o.status.code(), Some(1), "{args:?}: {}", output_text(&o));
+        assert!(output_text(&o).contains(flag), "{args:?}: {}", output_text(&o));
+        assert!(!d.join("bad").exists(), "{args:?} left an output behind");
+    }
+    let o = plant(&d, "set", &["--deformations", "4", "--train", "30", "--test", "10"]);
+    assert!(o.status.success(), "{}", output_text(&o));
+    let f = d.join("set/fields.npy");
+    let mut bytes = std::fs::read(&f).unwrap();
+    let at = bytes.len() - 3;
+    bytes[at] ^= 0x20;
+    std::fs::write(&f, bytes).unwrap();
+    std::fs::write(
+        d.join("eval.toml"),
+        "name = \"x\"\n[[dataset]]\nname = \"t\"\ntruth = \"set\"\n[[method]]\nlabel = \"pca\"\nkind = \"pca\"\n[sweep]\ncomponents = [3]\n",
+    )
+    .unwrap();
+    let o = meshdeco(&["eval", "--config", "eval.toml", "--out", "ev"], &d);
+    let text = output_text(&o);
+    assert!(text.contains("fields.npy") && text.contains("changed or damaged"), "{text}");
+    let _ = std::fs::remove_dir_all(&d);
+}
+
+#[test]
+fn the_autoencoders_dials_start_at_the_rest_shape_and_region_pca_names_its_regions() {
+    let d = fresh_dir("planted", "origin");
+    let o = plant(&d, "set", &["--deformations", "4", "--train", "40", "--test", "10", "--noise", "0"]);
+    assert!(o.status.success(), "{}", output_text(&o));
+    let data = "path = \"set/frames.npy\"\ntemplate = \"set/template.obj\"\nrest = \"set/template.obj\"\ntrain = \"1-40\"\ntest = \"41-50\"";
+    let model = common::train_cli(
+        &d,
+        "ae",
+        data,
+        "kind = \"autoencoder\"\ncomponents = 5\niterations = 40\nfit_test = false\nencoder_steps = 1",
+    );
+    // All dials 0 decode the rest shape's own code: the model's encoding of the rest mesh.
+    let o = meshdeco(&["synthesize", model.to_str().unwrap(), "--weights", "0:0", "--out", "zero.obj"], &d);
+    assert!(o.status.success(), "{}", output_text(&o));
+    let o = meshdeco(&["encode", model.to_str().unwrap(), "set/template.obj", "--out", "enc"], &d);
+    assert!(o.status.success(), "{}", output_text(&o));
+    let zero = common::obj_vertices(&d.join("zero.obj"));
+    let enc_dir = d.join("enc");
+    let rec_file = std::fs::read_dir(&enc_dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .find(|p| p.extension().is_some_and(|x| x == "obj"))
+        .expect("a reconstruction");
+    let enc = common::obj_vertices(&rec_file);
+    let gap = zero.iter().zip(&enc).map(|(a, b)| meshdeco::mesh::dist(*a, *b)).fold(0.0, f64::max);
+    assert!(gap < 1e-6, "dials 0 decode {gap} away from the rest mesh's encoding");
+    // Region PCA says how many regions it segmented the mesh into.
+    let cfg = d.join("region.toml");
+    std::fs::write(&cfg, format!("name = \"r\"\n[data]\n{data}\n[method]\nkind = \"region-pca\"\ncomponents = 8\n"))
+        .unwrap();
+    let o = meshdeco(&["train", "--config", "region.toml", "--out", "region"], &d);
+    assert!(o.status.success(), "{}", output_text(&o));
+    assert!(output_text(&o).contains("region-pca segmented the mesh into"), "{}", output_text(&o));
+    let _ = std::fs::remove_dir_all(&d);
+}
+
+/// A run that ends before it learned the shapes says so (issue 53): its decoding is no better
+/// than the rest shape's, `meshdeco train` warns, naming the key to change, and `metrics.json`
+/// keeps the warning; a run long enough to train does not warn.
+#[test]
+fn a_run_stopped_too_early_says_it_did_not_train() {
+    let d = fresh_dir("planted", "untrained");
+    let data = "path = \"synthetic:tube\"\ntrain = \"every:3\"\ntest = \"rest\"";
+    let run = |name: &str, iterations: usize| {
+        let cfg = d.join(format!("{name}.toml"));
+        std::fs::write(
+            &cfg,
+            format!(
+                "name = \"{name}\"\n[data]\n{data}\n[method]\nkind = \"autoencoder\"\ncomponents = 8\n\
+                 iterations = {iterations}\nfit_test = false\n"
+            ),
+        )
+        .unwrap();
+        let o = meshdeco(&["train", "--config", cfg.to_str().unwrap(), "--out", name], &d);
+        assert!(o.status.success(), "{}", output_text(&o));
+        let m: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(d.join(name).join("metrics.json")).unwrap()).unwrap();
+        (output_text(&o), m)
+    };
+    let (text, m) = run("early", 5);
+    assert!(text.contains("warning: the autoencoder did not train") && text.contains("method.iterations"), "{text}");
+    assert!(m["training_warning"].as_str().is_some_and(|w| w.contains("did not train")), "{m}");
+    let (text, m) = run("trained", 600);
+    assert!(!text.contains("did not train"), "{text}");
+    assert!(m.get("training_warning").is_none(), "{m}");
+    let _ = std::fs::remove_dir_all(&d);
+}
