@@ -745,8 +745,9 @@ fn feature_cache_ranges_changed_behind_a_rerecorded_checksum_are_recomputed() {
 
 /// Issue 55, cause 6: `--resume` of a run that has no steps left writes the same `objective`
 /// to the bit (its last loss comes from the checkpoint's JSON header, which now stores floats
-/// exactly). With seed 3 this run's objective, 146.25613565452593, is one that a plain JSON
-/// read gives back one unit in the last place off (before: 146.2561356545259).
+/// exactly). With seed 3 this run's objective, 146.25613565452593, is one that serde_json's
+/// default parser read back one unit in the last place off (before: 146.2561356545259; the
+/// crate is now also built with serde_json's `float_roundtrip`).
 #[test]
 fn a_resume_after_the_last_step_keeps_the_objective_to_the_bit() {
     let d = tmp("resume-exact");

@@ -775,6 +775,13 @@ mod tests {
         assert_eq!(CachePolicy::parse("off"), CachePolicy::Off);
         assert_eq!(CachePolicy::parse("/x/y"), CachePolicy::Dir("/x/y".into()));
         assert_eq!(CachePolicy::Auto.folder(AUTO_MIN_BYTES - 1), None);
+        // From AUTO_MIN_BYTES on, the default folder (HOME is set wherever the tests run).
+        let d = default_folder().expect("HOME is set");
+        match std::env::var_os("MESHDECO_CACHE_DIR").filter(|v| !v.is_empty()) {
+            Some(v) => assert_eq!(d, PathBuf::from(v)),
+            None => assert!(d.ends_with("meshdeco/features"), "{d:?}"),
+        }
+        assert_eq!(CachePolicy::Auto.folder(AUTO_MIN_BYTES), Some(d));
         assert_eq!(CachePolicy::Off.folder(usize::MAX), None);
         assert_eq!(CachePolicy::Dir("d".into()).folder(0), Some(PathBuf::from("d")));
         // An unwritable folder costs only the reuse.
