@@ -62,6 +62,9 @@ const KEPT_ENTRIES: usize = 8 << 20;
 /// Added to Φ's diagonal (module docs).
 const RIDGE: f64 = 1e-9;
 
+/// Each pin's reach: (vertex, weight) lists, one per pin.
+type Reaches = Vec<Vec<(usize, f64)>>;
+
 /// Wendland's C² function φ(t) = (1 − t)⁴ (4t + 1) on [0, 1), 0 from 1 on; t ≥ 0.
 pub fn wendland(t: f64) -> f64 {
     if t >= 1.0 {
@@ -179,12 +182,7 @@ impl PinSpread {
     /// whose bumps overlap: b and a are in one group when p_a lies within ρ_b of p_b; and every
     /// pin's reach when all of them fit `bounds.kept_entries`. Errors as soon as a group passes
     /// `bounds.max_group` pins.
-    fn groups(
-        &self,
-        sys: &System<'_>,
-        radius: f64,
-        bounds: Bounds,
-    ) -> Result<(Vec<Vec<usize>>, Option<Vec<Vec<(usize, f64)>>>)> {
+    fn groups(&self, sys: &System<'_>, radius: f64, bounds: Bounds) -> Result<(Vec<Vec<usize>>, Option<Reaches>)> {
         let Bounds { max_group, kept_entries } = bounds;
         let m = sys.pins.len();
         let mut sets = DisjointSet::new(m);

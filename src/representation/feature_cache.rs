@@ -705,7 +705,8 @@ mod tests {
         drop(file);
         let half = |b: u64| (f64::from_bits(b) / 2.0).to_bits();
         // Every field of the header is covered by its checksum.
-        let edits: Vec<(&str, Box<dyn Fn(&mut Header)>)> = vec![
+        type Edit<'a> = Box<dyn Fn(&mut Header) + 'a>;
+        let edits: Vec<(&str, Edit<'_>)> = vec![
             ("min", Box::new(|h: &mut Header| h.min_bits[0] = half(h.min_bits[0]))),
             ("max", Box::new(|h: &mut Header| h.max_bits[8] = half(h.max_bits[8]))),
             ("frame", Box::new(|h: &mut Header| h.frame_crc32[1] ^= 1)),
@@ -728,7 +729,7 @@ mod tests {
         }
         // Ranges changed behind a re-recorded checksum: the file opens, but its ranges are not
         // its frames'; open_or_build and encode_cached recompute it (the clean file again).
-        let ranges: Vec<(&str, Box<dyn Fn(&mut Header)>)> = vec![
+        let ranges: Vec<(&str, Edit<'_>)> = vec![
             ("halved minimum", Box::new(|h: &mut Header| h.min_bits[3] = half(h.min_bits[3]))),
             ("halved maximum", Box::new(|h: &mut Header| h.max_bits[0] = half(h.max_bits[0]))),
             ("huge", Box::new(|h: &mut Header| h.max_bits[5] = 1e300f64.to_bits())),
