@@ -903,7 +903,12 @@ pub fn open_for_reading(dir: &Path) -> Result<Manifest> {
     if under_way {
         match DirLock::acquire(dir) {
             Ok(_lock) => finish_commit(dir)?,
-            Err(e) => return Err(being_written(dir, e)),
+            Err(e) => {
+                return Err(match writer_of(dir) {
+                    Some(pid) => being_written_message(dir, &pid, "its new model is being moved in", None),
+                    None => e,
+                });
+            }
         }
     }
     verify_manifest(dir).map_err(|e| being_written(dir, e))
@@ -911,15 +916,34 @@ pub fn open_for_reading(dir: &Path) -> Result<Manifest> {
 
 /// `e`, or — when another meshdeco process holds `dir`'s lock — an error saying that `dir` is
 /// being written (with `e` after it): what a reader is told when it meets a directory that a
-/// training is writing.
+/// training is writing. An error that already says so is returned as it is.
 pub fn being_written(dir: &Path, e: Error) -> Error {
+    if matches!(&e, Error::Invalid(m) if m.contains(BEING_WRITTEN)) {
+        return e;
+    }
     match writer_of(dir) {
-        Some(pid) => Error::Invalid(format!(
-            "{} is being written by meshdeco process {pid} (a training is writing or replacing the model), so it cannot be read now; try again when that run has finished (reading it gave: {e})",
-            dir.display()
-        )),
+        Some(pid) => being_written_message(dir, &pid, "a training is writing or replacing the model", Some(&e)),
         None => e,
     }
+}
+
+/// The words of [`being_written`]'s message that name the writer.
+const BEING_WRITTEN: &str = " is being written by meshdeco process ";
+
+/// "`dir` is being written by meshdeco process `pid` (`what`) …", with what reading it gave.
+fn being_written_message(dir: &Path, pid: &str, what: &str, gave: Option<&Error>) -> Error {
+    let gave = gave.map(|e| format!(" (reading it gave: {e})")).unwrap_or_default();
+    Error::Invalid(format!(
+        "{}{BEING_WRITTEN}{pid} ({what}), so it cannot be read now; try again when that run has finished{gave}",
+        dir.display()
+    ))
+}
+
+/// What a reader of artefact directory `dir` compares before and after reading it, to know
+/// whether a commit changed the directory meanwhile: the content of its manifest (replaced
+/// last by every commit) and whether a commit is under way.
+pub fn read_state(dir: &Path) -> (Option<Vec<u8>>, bool) {
+    (std::fs::read(dir.join(MANIFEST_FILE)).ok(), commit_path(dir).is_ok_and(|c| c.is_dir()))
 }
 
 /// File in a commit's directory: what the commit moves into the artefact directory.

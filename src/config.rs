@@ -245,6 +245,26 @@ impl Validation {
     }
 }
 
+/// Refuses `data.validation` (`data`: its value, as the message shows it) beside the
+/// autoencoder's `method.validation` > 0: both hold frames out of the training to choose on
+/// (the first reports a validation Erms on frames the model never sees, the second chooses
+/// the kept step on training shapes), and which one a run's validation numbers mean would be
+/// unclear. The error names both keys.
+pub fn check_validation_keys(data: Option<String>, method: &MethodConfig) -> Result<()> {
+    if let (Some(v), MethodConfig::Autoencoder(m)) = (data, method)
+        && m.validation > 0
+    {
+        return Err(Error::config(
+            "data.validation",
+            format!(
+                "{v} is given together with method.validation = {}: both hold frames out of training to choose on (data.validation: frames reported as validation Erms; method.validation: training shapes that choose the autoencoder's kept step); keep one of them",
+                m.validation
+            ),
+        ));
+    }
+    Ok(())
+}
+
 impl std::fmt::Display for Validation {
     /// The config syntax that parses back to the same value.
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -422,6 +442,7 @@ impl Config {
         data.numpy_template()?;
 
         let method = MethodConfig::from_table(&raw.method)?;
+        check_validation_keys(data.validation.as_ref().map(|v| format!("`{v}`")), &method)?;
         Ok(Config { name, data, method, output: raw.output, source: None })
     }
 

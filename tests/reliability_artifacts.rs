@@ -42,7 +42,7 @@ fn train(d: &Path, name: &str, toml: &str) -> PathBuf {
 }
 
 /// Asserts a clean refusal: exit status 1 (not a panic's 101, not an abort's signal), every
-/// needle in the message, no panic text.
+/// needle in the message, no panic text, and a lock message said once (not nested in itself).
 fn refused(o: &Output, needles: &[&str], what: &str) {
     let t = output_text(o);
     assert_eq!(o.status.code(), Some(1), "{what}: status {:?} (expected a refusal): {t}", o.status);
@@ -50,6 +50,7 @@ fn refused(o: &Output, needles: &[&str], what: &str) {
     for n in needles {
         assert!(t.contains(n), "{what}: `{n}` not in: {t}");
     }
+    assert!(t.matches("being written").count() <= 1 && t.matches("reading it gave").count() <= 1, "{what}: {t}");
 }
 
 /// Re-records `dir`'s manifest after an edit, as a user "fixing" it (or another tool) would.
@@ -635,5 +636,234 @@ fn readers_while_a_training_holds_the_lock() {
     cases += 1;
     eprintln!("readers and the lock: {cases} cases");
     assert_eq!(cases, 7);
+    std::fs::remove_dir_all(&d).unwrap();
+}
+
+/// The JSON header of the feature-cache file at `path`, edited by `edit` with its checksum
+/// re-recorded (as the format defines it: CRC-32 of the key's length and bytes, F, E and W,
+/// the frame checksums, then `<` and the minima, `>` and the maxima, each list after its
+/// length), as a tool that "fixes" a cache file would. The data and the offset stay.
+fn rerecord_cache_header(path: &Path, edit: impl FnOnce(&mut serde_json::Value)) {
+    let bytes = std::fs::read(path).unwrap();
+    let at = u64::from_le_bytes(bytes[bytes.len() - 8..].try_into().unwrap()) as usize;
+    let mut h: serde_json::Value = serde_json::from_slice(&bytes[at..bytes.len() - 8]).unwrap();
+    edit(&mut h);
+    if h.get("header_crc32").is_some() {
+        let mut c = crc32fast::Hasher::new();
+        let key = h["key"].as_str().unwrap();
+        c.update(&(key.len() as u64).to_le_bytes());
+        c.update(key.as_bytes());
+        for n in ["n_frames", "n_elements", "width"] {
+            c.update(&h[n].as_u64().unwrap().to_le_bytes());
+        }
+        for f in h["frame_crc32"].as_array().unwrap() {
+            c.update(&(f.as_u64().unwrap() as u32).to_le_bytes());
+        }
+        for (list, tag) in [("min_bits", b'<'), ("max_bits", b'>')] {
+            let v = h[list].as_array().unwrap();
+            c.update(&[tag]);
+            c.update(&(v.len() as u64).to_le_bytes());
+            for b in v {
+                c.update(&b.as_u64().unwrap().to_le_bytes());
+            }
+        }
+        h["header_crc32"] = c.finalize().into();
+    }
+    let mut out = bytes[..at].to_vec();
+    out.extend(serde_json::to_vec(&h).unwrap());
+    out.extend((at as u64).to_le_bytes());
+    std::fs::write(path, out).unwrap();
+}
+
+/// Issue 55, cause 2: the feature cache's per-dimension ranges (which scale the autoencoder's
+/// features) changed behind a re-recorded checksum — halved, ±1e300, NaN — or a header byte
+/// changed without one: the file is named, recomputed, and the autoencoder trained from it is
+/// the one trained from a clean cache (before: halving the ranges trained another model, exit
+/// 0; ±1e300 and NaN failed without naming the file, and it was never recomputed).
+#[test]
+fn feature_cache_ranges_changed_behind_a_rerecorded_checksum_are_recomputed() {
+    let d = tmp("cache-ranges");
+    let cache = d.join("cache");
+    let toml = AE.replace("test = \"rest\"\n", &format!("test = \"rest\"\ncache = {:?}\n", cache.to_str().unwrap()));
+    let clean_model = train(&d, "clean", &toml);
+    let clean_bin = std::fs::read(clean_model.join("model.bin")).unwrap();
+    // (autoencoder.bpk holds each parameter's random id: it differs between runs.)
+    let clean_weights = std::fs::read(clean_model.join("weights.csv")).unwrap();
+    let files: Vec<PathBuf> = std::fs::read_dir(&cache).unwrap().map(|e| e.unwrap().path()).collect();
+    assert_eq!(files.len(), 1, "{files:?}");
+    let file = files[0].clone();
+    let clean = std::fs::read(&file).unwrap();
+    let half = |v: &serde_json::Value| serde_json::Value::from((f64::from_bits(v.as_u64().unwrap()) / 2.0).to_bits());
+    type Edit = Box<dyn Fn(&mut serde_json::Value)>;
+    let cases: Vec<(&str, Edit)> = vec![
+        (
+            "halved ranges",
+            Box::new(move |h| {
+                for list in ["min_bits", "max_bits"] {
+                    let halved: Vec<serde_json::Value> = h[list].as_array().unwrap().iter().map(half).collect();
+                    h[list] = halved.into();
+                }
+            }),
+        ),
+        ("a huge maximum", Box::new(|h| h["max_bits"][4] = 1e300f64.to_bits().into())),
+        ("a huge negative minimum", Box::new(|h| h["min_bits"][0] = (-1e300f64).to_bits().into())),
+        ("a NaN minimum", Box::new(|h| h["min_bits"][2] = f64::NAN.to_bits().into())),
+    ];
+    let mut n = 0;
+    for (what, edit) in &cases {
+        rerecord_cache_header(&file, edit);
+        let out = d.join(format!("run{n}"));
+        let o = train_into(&d, &out, &format!("run{n}"), &toml, &[]);
+        let t = output_text(&o);
+        assert!(o.status.success(), "{what}: {t}");
+        for needle in ["recomputing the cached features", file.to_str().unwrap(), "recorded range"] {
+            assert!(t.contains(needle), "{what}: `{needle}` not in {t}");
+        }
+        assert!(std::fs::read(out.join("model.bin")).unwrap() == clean_bin, "{what}: another model was trained");
+        assert!(std::fs::read(out.join("weights.csv")).unwrap() == clean_weights, "{what}: other codes");
+        assert!(std::fs::read(&file).unwrap() == clean, "{what}: the cache file was not recomputed");
+        n += 1;
+    }
+    // A header byte changed without re-recording: named and recomputed too.
+    let mut bytes = clean.clone();
+    let at = u64::from_le_bytes(bytes[bytes.len() - 8..].try_into().unwrap()) as usize;
+    let json = String::from_utf8(bytes[at..bytes.len() - 8].to_vec()).unwrap();
+    let pos = at + json.find("\"max_bits\":[").unwrap() + 12;
+    bytes[pos] = if bytes[pos] == b'1' { b'2' } else { b'1' };
+    std::fs::write(&file, &bytes).unwrap();
+    let out = d.join("run-byte");
+    let o = train_into(&d, &out, "run-byte", &toml, &[]);
+    let t = output_text(&o);
+    assert!(o.status.success() && t.contains(file.to_str().unwrap()) && t.contains("recomputing"), "{t}");
+    assert!(std::fs::read(out.join("model.bin")).unwrap() == clean_bin, "a changed header byte trained another model");
+    assert!(std::fs::read(&file).unwrap() == clean);
+    n += 1;
+    eprintln!("feature cache ranges: {n} cases");
+    assert_eq!(n, cases.len() + 1);
+    std::fs::remove_dir_all(&d).unwrap();
+}
+
+/// Issue 55, cause 6: `--resume` of a run that has no steps left writes the same `objective`
+/// to the bit (its last loss comes from the checkpoint's JSON header, which now stores floats
+/// exactly). With seed 3 this run's objective, 146.25613565452593, is one that serde_json's
+/// default parser read back one unit in the last place off (before: 146.2561356545259; the
+/// crate is now also built with serde_json's `float_roundtrip`).
+#[test]
+fn a_resume_after_the_last_step_keeps_the_objective_to_the_bit() {
+    let d = tmp("resume-exact");
+    let toml = AE.replace("fit_test = false\n", "fit_test = false\nseed = 3\n");
+    let ae = train(&d, "ae", &toml);
+    let objective = |dir: &Path| {
+        let text = std::fs::read_to_string(dir.join("metrics.json")).unwrap();
+        let at = text.find("\"objective\":").expect("objective in metrics.json");
+        text[at..].split([',', '\n', '}']).next().unwrap().to_string()
+    };
+    let first = objective(&ae);
+    for attempt in 0..2 {
+        let o = train_into(&d, &ae, "ae", &toml, &["--resume"]);
+        assert!(o.status.success(), "{}", output_text(&o));
+        assert_eq!(objective(&ae), first, "resume {attempt}");
+    }
+    std::fs::remove_dir_all(&d).unwrap();
+}
+
+/// Issue 55, cause 4: autoencoder.bpk edited behind a re-recorded manifest — 8 bytes
+/// duplicated inside it (at the start of the tensor data, in its middle, near its end, or
+/// appended), 8 bytes cut out, or 256 bytes appended — is refused by the loader itself, naming
+/// the file (before: `synthesize` read shifted parameters and exited 0). The untouched file
+/// loads.
+#[test]
+fn rerecorded_autoencoder_bpk_with_bytes_duplicated_or_cut_is_refused() {
+    let d = tmp("bpk");
+    let ae = train(&d, "ae", AE);
+    let bpk = ae.join("autoencoder.bpk");
+    let good = std::fs::read(&bpk).unwrap();
+    let len = good.len();
+    // The tensor data starts at the first 256-byte boundary after the header and metadata.
+    let metadata = u32::from_le_bytes(good[6..10].try_into().unwrap()) as usize;
+    let data = (10 + metadata).div_ceil(256) * 256;
+    assert!(data + 64 < len, "{data} {len}");
+    let duplicated = |at: usize| {
+        let mut b = good[..at + 8].to_vec();
+        b.extend_from_slice(&good[at..]);
+        b
+    };
+    let mut cut = good.clone();
+    cut.drain(len / 2..len / 2 + 8);
+    let mut appended = good.clone();
+    appended.extend(std::iter::repeat_n(0u8, 256));
+    let cases: Vec<(String, Vec<u8>)> = vec![
+        ("8 bytes duplicated at the data's start".into(), duplicated(data)),
+        ("8 bytes duplicated in the middle".into(), duplicated((data + len) / 2)),
+        ("8 bytes duplicated near the end".into(), duplicated(len - 16)),
+        ("the last 8 bytes appended again".into(), duplicated(len - 8)),
+        ("8 bytes cut out of the middle".into(), cut),
+        ("256 zero bytes appended".into(), appended),
+    ];
+    let mut n = 0;
+    for (what, bytes) in &cases {
+        std::fs::write(&bpk, bytes).unwrap();
+        rerecord(&ae);
+        n += all_refuse(&ae, &d, &["autoencoder.bpk"], what);
+    }
+    std::fs::write(&bpk, &good).unwrap();
+    rerecord(&ae);
+    let o = meshdeco(&["synthesize", ae.to_str().unwrap(), "--weights", "0:1", "--out", "s.obj"], &d);
+    assert!(o.status.success(), "the untouched file: {}", output_text(&o));
+    eprintln!("autoencoder.bpk layouts: {n} cases");
+    assert_eq!(n, 2 * cases.len());
+    std::fs::remove_dir_all(&d).unwrap();
+}
+
+/// Issue 55, cause 7: readers while retrains commit new models into the directory again and
+/// again (PCA with K = 3 and K = 4 in turn, each a separate `meshdeco train`): every read gets
+/// a whole model, the old or the new one (its K and its files agree), or an error naming the
+/// writer — never "changed or damaged" for a file a commit replaced (before: 2 of 155 reads).
+#[test]
+fn readers_during_retrains_get_a_whole_model_or_the_writer() {
+    let d = tmp("retrains");
+    let pca = train(&d, "pca", PCA);
+    std::fs::write(d.join("pca3.toml"), PCA).unwrap();
+    std::fs::write(d.join("pca4.toml"), PCA4).unwrap();
+    let done = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let writer = std::thread::spawn({
+        let (d, pca, done) = (d.clone(), pca.clone(), done.clone());
+        move || {
+            for i in 0..12 {
+                let cfg = d.join(if i % 2 == 0 { "pca4.toml" } else { "pca3.toml" });
+                let o = Command::new(env!("CARGO_BIN_EXE_meshdeco"))
+                    .args(["train", "--config", cfg.to_str().unwrap(), "--out", pca.to_str().unwrap()])
+                    .current_dir(&d)
+                    .output()
+                    .unwrap();
+                assert!(o.status.success(), "retrain {i}: {}", output_text(&o));
+            }
+            done.store(true, std::sync::atomic::Ordering::SeqCst);
+        }
+    });
+    let (mut whole, mut named) = (0, 0);
+    while !done.load(std::sync::atomic::Ordering::SeqCst) {
+        match meshdeco::pipeline::load_model(&pca) {
+            Ok(model) => {
+                let k = model.n_components();
+                assert!(k == 3 || k == 4, "K = {k}");
+                // Its weights and components are one model's: decoding the first training
+                // frame's weights gives a shape of the rest mesh's size.
+                let w = model.train_weights().expect("a linear model's training weights");
+                assert!(w.iter().all(|row| row.len() == k), "weights of K = {k}");
+                assert_eq!(model.decode(&w[..1]).unwrap()[0].len(), model.rest().n_vertices());
+                whole += 1;
+            }
+            Err(e) => {
+                let t = e.to_string();
+                assert!(t.contains("is being written by meshdeco process"), "a read during a retrain: {t}");
+                assert_eq!(t.matches("being written").count(), 1, "{t}");
+                named += 1;
+            }
+        }
+    }
+    writer.join().unwrap();
+    eprintln!("reads during 12 retrains: {whole} whole models, {named} errors naming the writer");
+    assert!(whole > 12, "{whole} reads");
     std::fs::remove_dir_all(&d).unwrap();
 }

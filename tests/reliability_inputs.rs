@@ -781,21 +781,34 @@ fn http_deadlines_cut_off_slow_clients() {
 #[test]
 fn http_connections_and_body_bytes_are_capped() {
     let limits = Limits { max_connections: 8, max_body_bytes_in_flight: 1 << 20, ..Limits::default() };
-    let addr = echo_server(limits);
-    // 8 idle connections fill the server; 40 more are answered 503 at once and closed.
-    let held: Vec<TcpStream> = (0..8).map(|_| TcpStream::connect(&addr).unwrap()).collect();
-    std::thread::sleep(Duration::from_millis(200));
+    let addr = serve_with(limits, |r: &Request| {
+        if r.path == "/slow" {
+            std::thread::sleep(Duration::from_millis(1500));
+        }
+        Response::new(200, "text/plain", format!("{} {} {}", r.method, r.path, r.body.len()).into_bytes())
+    });
+    // 8 requests being answered fill the server; 40 more connections are answered 503 at once
+    // and closed.
+    let held: Vec<_> = (0..8)
+        .map(|_| {
+            let addr = addr.clone();
+            std::thread::spawn(move || view_support::http(&addr, "GET", "/slow", b"").0)
+        })
+        .collect();
+    std::thread::sleep(Duration::from_millis(300));
     for i in 0..40 {
         let mut s = TcpStream::connect(&addr).unwrap();
         let (raw, took) = read_until_closed(&mut s, Duration::from_secs(5));
         assert_eq!(status_of(&raw), 503, "connection {i} over the cap");
-        assert!(String::from_utf8_lossy(&raw).contains("busy: 8 connections"), "{}", String::from_utf8_lossy(&raw));
+        let text = String::from_utf8_lossy(&raw);
+        assert!(text.contains("busy: 8 connections are being answered"), "{text}");
         assert!(took < Duration::from_secs(2));
     }
-    drop(held);
-    std::thread::sleep(Duration::from_millis(300));
+    for h in held {
+        assert_eq!(h.join().unwrap(), 200);
+    }
     let (s, _, _) = view_support::http(&addr, "GET", "/", b"");
-    assert_eq!(s, 200, "served again once connections closed");
+    assert_eq!(s, 200, "served again once the requests were answered");
     // Unfinished bodies: two of 400 KiB fit the 1 MiB budget, the third is answered 503 before
     // its body is read; once they finish, bodies are accepted again.
     let mut open = Vec::new();
@@ -905,30 +918,30 @@ fn viewer_binary_caps_connections_memory_and_duplicate_headers() {
         http::MAX_BODY_BYTES_IN_FLIGHT
     );
     drop(bodies);
-    // 200 idle connections: at most MAX_CONNECTIONS served (threads bounded), the rest 503.
+    // 200 idle connections: at most MAX_CONNECTIONS held (threads bounded; each new one closes
+    // the oldest that has sent nothing), and the page's own requests are answered meanwhile.
     let mut idle = Vec::new();
-    let mut busy = 0;
     for _ in 0..200 {
-        let mut s = TcpStream::connect(&v.addr).unwrap();
-        s.set_read_timeout(Some(Duration::from_millis(20))).unwrap();
-        let mut b = [0u8; 64];
-        if let Ok(n) = s.read(&mut b)
-            && String::from_utf8_lossy(&b[..n]).contains("503")
-        {
-            busy += 1;
-        }
-        idle.push(s);
+        idle.push(TcpStream::connect(&v.addr).unwrap());
     }
     std::thread::sleep(Duration::from_millis(300));
     let (_, threads_idle) = rss_and_threads(pid);
-    assert!(busy >= 200 - http::MAX_CONNECTIONS - 5, "only {busy} of 200 connections were turned away");
     assert!(
         threads_idle <= threads.max(8) + http::MAX_CONNECTIONS as u64 + 4,
         "{threads_idle} threads with 200 idle connections"
     );
+    let t0 = Instant::now();
+    assert_eq!(v.request("GET", "/api/model", b"").0, 200, "the page is answered beside 200 idle connections");
+    assert!(t0.elapsed() < Duration::from_secs(5), "answered after {:?}", t0.elapsed());
+    let mut closed = 0;
+    for s in &mut idle {
+        s.set_read_timeout(Some(Duration::from_millis(20))).unwrap();
+        if matches!(s.read(&mut [0u8; 64]), Ok(0)) {
+            closed += 1;
+        }
+    }
+    assert!(closed >= 200 - http::MAX_CONNECTIONS, "only {closed} of 200 idle connections were closed");
     drop(idle);
-    std::thread::sleep(Duration::from_millis(300));
-    assert_eq!(v.request("GET", "/api/model", b"").0, 200, "serves again");
     eprintln!("viewer binary cases: 5");
     drop(v);
     std::fs::remove_dir_all(&d).unwrap();
@@ -1239,4 +1252,69 @@ fn http_a_signal_during_a_blocked_write_does_not_cut_the_response() {
     assert_eq!(body.len(), SIZE, "the response was cut after {sent} signal(s) (read for {took:?})");
     assert_eq!(sent, SIGNALS, "the writing thread ended while the response was being written");
     eprintln!("64 MiB read whole after {sent} signals to the writing thread, in {took:?}");
+}
+
+/// Issue 55, cause 5: connections that have not sent a whole request cannot hold the viewer's
+/// slots. With every slot held by connections that send nothing (or half a request), a new
+/// request is answered at once and the connection that waited longest without a request is
+/// closed (before: every other request got 503 for the 120 s idle limit); a connection that has
+/// been answered and waits for its next request is closed only after those; a connection whose
+/// first request has not arrived whole within `first_request` is closed even when nobody else
+/// waits (408 for half a request).
+#[test]
+fn http_idle_connections_cannot_lock_out_the_page() {
+    let limits = Limits { max_connections: 8, ..Limits::default() };
+    let addr = echo_server(limits);
+    let mut n = 0;
+    // A keep-alive connection that has been answered, then 4 silent ones and 3 with half a head.
+    // A keep-alive request on `s`: its answer, read until the echo of `path`.
+    let ask = |s: &mut TcpStream, path: &str| -> Vec<u8> {
+        s.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
+        s.write_all(format!("GET {path} HTTP/1.1\r\n\r\n").as_bytes()).unwrap();
+        let (mut raw, mut buf) = (Vec::new(), [0u8; 256]);
+        while !raw.ends_with(format!("GET {path} 0").as_bytes()) {
+            let got = s.read(&mut buf).unwrap();
+            assert!(got > 0, "{path}: closed after {}", String::from_utf8_lossy(&raw));
+            raw.extend_from_slice(&buf[..got]);
+        }
+        raw
+    };
+    let mut kept = TcpStream::connect(&addr).unwrap();
+    assert_eq!(status_of(&ask(&mut kept, "/first")), 200);
+    let mut silent: Vec<TcpStream> = (0..4).map(|_| TcpStream::connect(&addr).unwrap()).collect();
+    for _ in 0..3 {
+        let mut s = TcpStream::connect(&addr).unwrap();
+        s.write_all(b"GET /half HTTP/1.1\r\nX: ").unwrap();
+        silent.push(s);
+    }
+    std::thread::sleep(Duration::from_millis(300));
+    // Every slot is held: 7 new keep-alive requests (their connections stay open) are answered
+    // at once, each closing the connection that has waited longest without a whole request.
+    let mut pages = Vec::new();
+    for i in 0..7 {
+        let t0 = Instant::now();
+        let mut page = TcpStream::connect(&addr).unwrap();
+        assert_eq!(status_of(&ask(&mut page, "/page")), 200, "request {i}");
+        assert!(t0.elapsed() < Duration::from_secs(1), "request {i} waited {:?}", t0.elapsed());
+        let (raw, _) = read_until_closed(&mut silent[i], Duration::from_secs(1));
+        assert!(raw.is_empty(), "connection {i} was closed without an answer: {}", String::from_utf8_lossy(&raw));
+        pages.push(page);
+        n += 1;
+    }
+    // The connection that had been answered is still open and is answered again.
+    assert_eq!(status_of(&ask(&mut kept, "/again")), 200);
+    n += 1;
+    // Alone on the server: nothing sent, closed after `first_request`; half a head, 408.
+    let addr = echo_server(Limits { first_request: Duration::from_secs(2), ..limits });
+    let mut s = TcpStream::connect(&addr).unwrap();
+    let (raw, took) = read_until_closed(&mut s, Duration::from_secs(6));
+    assert!(raw.is_empty() && took >= Duration::from_millis(1500) && took < Duration::from_secs(4), "{took:?}");
+    let mut s = TcpStream::connect(&addr).unwrap();
+    s.write_all(b"GET /half HTTP/1.1\r\n").unwrap();
+    let (raw, took) = read_until_closed(&mut s, Duration::from_secs(6));
+    assert_eq!(status_of(&raw), 408, "{}", String::from_utf8_lossy(&raw));
+    assert!(String::from_utf8_lossy(&raw).contains("within 2 s of connecting"), "{}", String::from_utf8_lossy(&raw));
+    assert!(took < Duration::from_secs(4), "{took:?}");
+    n += 2;
+    eprintln!("http idle-connection cases: {n}");
 }

@@ -132,7 +132,17 @@ pub fn run(a: PoseArgs) -> Result<()> {
     check_targets(&rest, &vertices, &targets).with_context(|| format!("{}", a.constraints.display()))?;
     let t0 = Instant::now();
     let spreader = meshdeco::model::spreader(model.as_ref());
-    let res = meshdeco::model::landed_pose(model.as_ref(), &spreader, &vertices, &targets, &w0, &opts)?;
+    let res = meshdeco::model::landed_pose(model.as_ref(), &spreader, &vertices, &targets, &w0, &opts).with_context(
+        || {
+            format!(
+                "posing {} with the {} pins of {} (--spread {})",
+                a.model.display(),
+                vertices.len(),
+                a.constraints.display(),
+                opts.spread
+            )
+        },
+    )?;
     let secs = t0.elapsed().as_secs_f64();
     if res.positions.iter().flatten().any(|x| !x.is_finite()) {
         bail!("posing {} produced non-finite coordinates; nothing written", a.model.display());

@@ -95,10 +95,40 @@ impl EdgeGraph {
     /// # Panics
     /// If `source` is ≥ N.
     pub fn distances_within(&self, source: usize, limit: f64) -> Vec<(usize, f64)> {
-        let mut best = vec![f64::INFINITY; self.n_vertices()];
         let mut done = Vec::new();
-        self.search(&[source], limit, &mut best, |v, d| done.push((v, d)));
+        self.for_each_within(source, limit, &mut self.scratch(), |v, d| done.push((v, d)));
         done
+    }
+
+    /// Scratch space for repeated [`EdgeGraph::for_each_within`] searches on this graph.
+    pub fn scratch(&self) -> SearchScratch {
+        SearchScratch { best: vec![f64::INFINITY; self.n_vertices()], settled: Vec::new(), heap: BinaryHeap::new() }
+    }
+
+    /// Calls `settled(v, d)` for every vertex `v` whose edge-path distance `d` from `source` is
+    /// below `limit`, nearest first (`source` first), as [`EdgeGraph::distances_within`] lists
+    /// them. `scratch` (from [`EdgeGraph::scratch`] of this graph) is left ready for the next
+    /// search: its work and memory are proportional to the vertices within reach, not to N.
+    ///
+    /// # Panics
+    /// If `source` is ≥ N or `scratch` belongs to a graph of another size.
+    pub fn for_each_within(
+        &self,
+        source: usize,
+        limit: f64,
+        scratch: &mut SearchScratch,
+        mut settled: impl FnMut(usize, f64),
+    ) {
+        let SearchScratch { best, settled: seen, heap } = scratch;
+        seen.clear();
+        self.search(&[source], limit, best, heap, |v, d| {
+            seen.push(v);
+            settled(v, d);
+        });
+        // Every vertex whose distance was lowered was settled: resetting those restores +∞.
+        for &v in seen.iter() {
+            best[v] = f64::INFINITY;
+        }
     }
 
     /// Like [`EdgeGraph::distances`], writing into `out` (N values, overwritten).
@@ -107,16 +137,24 @@ impl EdgeGraph {
     /// If a source index is ≥ N or `out.len() != N`.
     pub fn distances_into(&self, sources: &[usize], out: &mut [f64]) {
         out.fill(f64::INFINITY);
-        self.search(sources, f64::INFINITY, out, |_, _| {});
+        let mut heap = BinaryHeap::with_capacity(self.n_vertices() / 4 + sources.len() + 16);
+        self.search(sources, f64::INFINITY, out, &mut heap, |_, _| {});
     }
 
     /// Dijkstra from `sources` on `out` (pre-filled with +∞), relaxing only to distances below
     /// `limit`; `settled(v, d)` is called once per vertex as it is settled, nearest first.
-    fn search(&self, sources: &[usize], limit: f64, out: &mut [f64], mut settled: impl FnMut(usize, f64)) {
+    /// `heap` is a work space (emptied first).
+    fn search(
+        &self,
+        sources: &[usize],
+        limit: f64,
+        out: &mut [f64],
+        heap: &mut BinaryHeap<Reverse<(u64, usize)>>,
+        mut settled: impl FnMut(usize, f64),
+    ) {
         let n = self.n_vertices();
         assert_eq!(out.len(), n, "one output value per vertex");
-        // Non-negative f64 values order like their bit patterns: a heap of u64 keys.
-        let mut heap: BinaryHeap<Reverse<(u64, usize)>> = BinaryHeap::with_capacity(n / 4 + sources.len() + 16);
+        heap.clear();
         for &s in sources {
             assert!(s < n, "dijkstra: source {s} out of range ({n} vertices)");
             out[s] = 0.0;
@@ -138,6 +176,16 @@ impl EdgeGraph {
             }
         }
     }
+}
+
+/// Work space of [`EdgeGraph::for_each_within`]: the distances (all +∞ between searches), the
+/// vertices a search settled, and its heap of (distance bits, vertex) keys (non-negative `f64`
+/// values order like their bit patterns).
+#[derive(Debug, Clone)]
+pub struct SearchScratch {
+    best: Vec<f64>,
+    settled: Vec<usize>,
+    heap: BinaryHeap<Reverse<(u64, usize)>>,
 }
 
 /// Dijkstra on `d` (pre-filled with +∞) from `sources`; `visit(v, relax)` calls
@@ -229,6 +277,28 @@ mod tests {
         assert_eq!(got, want);
         for &(v, d) in &near {
             assert_eq!(d, full[v]);
+        }
+    }
+
+    #[test]
+    fn one_scratch_serves_many_bounded_searches() {
+        // Searches of different sources and limits through one scratch find what a full search
+        // finds below each limit, nearest first, whatever ran before them.
+        let s = icosphere(3);
+        let g = EdgeGraph::new(&s.positions, &s.faces);
+        let mut scratch = g.scratch();
+        for (source, limit) in [(5, 0.7), (100, 2.5), (5, 0.3), (0, 1e-9), (41, 10.0), (5, 0.7)] {
+            let full = g.distances(&[source]);
+            let mut got = Vec::new();
+            g.for_each_within(source, limit, &mut scratch, |v, d| got.push((v, d)));
+            let mut want: Vec<(usize, f64)> =
+                (0..full.len()).filter(|&v| full[v] < limit).map(|v| (v, full[v])).collect();
+            assert!(got.windows(2).all(|w| w[0].1 <= w[1].1), "nearest first");
+            assert_eq!(got.first().map(|e| e.0), want.iter().find(|e| e.0 == source).map(|e| e.0));
+            got.sort_by_key(|e| e.0);
+            want.sort_by_key(|e| e.0);
+            assert_eq!(got, want, "source {source}, limit {limit}");
+            assert!(scratch.best.iter().all(|d| d.is_infinite()), "the scratch is left ready");
         }
     }
 

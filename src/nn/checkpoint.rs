@@ -15,6 +15,14 @@
 //! u32              CRC-32 of every byte before it
 //! ```
 //!
+//! The JSON header stores every float a second time, exactly: `float_bits` lists the bits of
+//! each floating-point number of the header in the order [`visit_floats`] meets them, and a
+//! reader puts those values back (a JSON reader may read a float one unit in the last place
+//! off: serde_json's default parser did so for about one number in five; meshdeco now builds it
+//! with `float_roundtrip`, and the bits keep the header exact whichever parser reads it), so a run resumed
+//! after its last step reports its last loss to the bit. A header without `float_bits` (written
+//! before it existed) is read as JSON.
+//!
 //! `C` and its moments are written straight from the trainer's buffers and read straight into
 //! the resumed trainer's (no intermediate copies of the 13 M-number arrays of a large mesh). The
 //! checksum is verified, in a first pass over the file, before anything else is read: a damaged
@@ -87,6 +95,70 @@ pub struct CheckpointParts<'a> {
     pub adam: &'a ComponentAdam,
 }
 
+/// Key of the header's exact floats (module docs).
+const FLOAT_BITS: &str = "float_bits";
+
+/// Calls `f` on every floating-point number in `v`, depth first, object members in the map's
+/// order (the same order when the JSON text written from a value is read back).
+fn visit_floats(v: &mut serde_json::Value, f: &mut dyn FnMut(&mut serde_json::Number)) {
+    match v {
+        serde_json::Value::Number(n) if n.is_f64() => f(n),
+        serde_json::Value::Array(a) => a.iter_mut().for_each(|x| visit_floats(x, f)),
+        serde_json::Value::Object(o) => o.values_mut().for_each(|x| visit_floats(x, f)),
+        _ => {}
+    }
+}
+
+/// The header as JSON text with its floats' bits beside them (`float_bits`, module docs).
+fn header_bytes(header: &CheckpointHeader) -> Result<Vec<u8>> {
+    let bad = |e: serde_json::Error| Error::Invalid(format!("checkpoint header: {e}"));
+    let mut v = serde_json::to_value(header).map_err(bad)?;
+    let mut bits = Vec::new();
+    visit_floats(&mut v, &mut |n| bits.push(n.as_f64().unwrap_or(f64::NAN).to_bits()));
+    if let serde_json::Value::Object(o) = &mut v {
+        o.insert(FLOAT_BITS.into(), bits.into());
+    }
+    serde_json::to_vec(&v).map_err(bad)
+}
+
+/// Reads a header written by [`header_bytes`] with its floats exactly as they were written
+/// (`float_bits`); each listed value must round to the number in the text, and the list must
+/// have one value per float. Errors are messages for the caller to name the file.
+fn parse_header(bytes: &[u8]) -> std::result::Result<CheckpointHeader, String> {
+    let mut v: serde_json::Value = serde_json::from_slice(bytes).map_err(|e| e.to_string())?;
+    let bits = match &mut v {
+        serde_json::Value::Object(o) => o.remove(FLOAT_BITS),
+        _ => None,
+    };
+    if let Some(bits) = bits {
+        let bits: Vec<u64> = serde_json::from_value(bits).map_err(|e| format!("`{FLOAT_BITS}`: {e}"))?;
+        let (mut i, mut wrong) = (0usize, None);
+        visit_floats(&mut v, &mut |n| {
+            let text = n.as_f64().unwrap_or(f64::NAN);
+            match bits.get(i).map(|&b| f64::from_bits(b)) {
+                Some(x) if (x - text).abs() <= 4.0 * f64::EPSILON * x.abs() => {
+                    if let Some(exact) = serde_json::Number::from_f64(x) {
+                        *n = exact;
+                    }
+                }
+                found => {
+                    if wrong.is_none() {
+                        wrong = Some(format!("float {i} of the header is {text}, `{FLOAT_BITS}` says {found:?}"));
+                    }
+                }
+            }
+            i += 1;
+        });
+        if let Some(w) = wrong {
+            return Err(w);
+        }
+        if i != bits.len() {
+            return Err(format!("`{FLOAT_BITS}` lists {} values for the header's {i} floats", bits.len()));
+        }
+    }
+    serde_json::from_value(v).map_err(|e| e.to_string())
+}
+
 /// A writer that keeps the CRC-32 of everything written through it.
 struct Crc<W> {
     inner: W,
@@ -131,7 +203,7 @@ fn read_f32s(r: &mut impl Read, out: &mut [f32]) -> std::io::Result<()> {
 /// Serialises a checkpoint from borrowed parts and writes it atomically (streamed: no copy of
 /// the file is built in memory).
 pub fn write(path: &Path, parts: &CheckpointParts<'_>) -> Result<()> {
-    let header = serde_json::to_vec(parts.header).map_err(|e| Error::Invalid(format!("checkpoint header: {e}")))?;
+    let header = header_bytes(parts.header)?;
     let t = parts.adam.time;
     if parts.columns == 0
         || !parts.components.len().is_multiple_of(parts.columns)
@@ -262,7 +334,112 @@ impl Checkpoint {
         } else {
             ComponentAdam::default()
         };
-        let header: CheckpointHeader = serde_json::from_slice(&header).map_err(|e| corrupt(&format!("header: {e}")))?;
+        let header = parse_header(&header).map_err(|e| corrupt(&format!("header: {e}")))?;
         Ok(Checkpoint { header, layers, layers_optimizer, components, columns: columns as usize, adam })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Numbers serde_json's default parser (without `float_roundtrip`) read one unit in the last
+    /// place off (found by writing and reading random losses).
+    const MISREAD: [f64; 5] =
+        [1.1743710293288677e-6, 2.2088688993234186e-5, 116.48474444499239, 1.8580689537130886, 146.25613565452593];
+
+    fn header() -> CheckpointHeader {
+        let mut config = AutoencoderConfig::recommended();
+        config.learning_rate = MISREAD[0];
+        config.lambda1 = MISREAD[3];
+        CheckpointHeader {
+            iteration: 30,
+            rng_state: u64::MAX - 12345,
+            config,
+            n_vertices: 2,
+            n_shapes: 4,
+            neighbor_fingerprint: 0xdead_beef_f00d,
+            last_loss: Some(LossTerms {
+                total: MISREAD[4],
+                reconstruction: MISREAD[2],
+                sparsity: MISREAD[1],
+                hinge: 0.0,
+                orthogonality: -MISREAD[0],
+                vertex: 1.0,
+                code: 0.25,
+            }),
+        }
+    }
+
+    fn save(path: &Path, header: &CheckpointHeader) {
+        let adam = ComponentAdam::default();
+        let c = vec![0.5f32; 18];
+        let parts =
+            CheckpointParts { header, layers: b"L", layers_optimizer: b"O", components: &c, columns: 18, adam: &adam };
+        write(path, &parts).unwrap();
+    }
+
+    #[test]
+    fn the_header_reads_back_every_float_exactly() {
+        let dir = std::env::temp_dir().join(format!("meshdeco-ckpt-floats-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("checkpoint.bin");
+        let h = header();
+        save(&path, &h);
+        let back = Checkpoint::load(&path).unwrap();
+        assert_eq!(back.header, h, "every field, floats to the bit");
+        assert_eq!(back.header.last_loss.unwrap().total.to_bits(), MISREAD[4].to_bits());
+        assert_eq!((back.layers.as_slice(), back.layers_optimizer.as_slice()), (&b"L"[..], &b"O"[..]));
+        // The text lists every float of the header once, after the header's own fields.
+        let bytes = header_bytes(&h).unwrap();
+        let v: serde_json::Value = serde_json::from_slice(&bytes).unwrap();
+        let mut floats = 0;
+        let mut copy = serde_json::to_value(&h).unwrap();
+        visit_floats(&mut copy, &mut |_| floats += 1);
+        assert_eq!(v[FLOAT_BITS].as_array().unwrap().len(), floats);
+        assert!(floats >= 10, "{floats}");
+        // The bits, not the text, give the value: a reader whose text is one unit in the last
+        // place off (as serde_json's default parser read these numbers) still gets each float
+        // to the bit.
+        let mut off = v.clone();
+        let mut shifted = 0;
+        visit_floats(&mut off, &mut |n| {
+            let x = n.as_f64().unwrap();
+            if x != 0.0 {
+                *n = serde_json::Number::from_f64(f64::from_bits(x.to_bits() + 1)).unwrap();
+                shifted += 1;
+            }
+        });
+        assert!(shifted >= 5, "{shifted}");
+        let read = parse_header(&serde_json::to_vec(&off).unwrap()).unwrap();
+        assert_eq!(read, h, "every float from its bits");
+        off.as_object_mut().unwrap().remove(FLOAT_BITS);
+        assert_ne!(parse_header(&serde_json::to_vec(&off).unwrap()).unwrap(), h, "the text alone is off");
+        // A header written before `float_bits` still reads (as JSON reads it).
+        let old = serde_json::to_vec(&h).unwrap();
+        let read = parse_header(&old).unwrap();
+        assert_eq!(read.iteration, 30);
+        assert!((read.last_loss.unwrap().total - MISREAD[4]).abs() < 1e-12);
+        // Bits that disagree with the text, or too few or too many of them: refused.
+        for (edit, says) in [
+            (
+                Box::new(|b: &mut Vec<serde_json::Value>| b[0] = 2.5f64.to_bits().into()) as Box<dyn Fn(&mut Vec<_>)>,
+                "float 0",
+            ),
+            (
+                Box::new(|b: &mut Vec<serde_json::Value>| {
+                    b.pop();
+                }),
+                "float",
+            ),
+            (Box::new(|b: &mut Vec<serde_json::Value>| b.push(0u64.into())), "values for the header's"),
+            (Box::new(|b: &mut Vec<serde_json::Value>| b[1] = "x".into()), FLOAT_BITS),
+        ] {
+            let mut w = v.clone();
+            edit(w[FLOAT_BITS].as_array_mut().unwrap());
+            let e = parse_header(&serde_json::to_vec(&w).unwrap()).unwrap_err();
+            assert!(e.contains(says), "{e}");
+        }
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -630,12 +630,32 @@ impl Autoencoder {
         bytes: Vec<u8>,
         neighbors: NeighborIndex,
     ) -> Result<Self> {
-        let record = ModuleRecord::from_bytes(Bytes::from_bytes_vec(bytes))
+        let record = ModuleRecord::from_bytes(Bytes::from_bytes_vec(bytes.clone()))
             .map_err(|e| Error::parse(path, None, format!("module record: {e}")))?;
         let module = config
             .init(neighbors.n_vertices(), &default_device())
             .try_load_record(record)
             .map_err(|e| Error::parse(path, None, format!("module record: {e}")))?;
+        // Every tensor is there with its shape (checked by the record), and the file is exactly
+        // what saving those tensors writes: no byte inserted, moved or left over (a reader that
+        // only checks that a tensor's bytes lie inside the file would read shifted values).
+        let again = module
+            .clone()
+            .into_record()
+            .into_bytes()
+            .map_err(|e| Error::parse(path, None, format!("module record: {e}")))?;
+        if again[..] != bytes[..] {
+            let at = again.iter().zip(&bytes).position(|(a, b)| a != b).unwrap_or(again.len().min(bytes.len()));
+            return Err(Error::parse(
+                path,
+                None,
+                format!(
+                    "{} bytes, where the model's parameter tensors take {} in the layout meshdeco writes (the first difference at byte {at}): the file was changed after training",
+                    bytes.len(),
+                    again.len()
+                ),
+            ));
+        }
         Self::new(config, module, neighbors)
     }
 }

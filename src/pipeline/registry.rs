@@ -69,6 +69,9 @@ pub fn fit(prep: &Prepared, method: &MethodConfig, ctx: &mut FitContext<'_>) -> 
             method.kind().name()
         )));
     }
+    if !prep.validation.is_empty() {
+        crate::config::check_validation_keys(Some(format!("{} frames", prep.validation.len())), method)?;
+    }
     check_training_data(prep, method)?;
     let fitted = match method {
         MethodConfig::Pca(m) => linear::fit_pca(m, prep, ctx),
@@ -168,12 +171,38 @@ fn warn_zero_components(model: &dyn Model) {
 /// `method` field of its header, after verifying every file against `manifest.json`
 /// ([`artifact::open_for_reading`]: which also finishes a commit an interrupted training left
 /// half done, and says when a training is writing the directory right now).
+///
+/// A training that commits a new model while the files are read could leave the reader with
+/// files of two models: when the directory's manifest changed during the read, or a commit is
+/// under way at its end, the read is discarded and done again (up to [`READ_ATTEMPTS`] times,
+/// waiting a little longer each time), so a reader gets the old model or the new one, or an
+/// error naming the writer, never "changed or damaged" for a file that a commit replaced.
 pub fn load_model(dir: &Path) -> Result<Box<dyn Model>> {
     crate::timing::timed("load model", || {
         let adir = artifact::model_dir(dir);
-        load_verified(&adir).map_err(|e| artifact::being_written(&adir, e))
+        let mut attempt = 1;
+        loop {
+            let before = artifact::read_state(&adir);
+            let result = load_verified(&adir);
+            let after = artifact::read_state(&adir);
+            if before == after && !after.1 {
+                return result.map_err(|e| artifact::being_written(&adir, e));
+            }
+            if attempt == READ_ATTEMPTS {
+                let changed = Error::Invalid(format!(
+                    "{} changed while it was read, {READ_ATTEMPTS} times (a training is committing new models into it); try again when it has finished",
+                    adir.display()
+                ));
+                return Err(artifact::being_written(&adir, result.err().unwrap_or(changed)));
+            }
+            std::thread::sleep(std::time::Duration::from_millis(50 * attempt as u64));
+            attempt += 1;
+        }
     })
 }
+
+/// Reads of a model directory [`load_model`] tries while commits change it.
+pub const READ_ATTEMPTS: usize = 5;
 
 /// Files the autoencoder's loader reads besides [`artifact::MODEL_FILES`].
 const AUTOENCODER_FILES: &[&str] = &[crate::nn::inference::META_FILE, crate::nn::inference::MODEL_FILE];

@@ -7,17 +7,24 @@
 //! about file names or times enters it, so a changed frame, rest shape or option is a different
 //! file, and two datasets with the same frames share one.
 //!
-//! **File** (`<key>.features` in the cache folder): a line `MESHDECO-FEATURES 2`, then the
+//! **File** (`<key>.features` in the cache folder): a line `MESHDECO-FEATURES 3`, then the
 //! F·E·W little-endian `f64` ([`Features::data`]'s layout: the exact numbers, so a run that
 //! reads the cache gives the same model as one that computes), then one line of JSON
-//! ([`Header`]: key, F, E, W, every frame's CRC-32, each dimension's minimum and maximum), then
-//! the header's byte offset as 8 little-endian bytes. Written atomically, frames computed in
-//! parallel a run at a time (memory: one run's features). Every frame is checked against its
-//! CRC-32 whenever it is read ([`FeatureFile::frame`]), so a file can be opened at once and read
-//! frame by frame (a training batch at a time); a file whose header is unreadable or names
-//! another key or shape is recomputed and replaced (with a note on stderr), and a frame that
-//! fails its checksum is an error naming the file and frame. A cache folder that cannot be
-//! written only costs the reuse: training goes on with the computed features.
+//! ([`Header`]: key, F, E, W, every frame's CRC-32, each dimension's minimum and maximum, and a
+//! CRC-32 of all of these), then the header's byte offset as 8 little-endian bytes. Written
+//! atomically, frames computed in parallel a run at a time (memory: one run's features).
+//!
+//! **Checks.** Nothing in a cache file is trusted: the header must match its own checksum, and
+//! every frame is checked against its CRC-32 whenever it is read ([`FeatureFile::frame`]), so a
+//! file can be opened at once and read frame by frame (a training batch at a time). The
+//! recorded ranges, which scale the autoencoder's features, must be the frames' own: a file
+//! reused by [`open_or_build`] is read once to check them ([`FeatureFile::verify`]), and
+//! [`FeatureFile::read_all`] checks them on the way. A file whose header is unreadable, fails its
+//! checksum, names another key or shape, or records ranges its frames do not have is recomputed
+//! and replaced, with a note on stderr naming the file and what was wrong; a frame that fails
+//! its checksum while a training streams the file is an error naming the file and frame. A
+//! cache folder that cannot be written only costs the reuse: training goes on with the
+//! computed features.
 //!
 //! **Where** ([`CachePolicy`], `data.cache`): `"auto"` (the default) uses
 //! `$MESHDECO_CACHE_DIR`, else `$XDG_CACHE_HOME/meshdeco/features`, else
@@ -36,7 +43,7 @@ use crate::error::{Error, Result};
 use crate::mesh::FrameSource;
 
 /// First line of a cache file.
-const MAGIC: &str = "MESHDECO-FEATURES 2";
+const MAGIC: &str = "MESHDECO-FEATURES 3";
 
 /// Smallest feature array (bytes) `"auto"` caches: 64 MiB.
 pub const AUTO_MIN_BYTES: usize = 64 << 20;
@@ -122,9 +129,33 @@ pub struct Header {
     pub min_bits: Vec<u64>,
     /// Each dimension's maximum (W), as bits.
     pub max_bits: Vec<u64>,
+    /// CRC-32 of every field above ([`Header::checksum`]).
+    pub header_crc32: u32,
 }
 
 impl Header {
+    /// The CRC-32 of the header's fields (key, shape, frame checksums, ranges), as recorded in
+    /// `header_crc32`.
+    pub fn checksum(&self) -> u32 {
+        let mut h = crc32fast::Hasher::new();
+        h.update(&(self.key.len() as u64).to_le_bytes());
+        h.update(self.key.as_bytes());
+        for n in [self.n_frames, self.n_elements, self.width] {
+            h.update(&(n as u64).to_le_bytes());
+        }
+        for c in &self.frame_crc32 {
+            h.update(&c.to_le_bytes());
+        }
+        for (list, tag) in [(&self.min_bits, b'<'), (&self.max_bits, b'>')] {
+            h.update(&[tag]);
+            h.update(&(list.len() as u64).to_le_bytes());
+            for b in list {
+                h.update(&b.to_le_bytes());
+            }
+        }
+        h.finalize()
+    }
+
     /// Each dimension's minimum (W).
     pub fn min(&self) -> Vec<f64> {
         self.min_bits.iter().map(|&b| f64::from_bits(b)).collect()
@@ -169,6 +200,13 @@ impl FeatureFile {
         let mut json = vec![0u8; (len - 8 - header_at) as usize];
         crate::artifact::read_exact_at(&file, &mut json, header_at).map_err(|e| Error::io(path, e))?;
         let header: Header = serde_json::from_slice(&json).map_err(|e| bad(format!("header: {e}")))?;
+        if header.checksum() != header.header_crc32 {
+            return Err(bad(format!(
+                "header checksum {:08x} differs from the recorded {:08x} (the file changed after it was written)",
+                header.checksum(),
+                header.header_crc32
+            )));
+        }
         if header.key != key {
             return Err(bad(format!("holds key {}, expected {key}", header.key)));
         }
@@ -237,7 +275,8 @@ impl FeatureFile {
         Ok(out)
     }
 
-    /// Every frame, in order, as one feature array (frames read in parallel, each verified).
+    /// Every frame, in order, as one feature array (frames read in parallel, each verified),
+    /// after checking that the recorded ranges are theirs.
     pub fn read_all(&self) -> Result<Features> {
         use rayon::prelude::*;
         let h = &self.header;
@@ -253,7 +292,91 @@ impl FeatureFile {
                 },
             )?;
         }
+        let mut ranges = Ranges::new(h.width);
+        ranges.add(&out.data);
+        self.check_ranges(&ranges)?;
         Ok(out)
+    }
+
+    /// Reads every frame (each checked against its CRC-32, in parallel) and checks that the
+    /// header's ranges are the frames' own: each dimension's minimum and maximum over all frames
+    /// and elements. An error names the file and the first dimension that differs.
+    pub fn verify(&self) -> Result<()> {
+        use rayon::prelude::*;
+        let h = &self.header;
+        let ranges = (0..h.n_frames)
+            .into_par_iter()
+            .try_fold(
+                || (Ranges::new(h.width), Vec::new(), Vec::new()),
+                |(mut r, mut v, mut b), f| -> Result<_> {
+                    self.frame_into(f, &mut v, &mut b)?;
+                    r.add(&v);
+                    Ok((r, v, b))
+                },
+            )
+            .map(|acc| acc.map(|(r, _, _)| r))
+            .try_reduce(
+                || Ranges::new(h.width),
+                |mut a, b| {
+                    a.merge(&b);
+                    Ok(a)
+                },
+            )?;
+        self.check_ranges(&ranges)
+    }
+
+    /// Errors (naming the file) unless the header's ranges equal `ranges` (values compared, so
+    /// a NaN never passes).
+    fn check_ranges(&self, ranges: &Ranges) -> Result<()> {
+        let (min, max) = (self.header.min(), self.header.max());
+        for k in 0..self.header.width {
+            if min[k] != ranges.min[k] || max[k] != ranges.max[k] {
+                return Err(Error::Invalid(format!(
+                    "{}: the recorded range of feature dimension {k}, [{}, {}], is not its frames' [{}, {}] (the cache file changed after it was written)",
+                    self.path.display(),
+                    min[k],
+                    max[k],
+                    ranges.min[k],
+                    ranges.max[k]
+                )));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Each dimension's minimum and maximum over the values seen (W each; +∞ and −∞ before any).
+#[derive(Debug, Clone, PartialEq)]
+struct Ranges {
+    min: Vec<f64>,
+    max: Vec<f64>,
+}
+
+impl Ranges {
+    fn new(width: usize) -> Self {
+        Ranges { min: vec![f64::INFINITY; width], max: vec![f64::NEG_INFINITY; width] }
+    }
+
+    /// Takes in `values`, W numbers per element.
+    fn add(&mut self, values: &[f64]) {
+        let width = self.min.len();
+        if width == 0 {
+            return;
+        }
+        for v in values.chunks_exact(width) {
+            for (k, &x) in v.iter().enumerate() {
+                self.min[k] = self.min[k].min(x);
+                self.max[k] = self.max[k].max(x);
+            }
+        }
+    }
+
+    /// Takes in another set's ranges.
+    fn merge(&mut self, other: &Ranges) {
+        for k in 0..self.min.len() {
+            self.min[k] = self.min[k].min(other.min[k]);
+            self.max[k] = self.max[k].max(other.max[k]);
+        }
     }
 }
 
@@ -269,7 +392,8 @@ pub enum Opened {
 }
 
 /// The cache file of the features of `frames` of `seq` under `policy`, built if missing or
-/// unusable. `Err` only for errors of the data (a frame that cannot be encoded); a folder or
+/// unusable; a file found in the cache is verified first ([`FeatureFile::verify`]: one read of
+/// its frames). `Err` only for errors of the data (a frame that cannot be encoded); a folder or
 /// file that cannot be used is [`Opened::Unavailable`].
 ///
 /// `on_frames(done)` is called after each run of frames computed for a new file.
@@ -280,6 +404,19 @@ pub fn open_or_build(
     policy: &CachePolicy,
     on_frames: &mut dyn FnMut(usize),
 ) -> Result<Opened> {
+    open_or_build_checked(rep, seq, frames, policy, on_frames, true)
+}
+
+/// [`open_or_build`]; a file found in the cache is verified only when `verify` (a caller that
+/// reads it whole with [`FeatureFile::read_all`] checks it there).
+fn open_or_build_checked(
+    rep: &Representation,
+    seq: &dyn FrameSource,
+    frames: &[usize],
+    policy: &CachePolicy,
+    on_frames: &mut dyn FnMut(usize),
+    verify: bool,
+) -> Result<Opened> {
     let bytes = frames.len() * rep.n_elements() * rep.width() * 8;
     let Some(folder) = policy.folder(bytes) else { return Ok(Opened::NotCached) };
     if let Some(&f) = frames.iter().find(|&&f| f >= seq.n_frames()) {
@@ -289,7 +426,7 @@ pub fn open_or_build(
     let path = folder.join(format!("{key}.features"));
     let expect = (frames.len(), rep.n_elements(), rep.width());
     if path.is_file() {
-        match FeatureFile::open(&path, &key, expect) {
+        match FeatureFile::open(&path, &key, expect).and_then(|f| if verify { f.verify().map(|()| f) } else { Ok(f) }) {
             Ok(file) => return Ok(Opened::File { file, built: false }),
             Err(e) => eprintln!("note: recomputing the cached features: {e}"),
         }
@@ -316,7 +453,7 @@ pub fn encode_cached(
     frames: &[usize],
     policy: &CachePolicy,
 ) -> Result<(Features, CacheUse)> {
-    match open_or_build(rep, seq, frames, policy, &mut |_| {})? {
+    match open_or_build_checked(rep, seq, frames, policy, &mut |_| {}, false)? {
         Opened::NotCached => Ok((rep.encode_selected(seq, frames)?, CacheUse::Computed)),
         Opened::Unavailable(why) => Ok((rep.encode_selected(seq, frames)?, CacheUse::Unavailable(why))),
         Opened::File { file, built } => {
@@ -324,7 +461,8 @@ pub fn encode_cached(
             match file.read_all() {
                 Ok(f) => Ok((f, if built { CacheUse::Written(path) } else { CacheUse::Read(path) })),
                 Err(e) if !built => {
-                    // A frame changed on disk after the file was written: compute it again.
+                    // A frame or a range changed on disk after the file was written: compute
+                    // it again.
                     eprintln!("note: recomputing the cached features: {e}");
                     drop(file);
                     let _ = std::fs::remove_file(&path);
@@ -424,8 +562,9 @@ fn build(
         frame_crc32: Vec::with_capacity(frames.len()),
         min_bits: Vec::new(),
         max_bits: Vec::new(),
+        header_crc32: 0,
     };
-    let (mut min, mut max) = (vec![f64::INFINITY; width], vec![f64::NEG_INFINITY; width]);
+    let mut ranges = Ranges::new(width);
     crate::artifact::write_atomic_checked(path, |w| {
         use std::io::Write;
         let io = |e: std::io::Error| Error::io(path, e);
@@ -444,19 +583,15 @@ fn build(
             for frame in f.data.chunks_exact((f.n_elements * width).max(1)) {
                 let bytes: Vec<u8> = frame.iter().flat_map(|x| x.to_le_bytes()).collect();
                 header.frame_crc32.push(crc32fast::hash(&bytes));
-                for v in frame.chunks_exact(width) {
-                    for (k, &x) in v.iter().enumerate() {
-                        min[k] = min[k].min(x);
-                        max[k] = max[k].max(x);
-                    }
-                }
+                ranges.add(frame);
                 w.write_all(&bytes).map_err(io)?;
                 offset += bytes.len() as u64;
             }
             on_frames(header.frame_crc32.len());
         }
-        header.min_bits = min.iter().map(|x| x.to_bits()).collect();
-        header.max_bits = max.iter().map(|x| x.to_bits()).collect();
+        header.min_bits = ranges.min.iter().map(|x| x.to_bits()).collect();
+        header.max_bits = ranges.max.iter().map(|x| x.to_bits()).collect();
+        header.header_crc32 = header.checksum();
         let json = serde_json::to_vec(&header).map_err(|e| io(std::io::Error::other(e)))?;
         w.write_all(&json).map_err(io)?;
         w.write_all(&offset.to_le_bytes()).map_err(io)?;
@@ -536,12 +671,118 @@ mod tests {
         let _ = std::fs::remove_dir_all(&dir);
     }
 
+    /// Rewrites the JSON header of the cache file at `path` with `edit`, re-recording its
+    /// checksum when `rerecord` (the data and the header's offset stay).
+    fn edit_header(path: &Path, rerecord: bool, edit: impl FnOnce(&mut Header)) {
+        let bytes = std::fs::read(path).unwrap();
+        let at = u64::from_le_bytes(bytes[bytes.len() - 8..].try_into().unwrap()) as usize;
+        let mut h: Header = serde_json::from_slice(&bytes[at..bytes.len() - 8]).unwrap();
+        edit(&mut h);
+        if rerecord {
+            h.header_crc32 = h.checksum();
+        }
+        let mut out = bytes[..at].to_vec();
+        out.extend(serde_json::to_vec(&h).unwrap());
+        out.extend((at as u64).to_le_bytes());
+        std::fs::write(path, out).unwrap();
+    }
+
+    #[test]
+    fn ranges_are_checksummed_and_checked_against_the_frames() {
+        let (rep, seq) = setup();
+        let dir = std::env::temp_dir().join(format!("meshdeco-cache-ranges-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let policy = CachePolicy::Dir(dir.clone());
+        let frames = [0, 2, 4, 6];
+        let (a, used) = encode_cached(&rep, &seq, &frames, &policy).unwrap();
+        let CacheUse::Written(path) = used else { panic!("{used:?}") };
+        let clean = std::fs::read(&path).unwrap();
+        let k = key(&rep, &seq, &frames).unwrap();
+        let expect = (frames.len(), a.n_elements, a.width);
+        let file = FeatureFile::open(&path, &k, expect).unwrap();
+        file.verify().unwrap();
+        assert_eq!(file.header().checksum(), file.header().header_crc32);
+        drop(file);
+        let half = |b: u64| (f64::from_bits(b) / 2.0).to_bits();
+        // Every field of the header is covered by its checksum.
+        type Edit<'a> = Box<dyn Fn(&mut Header) + 'a>;
+        let edits: Vec<(&str, Edit<'_>)> = vec![
+            ("min", Box::new(|h: &mut Header| h.min_bits[0] = half(h.min_bits[0]))),
+            ("max", Box::new(|h: &mut Header| h.max_bits[8] = half(h.max_bits[8]))),
+            ("frame", Box::new(|h: &mut Header| h.frame_crc32[1] ^= 1)),
+            ("key", Box::new(|h: &mut Header| h.key.push('0'))),
+            ("frames", Box::new(|h: &mut Header| h.n_frames += 1)),
+            ("elements", Box::new(|h: &mut Header| h.n_elements += 1)),
+            ("width", Box::new(|h: &mut Header| h.width += 1)),
+            (
+                "fewer ranges",
+                Box::new(|h: &mut Header| {
+                    h.max_bits.pop();
+                }),
+            ),
+        ];
+        for (what, edit) in &edits {
+            edit_header(&path, false, edit);
+            let e = FeatureFile::open(&path, &k, expect).unwrap_err().to_string();
+            assert!(e.contains("header checksum") && e.contains(&path.display().to_string()), "{what}: {e}");
+            std::fs::write(&path, &clean).unwrap();
+        }
+        // Ranges changed behind a re-recorded checksum: the file opens, but its ranges are not
+        // its frames'; open_or_build and encode_cached recompute it (the clean file again).
+        let ranges: Vec<(&str, Edit<'_>)> = vec![
+            ("halved minimum", Box::new(|h: &mut Header| h.min_bits[3] = half(h.min_bits[3]))),
+            ("halved maximum", Box::new(|h: &mut Header| h.max_bits[0] = half(h.max_bits[0]))),
+            ("huge", Box::new(|h: &mut Header| h.max_bits[5] = 1e300f64.to_bits())),
+            ("minus huge", Box::new(|h: &mut Header| h.min_bits[5] = (-1e300f64).to_bits())),
+            ("NaN", Box::new(|h: &mut Header| h.min_bits[1] = f64::NAN.to_bits())),
+            ("NaN maximum", Box::new(|h: &mut Header| h.max_bits[1] = f64::NAN.to_bits())),
+        ];
+        for (what, edit) in &ranges {
+            for reader in 0..2 {
+                edit_header(&path, true, edit);
+                let file = FeatureFile::open(&path, &k, expect).unwrap();
+                let e = file.verify().unwrap_err().to_string();
+                assert!(e.contains("recorded range") && e.contains(&path.display().to_string()), "{what}: {e}");
+                let e = file.read_all().unwrap_err().to_string();
+                assert!(e.contains("recorded range"), "{what}: {e}");
+                drop(file);
+                if reader == 0 {
+                    let opened = open_or_build(&rep, &seq, &frames, &policy, &mut |_| {}).unwrap();
+                    assert!(matches!(opened, Opened::File { built: true, .. }), "{what}: {opened:?}");
+                } else {
+                    let (b, used) = encode_cached(&rep, &seq, &frames, &policy).unwrap();
+                    assert_eq!((b, used), (a.clone(), CacheUse::Written(path.clone())), "{what}");
+                }
+                assert_eq!(std::fs::read(&path).unwrap(), clean, "{what}: recomputed");
+            }
+        }
+        // The clean file is reused as it is.
+        let opened = open_or_build(&rep, &seq, &frames, &policy, &mut |_| {}).unwrap();
+        assert!(matches!(opened, Opened::File { built: false, .. }), "{opened:?}");
+        // A range recorded as −0 where the frames' is +0 (or the reverse) is the same range.
+        let mut r = Ranges::new(2);
+        r.add(&[0.0, 1.0, -0.0, 2.0]);
+        let mut other = Ranges::new(2);
+        other.add(&[-0.0, 2.0]);
+        other.merge(&Ranges { min: vec![0.0, 1.0], max: vec![0.0, 1.0] });
+        assert_eq!(r, other);
+        assert_eq!((r.min.clone(), r.max.clone()), (vec![0.0, 1.0], vec![0.0, 2.0]));
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
     #[test]
     fn policies() {
         assert_eq!(CachePolicy::parse("auto"), CachePolicy::Auto);
         assert_eq!(CachePolicy::parse("off"), CachePolicy::Off);
         assert_eq!(CachePolicy::parse("/x/y"), CachePolicy::Dir("/x/y".into()));
         assert_eq!(CachePolicy::Auto.folder(AUTO_MIN_BYTES - 1), None);
+        // From AUTO_MIN_BYTES on, the default folder (HOME is set wherever the tests run).
+        let d = default_folder().expect("HOME is set");
+        match std::env::var_os("MESHDECO_CACHE_DIR").filter(|v| !v.is_empty()) {
+            Some(v) => assert_eq!(d, PathBuf::from(v)),
+            None => assert!(d.ends_with("meshdeco/features"), "{d:?}"),
+        }
+        assert_eq!(CachePolicy::Auto.folder(AUTO_MIN_BYTES), Some(d));
         assert_eq!(CachePolicy::Off.folder(usize::MAX), None);
         assert_eq!(CachePolicy::Dir("d".into()).folder(0), Some(PathBuf::from("d")));
         // An unwritable folder costs only the reuse.

@@ -2,17 +2,23 @@
 //! request heads and bodies, `Content-Length` bodies only (no chunked uploads). Enough for a
 //! local viewer and for scripts; nothing here touches the file system.
 //!
-//! Every resource a client can hold is bounded ([`Limits`]): the number of connections (more are
-//! answered 503 at once), the time a request may take to arrive whole from its first byte and a
-//! response to be written (not only the time between two reads, so a client sending one byte
-//! every few seconds is cut off: 408), the idle time of a keep-alive connection, and the bytes of
-//! request bodies held at once over all connections (each body's `Content-Length` is reserved
-//! before it is read; a request that does not fit is answered 503).
+//! Every resource a client can hold is bounded ([`Limits`]): the number of connections, the time
+//! a request may take to arrive whole from its first byte and a response to be written (not only
+//! the time between two reads, so a client sending one byte every few seconds is cut off: 408),
+//! the time a new connection has for its first request, the idle time of a keep-alive
+//! connection, and the bytes of request bodies held at once over all connections (each body's
+//! `Content-Length` is reserved before it is read; a request that does not fit is answered 503).
+//!
+//! Only a connection whose request is being answered holds its slot for sure: when every slot
+//! is taken, a new connection closes the one that has waited longest without sending a whole
+//! request (first those that never sent one, then idle keep-alive ones), so connections that
+//! send nothing cannot lock the page out; only when every connection is being answered is a new
+//! one answered 503.
 
 use std::io::{BufRead, BufReader, Read, Write};
 use std::net::{TcpListener, TcpStream};
-use std::sync::Arc;
 use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 /// Longest request head (request line and headers) accepted.
@@ -21,6 +27,8 @@ pub const MAX_HEAD: usize = 16 * 1024;
 pub const MAX_BODY: usize = 4 * 1024 * 1024;
 /// An idle keep-alive connection is closed after this long.
 pub const IDLE: Duration = Duration::from_secs(120);
+/// A new connection is closed when its first request has not arrived whole within this long.
+pub const FIRST_REQUEST: Duration = Duration::from_secs(10);
 /// Time one request may take to arrive whole, from its first byte (and one response to be
 /// written).
 pub const REQUEST_TIME: Duration = Duration::from_secs(30);
@@ -34,10 +42,14 @@ pub const MAX_BODY_BYTES_IN_FLIGHT: usize = 4 * MAX_BODY;
 pub struct Limits {
     /// How long a keep-alive connection may wait for the first byte of its next request.
     pub idle: Duration,
+    /// How long a new connection may take to send its first request whole (from the moment
+    /// it is accepted).
+    pub first_request: Duration,
     /// How long a request may take to arrive whole (head and body) from its first byte, and a
     /// response to be written.
     pub request: Duration,
-    /// Most connections served at once; one more is answered 503 and closed.
+    /// Most connections served at once; one more closes the connection that has waited
+    /// longest without a whole request, or is answered 503 when all are being answered.
     pub max_connections: usize,
     /// Most bytes of request bodies reserved at once over all connections; a request whose
     /// `Content-Length` does not fit is answered 503.
@@ -48,6 +60,7 @@ impl Default for Limits {
     fn default() -> Self {
         Limits {
             idle: IDLE,
+            first_request: FIRST_REQUEST,
             request: REQUEST_TIME,
             max_connections: MAX_CONNECTIONS,
             max_body_bytes_in_flight: MAX_BODY_BYTES_IN_FLIGHT,
@@ -145,11 +158,62 @@ fn timed_out(e: &std::io::Error) -> bool {
     matches!(e.kind(), std::io::ErrorKind::TimedOut | std::io::ErrorKind::WouldBlock)
 }
 
-/// The server's shared counters: connections open, body bytes reserved.
+/// The server's shared state: its connections, body bytes reserved.
 #[derive(Debug, Default)]
 struct Load {
-    connections: AtomicUsize,
+    slots: Mutex<Slots>,
     body_bytes: AtomicUsize,
+}
+
+/// The connections holding a slot.
+#[derive(Debug, Default)]
+struct Slots {
+    /// Identity of the next connection.
+    next: u64,
+    open: Vec<Slot>,
+}
+
+/// One connection's slot: a handle to close it with, whether it has sent a whole request yet,
+/// whether one is being answered, and since when it has been waiting.
+#[derive(Debug)]
+struct Slot {
+    id: u64,
+    stream: TcpStream,
+    served: bool,
+    answering: bool,
+    since: Instant,
+}
+
+impl Slots {
+    /// The slot to close for a new connection: of those not being answered, the one waiting
+    /// longest among those that never sent a whole request, else the one idle longest.
+    fn to_close(&self) -> Option<usize> {
+        (0..self.open.len())
+            .filter(|&i| !self.open[i].answering)
+            .min_by_key(|&i| (self.open[i].served, self.open[i].since))
+    }
+}
+
+impl Load {
+    fn slots(&self) -> std::sync::MutexGuard<'_, Slots> {
+        self.slots.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// Marks connection `id`'s request as being answered (`true`) or answered (`false`);
+    /// `false` when the connection was closed for another one meanwhile (its request is not
+    /// answered then).
+    fn answering(&self, id: u64, answering: bool) -> bool {
+        let mut slots = self.slots();
+        match slots.open.iter_mut().find(|s| s.id == id) {
+            Some(s) => {
+                s.answering = answering;
+                s.served = true;
+                s.since = Instant::now();
+                true
+            }
+            None => false,
+        }
+    }
 }
 
 /// Body bytes reserved in [`Load::body_bytes`], given back when dropped (after the request was
@@ -175,26 +239,25 @@ impl Drop for BodyReservation {
     }
 }
 
-/// A slot in [`Load::connections`], given back when dropped.
-struct ConnectionSlot(Arc<Load>);
+/// Connection `.1`'s slot in [`Load::slots`], given back when dropped (if it was not taken
+/// for another connection before).
+struct ConnectionSlot(Arc<Load>, u64);
 
 impl Drop for ConnectionSlot {
     fn drop(&mut self) {
-        self.0.connections.fetch_sub(1, Ordering::SeqCst);
+        self.0.slots().open.retain(|s| s.id != self.1);
     }
 }
 
+/// Reads one request within `limits`; `late` is the 408 message for one that does not arrive
+/// in time.
 fn read_request(
     r: &mut BufReader<DeadlineReader>,
     limits: &Limits,
     load: &Arc<Load>,
+    late: &str,
 ) -> Result<(Request, bool, Option<BodyReservation>), ReadError> {
-    let late = || {
-        ReadError::Respond(Response::error(
-            408,
-            format!("the request did not arrive whole within {} s", limits.request.as_secs_f64()),
-        ))
-    };
+    let late = || ReadError::Respond(Response::error(408, late));
     let mut head = Vec::new();
     loop {
         let before = head.len();
@@ -347,27 +410,55 @@ fn write_response(w: &mut TcpStream, resp: &Response, keep_alive: bool, deadline
     write_all_by(w, &resp.body, deadline)
 }
 
-/// Serves one connection within `limits` (`load`: the server's shared counters).
-fn serve_limited(stream: TcpStream, handle: &dyn Fn(&Request) -> Response, limits: &Limits, load: &Arc<Load>) {
+/// Serves connection `id` (accepted at `accepted`) within `limits` (`load`: the server's
+/// shared state).
+fn serve_limited(
+    stream: TcpStream,
+    handle: &dyn Fn(&Request) -> Response,
+    limits: &Limits,
+    load: &Arc<Load>,
+    (id, accepted): (u64, Instant),
+) {
     let _ = stream.set_nodelay(true);
     let Ok(mut writer) = stream.try_clone() else { return };
     let mut reader = BufReader::new(DeadlineReader { stream, deadline: Instant::now() });
+    // The first request must arrive whole within `limits.first_request` of the connection.
+    let mut first = Some(accepted + limits.first_request);
     loop {
         // Idle: wait for the first byte of the next request (nothing to answer if none comes).
-        reader.get_mut().deadline = Instant::now() + limits.idle;
+        let idle = Instant::now() + limits.idle;
+        reader.get_mut().deadline = first.map_or(idle, |f| f.min(idle));
         match reader.fill_buf() {
             Ok([]) | Err(_) => return,
             Ok(_) => {}
         }
         // From its first byte the request has `limits.request` to arrive whole.
-        reader.get_mut().deadline = Instant::now() + limits.request;
-        match read_request(&mut reader, limits, load) {
+        let whole = Instant::now() + limits.request;
+        let (deadline, late) = match first {
+            Some(f) if f < whole => (
+                f,
+                format!(
+                    "the request did not arrive whole within {} s of connecting",
+                    limits.first_request.as_secs_f64()
+                ),
+            ),
+            _ => (whole, format!("the request did not arrive whole within {} s", limits.request.as_secs_f64())),
+        };
+        reader.get_mut().deadline = deadline;
+        match read_request(&mut reader, limits, load, &late) {
             Ok((req, keep_alive, reservation)) => {
+                first = None;
+                if !load.answering(id, true) {
+                    return; // closed for another connection meanwhile
+                }
                 let resp = handle(&req);
                 drop(req);
                 drop(reservation);
                 let deadline = Instant::now() + limits.request;
                 if write_response(&mut writer, &resp, keep_alive, deadline).is_err() || !keep_alive {
+                    return;
+                }
+                if !load.answering(id, false) {
                     return;
                 }
             }
@@ -381,8 +472,10 @@ fn serve_limited(stream: TcpStream, handle: &dyn Fn(&Request) -> Response, limit
 }
 
 /// Accepts connections on `listener` until the process ends, each served on its own thread
-/// within `limits` and answered with `handle`. A connection beyond `limits.max_connections` is
-/// answered 503 and closed at once (no thread is started for it).
+/// within `limits` and answered with `handle`. A connection beyond `limits.max_connections`
+/// closes the one that has waited longest without sending a whole request (module docs), or,
+/// when every connection's request is being answered, is answered 503 and closed at once (no
+/// thread is started for it).
 pub fn serve<H>(listener: TcpListener, limits: Limits, handle: H) -> std::io::Result<()>
 where
     H: Fn(&Request) -> Response + Send + Sync + 'static,
@@ -391,24 +484,40 @@ where
     let load = Arc::new(Load::default());
     for stream in listener.incoming() {
         let Ok(mut stream) = stream else { continue };
-        let open = load.connections.fetch_add(1, Ordering::SeqCst);
-        let slot = ConnectionSlot(Arc::clone(&load));
-        if open >= limits.max_connections {
-            drop(slot);
-            let resp = Response::error(
-                503,
-                format!("busy: {} connections are open, the most this server serves at once; try again", open),
-            )
-            .with_header("Retry-After", "1".into());
-            let _ = write_response(&mut stream, &resp, false, Instant::now() + Duration::from_millis(200));
-            let _ = stream.shutdown(std::net::Shutdown::Write);
-            continue;
-        }
+        let accepted = Instant::now();
+        let Ok(closer) = stream.try_clone() else { continue };
+        let id = {
+            let mut slots = load.slots();
+            if slots.open.len() >= limits.max_connections {
+                match slots.to_close() {
+                    Some(i) => {
+                        let _ = slots.open.swap_remove(i).stream.shutdown(std::net::Shutdown::Both);
+                    }
+                    None => {
+                        let open = slots.open.len();
+                        drop(slots);
+                        let resp = Response::error(
+                            503,
+                            format!("busy: {open} connections are being answered, the most this server serves at once; try again"),
+                        )
+                        .with_header("Retry-After", "1".into());
+                        let _ = write_response(&mut stream, &resp, false, Instant::now() + Duration::from_millis(200));
+                        let _ = stream.shutdown(std::net::Shutdown::Write);
+                        continue;
+                    }
+                }
+            }
+            let id = slots.next;
+            slots.next += 1;
+            slots.open.push(Slot { id, stream: closer, served: false, answering: false, since: accepted });
+            id
+        };
+        let slot = ConnectionSlot(Arc::clone(&load), id);
         let handle = Arc::clone(&handle);
         let load = Arc::clone(&load);
         let _ = std::thread::Builder::new().name("meshdeco-http".into()).spawn(move || {
             let _slot = slot;
-            serve_limited(stream, &*handle, &limits, &load);
+            serve_limited(stream, &*handle, &limits, &load, (id, accepted));
         });
     }
     Ok(())
