@@ -1,0 +1,217 @@
+//! Guards of the newest code (issue 58), each by what a user sees:
+//!
+//! - the pose's landing correction reaches `spread` × the rest mesh's bounding-box diagonal in
+//!   data units, on meshes of two sizes (`src/model/pose.rs`, where the option becomes a radius);
+//! - the autoencoder trained from the feature cache (`data.cache`, a batch at a time) is the
+//!   model trained in memory, bit for bit, with `batch_size` below the set, `data.train` named out
+//!   of order and the network's own validation shapes held out (`src/nn/data.rs`: which cached
+//!   frame a batch lane gets);
+//! - `data.validation = "auto:P%"` holds out round(P % × the training frames) (at least one) of
+//!   the training selection, never a test frame nor the first training frame, the same for the
+//!   same seed and other frames for another (`src/config.rs`).
+
+mod common;
+
+use std::collections::BTreeSet;
+use std::path::Path;
+
+use common::{fresh_dir, meshdeco, output_text};
+use meshdeco::config::Config;
+use meshdeco::mesh::{self, TriMesh, Vec3};
+use meshdeco::pipeline::{Silent, TrainOptions};
+
+/// The synthetic bumps tube scaled by `scale` (all 40 frames), written as `s.npy` + `s.obj` into
+/// `d`; returns the scaled frames.
+fn scaled_bumps(d: &Path, scale: f64) -> (Vec<Vec<Vec3>>, Vec<[usize; 3]>) {
+    let seq = meshdeco::synthetic::load("synthetic:bumps").unwrap();
+    let frames: Vec<Vec<Vec3>> =
+        seq.frames.iter().map(|f| f.iter().map(|p| [p[0] * scale, p[1] * scale, p[2] * scale]).collect()).collect();
+    mesh::npy::write_npy(&d.join("s.npy"), &frames).unwrap();
+    mesh::write::write_obj(&d.join("s.obj"), &TriMesh::new(frames[0].clone(), seq.faces.clone())).unwrap();
+    (frames, seq.faces)
+}
+
+/// What one landed drag reaches on the bumps tube scaled by `scale`: (the largest straight-line
+/// distance from the pin of a vertex the landing correction moved, the radius `spread` × the
+/// rest's bounding-box diagonal, the landed pin's distance to its target / the drag).
+fn landing_reach(scale: f64, spread: f64) -> (f64, f64, f64) {
+    let d = fresh_dir("guards58", &format!("reach-{scale}"));
+    let (frames, _) = scaled_bumps(&d, scale);
+    let cfg = Config::from_toml(&format!(
+        "name = \"pca\"\n[data]\npath = \"{}\"\ntemplate = \"{}\"\ntrain = \"1-30\"\ntest = \"rest\"\n[method]\nkind = \"pca\"\ncomponents = 3\n",
+        d.join("s.npy").display(),
+        d.join("s.obj").display()
+    ))
+    .unwrap();
+    let model = d.join("pca");
+    meshdeco::pipeline::train(&cfg, &model, &TrainOptions::default(), &mut Silent).unwrap();
+    let rest = &frames[0];
+    // A vertex no training frame moves: the linear model cannot move it, so the whole drag is
+    // the landing correction's.
+    let still = (0..rest.len())
+        .min_by(|&a, &b| {
+            let m = |v: usize| frames.iter().map(|f| mesh::dist(f[v], rest[v])).fold(0.0, f64::max);
+            m(a).total_cmp(&m(b)).then(a.cmp(&b))
+        })
+        .unwrap();
+    let (lo, hi) = mesh::bounding_box(rest);
+    let diagonal = mesh::dist(lo, hi);
+    // A drag of 1 % of the diagonal: the fold-free floor (3 × the residual) stays below the radius.
+    let amount = 0.01 * diagonal;
+    let p = rest[still];
+    let t: Vec3 = [p[0], p[1], p[2] + amount];
+    std::fs::write(d.join("c.json"), format!("{{\"{still}\": [{}, {}, {}]}}", t[0], t[1], t[2])).unwrap();
+    let pose = |spread: &str, out: &str| {
+        let o = meshdeco(&["pose", model.to_str().unwrap(), "-c", "c.json", "--out", out, "--spread", spread], &d);
+        assert!(o.status.success(), "pose --spread {spread}: {}", output_text(&o));
+        mesh::load_mesh(&d.join(out)).unwrap().positions
+    };
+    let own = pose("0", "own.obj");
+    let landed = pose(&spread.to_string(), "landed.obj");
+    let miss = mesh::dist(landed[still], t) / amount;
+    let reach = (0..rest.len())
+        .filter(|&v| mesh::dist(own[v], landed[v]) > 1e-9 * amount)
+        .map(|v| mesh::dist(rest[v], p))
+        .fold(0.0, f64::max);
+    let _ = std::fs::remove_dir_all(&d);
+    (reach, spread * diagonal, miss)
+}
+
+/// The landing radius is `spread` × the bounding-box diagonal in data units: on the tube at half
+/// and at twenty times its size, the correction reaches most of the way to that radius and no
+/// farther (straight-line distance never exceeds the distance along the surface), and the reach
+/// grows with the mesh (40 × between the two sizes). A radius taken in absolute units (the scale
+/// dropped) reaches the same data-unit distance on both.
+#[test]
+fn the_landing_radius_is_a_share_of_the_diagonal_in_data_units() {
+    let spread = 0.1;
+    let small = landing_reach(0.5, spread);
+    let large = landing_reach(20.0, spread);
+    for (name, (reach, radius, miss)) in [("half size", small), ("20 × size", large)] {
+        assert!(miss < 1e-4, "{name}: the pin landed {:.4} % of the drag away", 100.0 * miss);
+        assert!(
+            reach <= radius * (1.0 + 1e-9),
+            "{name}: the correction moved a vertex {reach} from the pin, beyond the radius {radius}"
+        );
+        // The mesh's edges are a few % of the diagonal: the last moved vertex is within a few
+        // edges of the radius along the surface.
+        assert!(reach >= 0.6 * radius, "{name}: the correction reaches {reach}, short of the radius {radius}");
+    }
+    let ratio = large.0 / small.0;
+    assert!((ratio / 40.0 - 1.0).abs() < 1e-6, "reach at 20 × / at ½ × size: {ratio}, expected 40");
+}
+
+/// The autoencoder block of the cache test: batches of 4 out of 13 fitted shapes (16 training
+/// frames, 3 held out as the network's validation shapes, so that the cached frames a batch
+/// reads are not the file's frames 0, 1, 2, … in order).
+const AE: &str = "kind = \"autoencoder\"\ncomponents = 4\niterations = 10\nbatch_size = 4\nvalidation = 3\nvalidate_every = 2\nseed = 5";
+
+fn train_cli(d: &Path, name: &str, data: &str) -> String {
+    let cfg = d.join(format!("{name}.toml"));
+    std::fs::write(&cfg, format!("name = \"{name}\"\n[data]\n{data}\n[method]\n{AE}\n")).unwrap();
+    let o = meshdeco(&["train", "--config", cfg.to_str().unwrap(), "--out", d.join(name).to_str().unwrap()], d);
+    assert!(o.status.success(), "{name}: {}", output_text(&o));
+    output_text(&o)
+}
+
+/// Training from the feature cache gives the in-memory model to the bit: model, weights and
+/// metrics (losses, Erms) agree, with `data.train` out of order and batches smaller than the set.
+#[test]
+fn training_from_the_cache_is_training_from_memory_with_frames_out_of_order() {
+    let d = fresh_dir("guards58", "cache");
+    let data = |cache: &str| {
+        format!("path = \"synthetic:bumps\"\ntrain = \"25,2,9-14,1,30-36\"\ntest = \"rest\"\ncache = \"{cache}\"")
+    };
+    let mem = train_cli(&d, "mem", &data("off"));
+    assert!(!mem.contains("features cached") && !mem.contains("from the cache"), "{mem}");
+    let cached = train_cli(&d, "cached", &data("cache"));
+    assert!(cached.contains("features cached in"), "{cached}");
+    let read = |p: std::path::PathBuf| std::fs::read(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display()));
+    for f in ["model.bin", "weights.csv"] {
+        assert!(
+            read(d.join("mem").join(f)) == read(d.join("cached").join(f)),
+            "cached/{f} differs from the in-memory run's"
+        );
+    }
+    let metrics = |r: &str| -> serde_json::Value {
+        let mut m: serde_json::Value = serde_json::from_slice(&read(d.join(r).join("metrics.json"))).unwrap();
+        m.as_object_mut().unwrap().retain(|k, _| !k.contains("seconds"));
+        m
+    };
+    let (a, b) = (metrics("mem"), metrics("cached"));
+    assert_eq!(a, b);
+    assert_eq!(a["train_frames"], 16, "{a}");
+    // The per-step losses, the kept step included (the log's timing fields aside).
+    let log = |r: &str| -> Vec<serde_json::Value> {
+        String::from_utf8(read(d.join(r).join("training.jsonl")))
+            .unwrap()
+            .lines()
+            .map(|l| {
+                let mut v: serde_json::Value = serde_json::from_str(l).unwrap();
+                if let Some(o) = v.as_object_mut() {
+                    o.retain(|k, _| !k.contains("seconds") && !k.contains("time"));
+                }
+                v
+            })
+            .collect()
+    };
+    let (la, lb) = (log("mem"), log("cached"));
+    assert!(la.len() >= 5, "{la:?}");
+    assert_eq!(la, lb);
+    let _ = std::fs::remove_dir_all(&d);
+}
+
+/// `data.validation = "auto:P%"` on a training selection that is neither contiguous nor starts
+/// at frame 1, with test frames between its frames: round(P % × training frames) (at least one)
+/// held out, all of them training frames (so never a test frame), never the first training
+/// frame, the fitted frames the rest; the same draw for the same seed, another for another seed.
+#[test]
+fn auto_validation_draws_its_share_of_the_training_selection() {
+    let train_sel = "25,4,9-14,2,30-36";
+    let train_1: BTreeSet<usize> = [25, 4, 9, 10, 11, 12, 13, 14, 2, 30, 31, 32, 33, 34, 35, 36].into();
+    let test_1: BTreeSet<usize> = (1..=40).filter(|f| !train_1.contains(f)).collect();
+    let prepare = |v: &str| {
+        let cfg = Config::from_toml(&format!(
+            "name = \"v\"\n[data]\npath = \"synthetic:bumps\"\ntrain = \"{train_sel}\"\ntest = \"rest\"\nvalidation = \"{v}\"\n[method]\nkind = \"pca\"\ncomponents = 3\n"
+        ))
+        .unwrap();
+        let p = meshdeco::preprocess::prepare(&cfg.data).unwrap();
+        let one = |s: &[usize]| -> BTreeSet<usize> { s.iter().map(|&f| f + 1).collect() };
+        (one(&p.validation), one(&p.train), one(&p.test))
+    };
+    let n = train_1.len() as f64;
+    let mut drawn = BTreeSet::new();
+    for (percent, expected) in [(1.0, 1usize), (10.0, 2), (30.0, 5), (60.0, 10)] {
+        assert_eq!(expected, ((percent / 100.0 * n).round() as usize).max(1));
+        let mut draws = BTreeSet::new();
+        for seed in 0..8u64 {
+            let spec = format!("auto:{percent}%:{seed}");
+            let (val, fit, test) = prepare(&spec);
+            assert_eq!(val.len(), expected, "{spec}: {val:?}");
+            assert!(val.is_subset(&train_1), "{spec}: {val:?} is not out of the training frames {train_1:?}");
+            assert!(val.is_disjoint(&test_1) && val.is_disjoint(&test), "{spec}: a test frame held out: {val:?}");
+            assert!(!val.contains(&2), "{spec}: the first training frame (frame 2) was held out");
+            assert_eq!(fit, &train_1 - &val, "{spec}: the fitted frames are not the other training frames");
+            assert_eq!(test, test_1, "{spec}");
+            assert_eq!(prepare(&spec).0, val, "{spec}: another draw for the same seed");
+            draws.insert(val.iter().copied().collect::<Vec<_>>());
+            drawn.extend(val);
+        }
+        if expected < 15 {
+            assert!(draws.len() > 1, "auto:{percent}%: every seed drew the same frames {draws:?}");
+        }
+    }
+    // `auto:P%` is seed 0.
+    assert_eq!(prepare("auto:30%").0, prepare("auto:30%:0").0);
+    // Across the draws every training frame but the first is reachable.
+    assert_eq!(drawn, &train_1 - &BTreeSet::from([2]), "frames ever drawn");
+    // What a training run reports: the counts of the split.
+    let cfg = Config::from_toml(&format!(
+        "name = \"v\"\n[data]\npath = \"synthetic:bumps\"\ntrain = \"{train_sel}\"\ntest = \"rest\"\nvalidation = \"auto:30%:3\"\n[method]\nkind = \"pca\"\ncomponents = 3\n"
+    ))
+    .unwrap();
+    let d = fresh_dir("guards58", "validation");
+    let m = meshdeco::pipeline::train(&cfg, &d.join("v"), &TrainOptions::default(), &mut Silent).unwrap().metrics;
+    assert_eq!((m.train_frames, m.validation_frames), (11, 5));
+    let _ = std::fs::remove_dir_all(&d);
+}
