@@ -215,3 +215,74 @@ fn auto_validation_draws_its_share_of_the_training_selection() {
     assert_eq!((m.train_frames, m.validation_frames), (11, 5));
     let _ = std::fs::remove_dir_all(&d);
 }
+
+/// The pose options as the viewer offers and checks them (`PoseOptions::to_json`, `validate`):
+/// the README's defaults (shape prior, γ 1, β 1e-3, 30 iterations, radius 0.2), every option
+/// named in its JSON, and each bound refused naming the option — `spread` from 0 (off) to 1 (the
+/// whole diagonal) inclusive; the command line checks `--spread` itself, the viewer relies on
+/// `validate`.
+#[test]
+fn pose_options_read_back_and_are_checked_at_their_bounds() {
+    use meshdeco::model::{PoseOptions, PosePrior};
+    let d = PoseOptions::default();
+    assert_eq!(
+        (d.gamma, d.beta, d.max_iterations, d.prior, d.time_limit, d.spread),
+        (1.0, 1e-3, 30, PosePrior::Shape, None, 0.2)
+    );
+    let o = PoseOptions {
+        gamma: 0.25,
+        beta: 2.5,
+        max_iterations: 7,
+        prior: PosePrior::Weights,
+        time_limit: None,
+        spread: 0.05,
+    };
+    assert_eq!(
+        o.to_json(),
+        serde_json::json!({"gamma": 0.25, "beta": 2.5, "max_iterations": 7, "prior": "weights", "spread": 0.05})
+    );
+    let check = |o: PoseOptions| o.validate().map_err(|e| e.to_string());
+    for ok in [
+        PoseOptions { spread: 0.0, ..d },
+        PoseOptions { spread: 1.0, ..d },
+        PoseOptions { gamma: 0.0, beta: 0.0, ..d },
+        PoseOptions { max_iterations: 1, ..d },
+        PoseOptions { max_iterations: PoseOptions::MAX_ITERATIONS, ..d },
+    ] {
+        assert_eq!(check(ok), Ok(()), "{ok:?}");
+    }
+    for (bad, key) in [
+        (PoseOptions { spread: 1.0 + 1e-9, ..d }, "`spread`"),
+        (PoseOptions { spread: -1e-9, ..d }, "`spread`"),
+        (PoseOptions { spread: f64::NAN, ..d }, "`spread`"),
+        (PoseOptions { gamma: f64::INFINITY, ..d }, "`gamma`"),
+        (PoseOptions { beta: -1e-9, ..d }, "`beta`"),
+        (PoseOptions { beta: f64::NAN, ..d }, "`beta`"),
+        (PoseOptions { max_iterations: 0, ..d }, "`max_iterations`"),
+        (PoseOptions { max_iterations: PoseOptions::MAX_ITERATIONS + 1, ..d }, "`max_iterations`"),
+    ] {
+        let e = check(bad).expect_err(&format!("{bad:?} accepted"));
+        assert!(e.contains(key), "{bad:?}: {e}");
+    }
+}
+
+/// Constraints read from JSON of the wrong kind name what they got, and count what they hold.
+#[test]
+fn constraints_name_the_wrong_kind_and_count_their_vertices() {
+    use meshdeco::model::Constraints;
+    for (v, kind) in [
+        (serde_json::json!(null), "got null"),
+        (serde_json::json!(true), "got a boolean"),
+        (serde_json::json!(3), "got a number"),
+        (serde_json::json!("7"), "got a string"),
+    ] {
+        let e = Constraints::from_json("body", &v, 10).unwrap_err().to_string();
+        assert!(e.starts_with("body: ") && e.contains(kind), "{v}: {e}");
+    }
+    let e = Constraints::from_json_text("c.json", "\"7\"", 10).unwrap_err().to_string();
+    assert!(e.contains("expected a JSON object"), "{e}");
+    let c = Constraints::from_json_text("c.json", r#"{"4": [0, 0, 0], "1": [1, 1, 1], "9": [2, 2, 2]}"#, 10).unwrap();
+    assert_eq!((c.len(), c.is_empty()), (3, false));
+    assert_eq!(c.vertices, [1, 4, 9]);
+    assert_eq!(c.targets, [[1.0; 3], [0.0; 3], [2.0; 3]]);
+}
