@@ -285,4 +285,90 @@ fn constraints_name_the_wrong_kind_and_count_their_vertices() {
     assert_eq!((c.len(), c.is_empty()), (3, false));
     assert_eq!(c.vertices, [1, 4, 9]);
     assert_eq!(c.targets, [[1.0; 3], [0.0; 3], [2.0; 3]]);
+    // Never empty once read; a value built empty says so.
+    let none = Constraints { vertices: Vec::new(), targets: Vec::new() };
+    assert_eq!((none.len(), none.is_empty()), (0, true));
+}
+
+/// The autoencoder's streamed training data (`nn::data::TrainingData` over a cache file) holds
+/// the named frames: shape s is frame `frames[s]` of the sequence encoded alone and scaled, the
+/// same numbers as the data held in memory, also after holding out validation shapes and in a
+/// batch whose lanes name shapes out of order; bad ranges and counts are refused.
+#[test]
+fn streamed_shapes_are_the_cached_frames_they_name() {
+    use meshdeco::nn::data::TrainingData;
+    use meshdeco::representation::feature_cache::{CachePolicy, Opened, open_or_build};
+    use meshdeco::representation::scaling::{FeatureScaling, ScalingMode};
+    use meshdeco::representation::{Representation, RepresentationKind, RepresentationOptions};
+    let d = fresh_dir("guards58", "streamed");
+    let seq = meshdeco::synthetic::load("synthetic:bumps").unwrap();
+    let rest = TriMesh::new(seq.frames[0].clone(), seq.faces.clone());
+    let rep = Representation::new(RepresentationKind::Acap, &rest, RepresentationOptions::default()).unwrap();
+    let frames = [1usize, 4, 9, 10, 11, 23, 30, 33];
+    let Opened::File { file, built } =
+        open_or_build(&rep, &seq, &frames, &CachePolicy::Dir(d.join("cache")), &mut |_| {}).unwrap()
+    else {
+        panic!("a cache folder caches")
+    };
+    assert!(built);
+    let h = file.header();
+    let scaling = FeatureScaling::fit_column_ranges(&h.min(), &h.max(), ScalingMode::PerDimension).unwrap();
+    // Each frame encoded alone, scaled: what shape s must hold.
+    let alone: Vec<Vec<f64>> =
+        frames.iter().map(|&f| scaling.apply(&rep.encode_selected(&seq, &[f]).unwrap()).unwrap().data).collect();
+    let mut all = rep.encode_selected(&seq, &frames).unwrap();
+    all = scaling.apply(&all).unwrap();
+    let mem = TrainingData::from_features(&all).unwrap();
+    let streamed = TrainingData::from_feature_file(std::sync::Arc::new(file), scaling).unwrap();
+    assert!(streamed.is_streamed() && !mem.is_streamed());
+    assert_eq!((streamed.n_shapes(), streamed.n_vertices()), (frames.len(), rest.positions.len()));
+    assert_eq!((mem.n_shapes(), mem.n_vertices()), (frames.len(), rest.positions.len()));
+    let f32s = |v: &[f64]| v.iter().map(|&x| x as f32).collect::<Vec<f32>>();
+    for (s, want) in alone.iter().enumerate() {
+        assert_eq!(streamed.shape(s).unwrap().as_ref(), f32s(want).as_slice(), "streamed shape {s}");
+        assert_eq!(mem.shape(s).unwrap().as_ref(), f32s(want).as_slice(), "in-memory shape {s}");
+    }
+    let sf = streamed.scaled_features(2..5).unwrap();
+    assert_eq!((sf.n_frames, sf.n_elements, sf.width), (3, rest.positions.len(), 9));
+    assert_eq!(sf.data, alone[2..5].concat());
+    assert!(streamed.shape(frames.len()).is_err() && mem.shape(frames.len()).is_err());
+    assert!(mem.scaled_features(0..1).is_err(), "in-memory data has no scaled_features");
+    assert!(streamed.scaled_features(0..frames.len() + 1).is_err());
+    #[allow(clippy::reversed_empty_ranges)]
+    let backwards = 3..2;
+    assert!(streamed.scaled_features(backwards).is_err());
+    // Held out evenly: shapes ⌊(j + ½)·8/3⌋ = 1, 4, 6; the others fitted, in order.
+    for data in [&mem, &streamed] {
+        assert!(data.split_validation(0).is_err() && data.split_validation(frames.len()).is_err());
+        let (fit, val, held) = data.split_validation(3).unwrap();
+        assert_eq!(held, [1, 4, 6]);
+        let keep = [0usize, 2, 3, 5, 7];
+        assert_eq!((fit.n_shapes(), val.n_shapes(), fit.is_streamed()), (5, 3, data.is_streamed()));
+        for (i, &s) in keep.iter().enumerate() {
+            assert_eq!(fit.shape(i).unwrap().as_ref(), f32s(&alone[s]).as_slice(), "fitted shape {i}");
+        }
+        for (i, &s) in held.iter().enumerate() {
+            assert_eq!(val.shape(i).unwrap().as_ref(), f32s(&alone[s]).as_slice(), "held-out shape {i}");
+        }
+        if fit.is_streamed() {
+            let sf = fit.scaled_features(1..3).unwrap();
+            assert_eq!(sf.data, [alone[2].clone(), alone[3].clone()].concat());
+        }
+        // A batch of fitted shapes 3, 0, 4 (frames 23, 1, 33): lane j holds its shape, the
+        // padding lanes zero.
+        let lanes = [3usize, 0, 4];
+        let n9 = rest.positions.len() * 9;
+        for (buf, bp) in [
+            (fit.batch_vcb(&lanes).unwrap(), meshdeco::nn::kernels::padded_width(3)),
+            (fit.batch_vcb_width(&lanes, 2 * meshdeco::nn::kernels::LANES).unwrap(), 2 * meshdeco::nn::kernels::LANES),
+        ] {
+            assert_eq!(buf.len(), n9 * bp);
+            for (j, &s) in lanes.iter().enumerate() {
+                let lane: Vec<f32> = (0..n9).map(|r| buf[r * bp + j]).collect();
+                assert_eq!(lane, f32s(&alone[keep[s]]), "lane {j}");
+            }
+            assert!((3..bp).all(|j| (0..n9).all(|r| buf[r * bp + j] == 0.0)), "padding lanes");
+        }
+    }
+    let _ = std::fs::remove_dir_all(&d);
 }
