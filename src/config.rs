@@ -13,6 +13,7 @@
 //! align = "none"                  # none | rigid
 //! unit_box = false                # scale into the unit box (SPLOCS's convention); outputs keep data units
 //! # template = "t.obj"           # with a NumPy path (F×N×3 .npy, or .npz + array = "name"): the faces
+//! # dataset = "verts"             # with an HDF5 path (.h5): the dataset (F×N×3 or N×3×F; default verts); faces: tris or template
 //! # cache = "auto"              # training features cached: auto (large ones, in ~/.cache/meshdeco), off, or a folder
 //! [method]
 //! kind = "autoencoder"            # autoencoder | splocs | pca | region-pca
@@ -282,8 +283,10 @@ pub struct DataConfig {
     pub unit_box: bool,
     /// Name of the array inside a `.npz` `path`.
     pub array: Option<String>,
-    /// Mesh file whose faces a NumPy `path` uses.
+    /// Mesh file whose faces a NumPy `path` uses (an HDF5 `path`: instead of its `tris`).
     pub template: Option<PathBuf>,
+    /// The dataset of an HDF5 `path` (`data.dataset`; default `verts`, the SPLOCS layout).
+    pub dataset: Option<String>,
     /// Where the training features are cached (`data.cache`: auto, off or a folder).
     pub cache: CachePolicy,
 }
@@ -322,6 +325,7 @@ struct RawData {
     unit_box: Option<bool>,
     array: Option<String>,
     template: Option<PathBuf>,
+    dataset: Option<String>,
     cache: Option<String>,
 }
 
@@ -408,6 +412,7 @@ impl Config {
             unit_box: d.unit_box.unwrap_or(false),
             array: d.array,
             template: d.template,
+            dataset: d.dataset,
             cache: match d.cache.as_deref().map(str::trim) {
                 None => CachePolicy::Auto,
                 Some("") => return Err(Error::config("data.cache", "is empty: expected auto, off or a folder")),
@@ -575,14 +580,44 @@ impl DataConfig {
                 format!("is required with a NumPy data.path (`{}`): the mesh file giving the faces", self.path),
             ));
         }
-        if !numpy && (self.template.is_some() || self.array.is_some()) {
-            let key = if self.template.is_some() { "data.template" } else { "data.array" };
+        let hdf5 = crate::mesh::hdf5::is_hdf5_path(&self.path);
+        if !numpy && ((self.template.is_some() && !hdf5) || self.array.is_some()) {
+            let key = if self.array.is_none() { "data.template" } else { "data.array" };
             return Err(Error::config(
                 key,
                 format!("applies to a NumPy data.path (.npy or .npz) only, not `{}`", self.path),
             ));
         }
-        Ok(self.template.as_deref())
+        if self.dataset.is_some() && !hdf5 {
+            return Err(Error::config(
+                "data.dataset",
+                format!("applies to an HDF5 data.path (.h5, .hdf5 or .hdf) only, not `{}`", self.path),
+            ));
+        }
+        if let Some(d) = &self.dataset {
+            if d.trim().is_empty() {
+                return Err(Error::config(
+                    "data.dataset",
+                    "is empty: name a dataset of the HDF5 file (e.g. \"verts\")",
+                ));
+            }
+            if matches!(crate::mesh::hdf5::split_spec(&self.path), Some((_, Some(_)))) {
+                return Err(Error::config(
+                    "data.dataset",
+                    format!("`{d}` is given, and data.path `{}` names a dataset too: give one", self.path),
+                ));
+            }
+        }
+        Ok(if numpy { self.template.as_deref() } else { None })
+    }
+
+    /// The HDF5 source of the data: (file, dataset, template), `None` unless `path` is an HDF5
+    /// file (`x.h5`, or `x.h5:dataset`). The dataset is `data.dataset`, else the path's suffix,
+    /// else `verts`; the faces come from `data.template`, else the file's `tris`.
+    pub fn hdf5_source(&self) -> Option<(&Path, &str, Option<&Path>)> {
+        let (file, suffix) = crate::mesh::hdf5::split_spec(&self.path)?;
+        let dataset = self.dataset.as_deref().or(suffix).unwrap_or(crate::mesh::hdf5::DEFAULT_DATASET);
+        Some((Path::new(file), dataset, self.template.as_deref()))
     }
 
     /// The `[data]` table with every default written out (for the artefact's config.toml).
@@ -604,6 +639,9 @@ impl DataConfig {
         }
         if let Some(p) = &self.template {
             t.insert("template".into(), p.display().to_string().into());
+        }
+        if let Some(d) = &self.dataset {
+            t.insert("dataset".into(), d.clone().into());
         }
         t.insert("cache".into(), self.cache.to_config_string().into());
         t

@@ -263,6 +263,14 @@ pub fn load_frames(path: &str) -> Result<MeshSequence> {
 /// [`load_frames`] reads, or a NumPy `.npy` (F × N × 3) — or `.npz` written `file.npz:array` —
 /// whose connectivity is the model's (the template it was trained with).
 pub fn load_frames_for(path: &str, rest: &crate::mesh::TriMesh) -> Result<MeshSequence> {
+    // HDF5 (`x.h5`, `x.h5:dataset`): the file's `tris`, else the model's faces.
+    if let Some((file, dataset)) = mesh::hdf5::split_spec(path) {
+        return mesh::hdf5::load_hdf5_sequence(
+            Path::new(file),
+            dataset.unwrap_or(mesh::hdf5::DEFAULT_DATASET),
+            mesh::hdf5::Faces::FileOr(&rest.faces),
+        );
+    }
     let (file, array) = match path.rsplit_once(':') {
         Some((f, a)) if f.to_ascii_lowercase().ends_with(".npz") => (f, Some(a)),
         _ => (path, None),
@@ -279,10 +287,25 @@ pub fn load_frames_for(path: &str, rest: &crate::mesh::TriMesh) -> Result<MeshSe
 /// Loads the frames of a `[data]` section: a NumPy `.npy`/`.npz` array with its template mesh
 /// (`data.template`, `data.array`), or anything [`load_frames`] reads.
 pub fn load_data(cfg: &DataConfig) -> Result<MeshSequence> {
-    match cfg.numpy_template()? {
+    let template = cfg.numpy_template()?;
+    if let Some(seq) = load_hdf5(cfg)? {
+        return Ok(seq);
+    }
+    match template {
         Some(template) => mesh::npy::load_npy_sequence(Path::new(&cfg.path), cfg.array.as_deref(), template),
         None => load_frames(&cfg.path),
     }
+}
+
+/// The frames of an HDF5 `data.path` (`data.dataset`, faces from `data.template` or the file's
+/// `tris`), read into memory; `None` for other paths.
+fn load_hdf5(cfg: &DataConfig) -> Result<Option<MeshSequence>> {
+    let Some((file, dataset, template)) = cfg.hdf5_source() else { return Ok(None) };
+    let faces = match template {
+        Some(t) => mesh::hdf5::Faces::Template(t),
+        None => mesh::hdf5::Faces::FromFile,
+    };
+    mesh::hdf5::load_hdf5_sequence(file, dataset, faces).map(Some)
 }
 
 /// Loads and preprocesses the data of a config.
@@ -293,7 +316,11 @@ pub fn prepare(cfg: &DataConfig) -> Result<Prepared> {
 /// [`prepare`] with the given [`MemoryLimits`] (tests pass 0 to stream small sets): a C-order
 /// `.npy` or a folder of mesh files past `stream_bytes` is read on demand.
 pub fn prepare_with(cfg: &DataConfig, limits: MemoryLimits) -> Result<Prepared> {
-    let seq = match cfg.numpy_template()? {
+    let template = cfg.numpy_template()?;
+    if let Some(seq) = load_hdf5(cfg)? {
+        return prepare_sequence_with(seq, cfg, limits);
+    }
+    let seq = match template {
         Some(template) => {
             let path = Path::new(&cfg.path);
             let tmpl = mesh::load_mesh(template)?;
@@ -510,6 +537,7 @@ mod tests {
             unit_box: false,
             array: None,
             template: None,
+            dataset: None,
             cache: CachePolicy::Off,
         }
     }

@@ -47,7 +47,7 @@ fn flat9(a: &[[f64; 9]; 9]) -> Vec<f32> {
     a.iter().flatten().map(|&v| v as f32).collect()
 }
 
-fn gradient_check(layers: usize) {
+fn gradient_check(layers: usize, lambda_code: f64) {
     let (_, faces) = grid(7, 6);
     let n = 42;
     let nb = NeighborIndex::from_faces(n, &faces).unwrap();
@@ -63,6 +63,7 @@ fn gradient_check(layers: usize) {
         d_min: 0.2,
         d_max: 0.6,
         seed: 3,
+        lambda_code,
         ..Default::default()
     };
     cfg.validate().unwrap();
@@ -80,6 +81,8 @@ fn gradient_check(layers: usize) {
     let mut g = Grads { layers: Vec::new(), c: Vec::new() };
     let terms = engine::loss_and_grad(&mut ws, &w, &nb, &x, None, 3, &maps, &cfg, &mut g, None);
     assert!(terms.hinge > 0.0 && terms.sparsity > 0.0 && terms.reconstruction > 0.0, "{terms:?}");
+    // The code term (`lambda_code`): the last lane plays the rest shape.
+    assert_eq!(terms.code > 0.0, lambda_code > 0.0, "{terms:?}");
 
     // Burn autodiff reference.
     let nbt = NeighborTensors::new(&nb, &device);
@@ -91,6 +94,7 @@ fn gradient_check(layers: usize) {
         (terms.reconstruction, ref_terms.reconstruction),
         (terms.sparsity, ref_terms.sparsity),
         (terms.hinge, ref_terms.hinge),
+        (terms.code, ref_terms.code),
     ] {
         assert!((a - b).abs() <= 1e-5 * b.abs().max(1e-3), "loss terms differ: hand {terms:?} vs burn {ref_terms:?}");
     }
@@ -119,12 +123,19 @@ fn gradient_check(layers: usize) {
 
 #[test]
 fn hand_gradients_match_burn_autodiff_one_layer() {
-    gradient_check(1);
+    gradient_check(1, 0.0);
 }
 
 #[test]
 fn hand_gradients_match_burn_autodiff_three_layers() {
-    gradient_check(3);
+    gradient_check(3, 0.0);
+}
+
+/// The code term's gradient (`lambda_code`: every code pulled towards the last lane's, the
+/// rest shape's, and that one towards them) against Burn autodiff of the same loss.
+#[test]
+fn hand_gradients_match_burn_autodiff_with_the_code_term() {
+    gradient_check(1, 0.7);
 }
 
 #[test]

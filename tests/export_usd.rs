@@ -16,24 +16,7 @@ use common::{json_lines, meshdeco, output_text, train_cli};
 use meshdeco::export::read_glb;
 
 fn usd_python() -> Option<PathBuf> {
-    let candidates = [
-        std::env::var_os("MESHDECO_USD_PYTHON").map(PathBuf::from),
-        Some(PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("usd-venv/bin/python")),
-    ];
-    for p in candidates.into_iter().flatten() {
-        let ok = Command::new(&p).args(["-c", "import pxr.UsdValidation"]).output().is_ok_and(|o| o.status.success());
-        if ok {
-            return Some(p);
-        }
-    }
-    assert!(
-        std::env::var_os("CI").is_none(),
-        "CI: no Python with usd-core (MESHDECO_USD_PYTHON or {}/usd-venv; .ci/run installs it)",
-        env!("CARGO_TARGET_TMPDIR")
-    );
-    eprintln!("SKIPPED USD validation: no Python with usd-core (pip install usd-core; MESHDECO_USD_PYTHON)");
-    common::record_skip("python with usd-core");
-    None
+    common::python_with("MESHDECO_USD_PYTHON", "usd-venv", "pxr.UsdValidation")
 }
 
 /// Every list of 3-vectors that follows `key` on a line of a `.usda` text, in order.

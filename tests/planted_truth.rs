@@ -179,3 +179,35 @@ fn the_autoencoders_dials_start_at_the_rest_shape_and_region_pca_names_its_regio
     assert!(output_text(&o).contains("region-pca segmented the mesh into"), "{}", output_text(&o));
     let _ = std::fs::remove_dir_all(&d);
 }
+
+/// A run that ends before it learned the shapes says so (issue 53): its decoding is no better
+/// than the rest shape's, `meshdeco train` warns, naming the key to change, and `metrics.json`
+/// keeps the warning; a run long enough to train does not warn.
+#[test]
+fn a_run_stopped_too_early_says_it_did_not_train() {
+    let d = fresh_dir("planted", "untrained");
+    let data = "path = \"synthetic:tube\"\ntrain = \"every:3\"\ntest = \"rest\"";
+    let run = |name: &str, iterations: usize| {
+        let cfg = d.join(format!("{name}.toml"));
+        std::fs::write(
+            &cfg,
+            format!(
+                "name = \"{name}\"\n[data]\n{data}\n[method]\nkind = \"autoencoder\"\ncomponents = 8\n\
+                 iterations = {iterations}\nfit_test = false\n"
+            ),
+        )
+        .unwrap();
+        let o = meshdeco(&["train", "--config", cfg.to_str().unwrap(), "--out", name], &d);
+        assert!(o.status.success(), "{}", output_text(&o));
+        let m: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(d.join(name).join("metrics.json")).unwrap()).unwrap();
+        (output_text(&o), m)
+    };
+    let (text, m) = run("early", 5);
+    assert!(text.contains("warning: the autoencoder did not train") && text.contains("method.iterations"), "{text}");
+    assert!(m["training_warning"].as_str().is_some_and(|w| w.contains("did not train")), "{m}");
+    let (text, m) = run("trained", 600);
+    assert!(!text.contains("did not train"), "{text}");
+    assert!(m.get("training_warning").is_none(), "{m}");
+    let _ = std::fs::remove_dir_all(&d);
+}

@@ -19,28 +19,10 @@ use std::path::PathBuf;
 use common::{fresh_dir, meshdeco, output_text};
 use serde_json::Value;
 use view_support::cdp::{Browser, find_chromium};
-use view_support::{Viewer, dist, train};
-
-fn chromium_or_skip() -> Option<PathBuf> {
-    if let Some(p) = find_chromium() {
-        return Some(p);
-    }
-    let test = std::thread::current().name().unwrap_or("?").to_string();
-    if std::env::var_os("CI").is_some() {
-        panic!("CI is set but no Chromium is installed (chromium-headless-shell or chromium; needed by {test})");
-    }
-    eprintln!("SKIPPED {test}: no chromium-headless-shell / chromium on the PATH (set MESHDECO_CHROMIUM to a binary)");
-    common::record_skip("chromium (not installed)");
-    None
-}
-
-fn f(v: &Value) -> f64 {
-    v.as_f64().unwrap_or_else(|| panic!("not a number: {v}"))
-}
+use view_support::{Viewer, chromium_or_skip, dist, num as f, train};
 
 fn positions(b: &mut Browser) -> Vec<[f64; 3]> {
-    let p = b.eval("Array.from(meshdeco.S.pos)");
-    p.as_array().unwrap().chunks(3).map(|c| [f(&c[0]), f(&c[1]), f(&c[2])]).collect()
+    view_support::page_positions(b, "meshdeco")
 }
 
 fn open_page(b: &mut Browser, v: &Viewer) {
@@ -55,8 +37,7 @@ fn open_page_with(b: &mut Browser, v: &Viewer, query: &str) {
 
 /// Waits until no request is in flight or waiting.
 fn settle(b: &mut Browser) {
-    std::thread::sleep(std::time::Duration::from_millis(50));
-    b.wait_for("meshdeco.idle()", 120);
+    view_support::settle(b, "meshdeco");
 }
 
 #[test]

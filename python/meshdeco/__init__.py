@@ -49,6 +49,7 @@ __all__ = [
     *_errors.__all__,
     "Model",
     "Pose",
+    "View",
     "load_mesh",
     "load_sequence",
     "save_mesh",
@@ -115,8 +116,10 @@ def load_mesh(path: PathLike) -> tuple[np.ndarray, np.ndarray]:
 
 def load_sequence(path: PathLike, *, return_names: bool = False) -> Any:
     """Reads frames that share one connectivity: a directory or glob of mesh files (natural
-    order: ``2.obj`` before ``10.obj``) or a built-in synthetic set (``"synthetic:tube"``,
-    ``"synthetic:bumps"``, ``"synthetic:pieces"``).
+    order: ``2.obj`` before ``10.obj``), an HDF5 file with its triangles in ``tris``
+    (``"x.h5"`` reads the dataset ``verts``, ``"x.h5:name"`` another; F × N × 3 or N × 3 × F)
+    or a built-in synthetic set (``"synthetic:tube"``, ``"synthetic:bumps"``,
+    ``"synthetic:pieces"``).
 
     Returns ``(frames, faces)``: ``float64 (F, N, 3)`` and ``int64 (T, 3)``; with
     ``return_names=True`` also the frame names (file stems), ``(frames, faces, names)``.
@@ -152,6 +155,40 @@ class Pose(NamedTuple):
     """The posed weights (model coordinates), ``float64 (K,)``."""
     start: np.ndarray
     """The start shape, ``float64 (N, 3)``, data units."""
+
+
+class View:
+    """A model's standalone viewer page (:meth:`Model.show`, :meth:`Model.html`): one
+    self-contained HTML document — sliders, heat maps, the training frames — that needs no server
+    and makes no network request. In Jupyter (JupyterLab, classic Notebook, VS Code) it displays
+    inline as an ``<iframe srcdoc=…>`` (``_repr_html_``); :meth:`save` writes the page to a file.
+    """
+
+    __slots__ = ("html", "height")
+
+    def __init__(self, html: str, height: int = 640) -> None:
+        self.html = html
+        """The page (HTML text)."""
+        self.height = height
+        """Height of the inline frame, CSS pixels."""
+
+    def _repr_html_(self) -> str:
+        import html as _html
+
+        return (
+            f'<iframe srcdoc="{_html.escape(self.html, quote=True)}" '
+            f'style="width: 100%; height: {int(self.height)}px; border: 0;" '
+            'title="meshdeco standalone viewer"></iframe>'
+        )
+
+    def save(self, path: PathLike) -> None:
+        """Writes the page to ``path`` (an ``.html`` file that opens from disk)."""
+        p = _path("path", path)
+        with open(p, "w", encoding="utf-8") as f:
+            f.write(self.html)
+
+    def __repr__(self) -> str:
+        return f"<meshdeco.View: standalone page of {len(self.html)} characters>"
 
 
 class Model:
@@ -331,6 +368,38 @@ class Model:
         """The options of :meth:`pose` this model reads (e.g. ``["gamma"]``)."""
         return self._m.pose_parameters()
 
+    def html(self, name: Optional[str] = None) -> str:
+        """The standalone viewer page of the model (``meshdeco export --out view.html``): one
+        HTML document with the neutral mesh, one blend target per component (for models whose
+        decoding is not linear in the dials, e.g. the autoencoder, targets fitted by least
+        squares, with the additivity error shown), sliders, heat maps and the training frames'
+        weights. ``name``: the title (default: the artefact directory's name, else ``model``)."""
+        if name is not None and not isinstance(name, str):
+            raise ArgumentTypeError(f"name: {type(name).__name__} is not a str")
+        return self._m.html(name)
+
+    def show(self, *, height: int = 640, name: Optional[str] = None) -> Optional[View]:
+        """Shows the model's standalone viewer page inline in a notebook (JupyterLab, classic
+        Notebook, VS Code): sliders move the mesh, a component's name shows its heat map, the
+        frames panel steps through the training frames. No server process: the page is in the
+        notebook's output (an ``<iframe srcdoc>``), and it stays in the saved notebook. For
+        click-and-drag posing run ``meshdeco view <model directory>``.
+
+        In IPython it displays the page and returns ``None``; elsewhere it returns the
+        :class:`View` (``view.save("model.html")``). ``height``: of the frame, CSS pixels."""
+        if isinstance(height, bool) or not isinstance(height, (int, np.integer)) or not 100 <= height <= 10000:
+            raise ArgumentError(f"height: {height!r}; expected an integer number of pixels from 100 to 10000")
+        view = View(self.html(name), int(height))
+        try:
+            from IPython import get_ipython  # type: ignore[import-not-found]
+            from IPython.display import display  # type: ignore[import-not-found]
+        except ImportError:
+            return view
+        if get_ipython() is None:
+            return view
+        display(view)
+        return None
+
     def export(
         self,
         path: PathLike,
@@ -342,11 +411,14 @@ class Model:
         bake: bool = False,
     ) -> dict[str, Any]:
         """Writes the model for other tools, as ``meshdeco export``: ``.glb`` (glTF 2.0: rest
-        mesh plus one morph target per component, in rank order) or ``.usda`` (USD blend
-        shapes). ``animation``: key the training frames' weights at ``fps`` frames per second;
-        ``colors``: a ``COLOR_0`` showing each component's support; ``up``: the data axis that
-        becomes +Y (``auto``, ``x``, ``-z``, …); ``bake``: one target per training frame.
-        Returns the report (targets, names, additivity Erms, up axis, bytes, …)."""
+        mesh plus one morph target per component, in rank order), ``.usda`` (USD blend
+        shapes), ``.html`` (the standalone viewer page, as :meth:`show` displays it) or ``.h5``
+        (a linear model in the SPLOCS reference's HDF5 layout: ``default``, ``tris``,
+        ``comp000``…, ``weights``, ``verts``). ``animation``: key the training frames' weights at
+        ``fps`` frames per second; ``colors``: a ``COLOR_0`` showing each component's support;
+        ``up``: the data axis that becomes +Y (``auto``, ``x``, ``-z``, …); ``bake``: one target
+        per training frame (these four: ``.glb`` and ``.usda`` only). Returns the report
+        (targets, additivity Erms, bytes, …)."""
         return self._m.export(_path("path", path), bool(animation), float(fps), bool(colors), str(up), bool(bake))
 
 

@@ -43,6 +43,14 @@ class Pose(NamedTuple):
     start: Float64Array
     """(N, 3), data units."""
 
+class View:
+    html: str
+    height: int
+    def __init__(self, html: str, height: int = ...) -> None: ...
+    def _repr_html_(self) -> str:
+        """An <iframe srcdoc> holding the page."""
+    def save(self, path: PathLike) -> None: ...
+
 class Model:
     @property
     def kind(self) -> str: ...
@@ -88,6 +96,10 @@ class Model:
     ) -> Pose:
         """{vertex: (x, y, z)} targets in data units → Pose((N, 3), (K,), (N, 3))."""
     def pose_parameters(self) -> list[str]: ...
+    def html(self, name: Optional[str] = None) -> str:
+        """The standalone viewer page (one HTML document)."""
+    def show(self, *, height: int = 640, name: Optional[str] = None) -> Optional[View]:
+        """Displays the page inline in Jupyter (returns None there); elsewhere returns the View."""
     def export(
         self,
         path: PathLike,
@@ -98,7 +110,8 @@ class Model:
         up: str = "auto",
         bake: bool = False,
     ) -> dict[str, Any]:
-        """Writes .glb (glTF 2.0 morph targets) or .usda (USD blend shapes)."""
+        """Writes .glb (glTF 2.0 morph targets), .usda (USD blend shapes), .html (the standalone
+        page) or .h5 (the SPLOCS reference's HDF5 layout)."""
 
 def train(
     config: Union[Mapping[str, Any], PathLike],

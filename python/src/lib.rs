@@ -203,6 +203,14 @@ impl NativeModel {
         let n_components = model.n_components();
         NativeModel { model: Mutex::new(SendModel(model)), metrics, directory, n_vertices, n_components }
     }
+    /// The name a page shows: the artefact directory's, else `model`.
+    fn page_name(&self) -> String {
+        self.directory
+            .as_ref()
+            .and_then(|d| d.file_name())
+            .map(|f| f.to_string_lossy().to_string())
+            .unwrap_or_else(|| "model".into())
+    }
     /// Runs `f` on the model with the GIL released (panics caught).
     fn with<T: Send>(&self, py: Python<'_>, f: impl FnOnce(&dyn Model) -> meshdeco::Result<T> + Send) -> PyResult<T> {
         run(py, || {
@@ -395,7 +403,19 @@ impl NativeModel {
         self.with(py, |m| Ok(m.pose_parameters().iter().map(|s| s.to_string()).collect()))
     }
 
-    /// Writes `.glb` (glTF 2.0 morph targets) or `.usda` (USD blend shapes); returns the report.
+    /// The standalone viewer page (one self-contained HTML document; `meshdeco export --out
+    /// view.html`), titled `name` (default: the artefact directory's name, else the method).
+    #[pyo3(signature = (name=None))]
+    fn html(&self, py: Python<'_>, name: Option<String>) -> PyResult<String> {
+        let name = name.unwrap_or_else(|| self.page_name());
+        self.with(py, move |m| {
+            meshdeco::view::standalone::page(m, &name, &meshdeco::export::gltf::ExportOptions::default())
+                .map(|(h, _)| h)
+        })
+    }
+
+    /// Writes `.glb` (glTF 2.0 morph targets), `.usda` (USD blend shapes), `.html` (the
+    /// standalone page) or `.h5` (the SPLOCS reference's layout); returns the report.
     #[pyo3(signature = (path, animation=false, fps=30.0, colors=false, up="auto", bake=false))]
     #[allow(clippy::too_many_arguments)]
     fn export<'py>(
@@ -415,8 +435,39 @@ impl NativeModel {
         let up_axis =
             UpAxis::parse(up).ok_or_else(|| arg_err("up", format!("`{up}`: expected auto, x, y, z, +x, -y, …")))?;
         let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
-        if ext != "glb" && ext != "usda" {
-            return Err(arg_err("path", format!("`{}`: the file name must end in .glb or .usda", path.display())));
+        if !["glb", "usda", "html", "h5"].contains(&ext.as_str()) {
+            return Err(arg_err(
+                "path",
+                format!("`{}`: the file name must end in .glb, .usda, .html or .h5", path.display()),
+            ));
+        }
+        if ext == "html" || ext == "h5" {
+            if animation || colors || bake || up != "auto" {
+                return Err(arg_err(
+                    "path",
+                    format!("`{}`: animation, colors, up and bake apply to .glb and .usda only", path.display()),
+                ));
+            }
+            let name = self.page_name();
+            let d = PyDict::new(py);
+            if ext == "html" {
+                let r = self.with(py, move |m| {
+                    meshdeco::view::standalone::export_html(m, &name, &path, &ExportOptions::default())
+                })?;
+                d.set_item("targets", r.targets)?;
+                d.set_item("targets_kind", r.targets_kind)?;
+                d.set_item("additivity_erms", r.additivity_erms)?;
+                d.set_item("storage", r.storage.name())?;
+                d.set_item("frames", r.frames)?;
+                d.set_item("bytes", r.bytes)?;
+            } else {
+                let r = self.with(py, move |m| meshdeco::export::hdf5::export_splocs_h5(m, &path))?;
+                d.set_item("components", r.components)?;
+                d.set_item("frames", r.frames)?;
+                d.set_item("blend_error", r.blend_error)?;
+                d.set_item("bytes", r.bytes)?;
+            }
+            return Ok(d);
         }
         let options = ExportOptions { animation, fps, colors, up: up_axis, bake, ..ExportOptions::default() };
         let report = self.with(py, move |m| {

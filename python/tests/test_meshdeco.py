@@ -204,6 +204,54 @@ def test_export_glb_and_usda(tube_model, tmp_path):
     assert (tmp_path / "m.usda").read_text().startswith("#usda")
 
 
+def test_show_and_html_are_the_standalone_page(tube_model, tmp_path):
+    page = tube_model.html()
+    assert page.lower().startswith("<!doctype html>") and 'id="meshdeco-embedded"' in page
+    assert '"model":"tube-splocs"' in page, "titled after the artefact directory"
+    assert '"model":"mine"' in tube_model.html(name="mine")
+    # Outside IPython, show() returns the View; in a notebook it displays it (an iframe srcdoc).
+    view = tube_model.show(height=500)
+    assert isinstance(view, meshdeco.View) and view.html == page
+    frame = view._repr_html_()
+    assert frame.startswith('<iframe srcdoc="&lt;!doctype html&gt;') and "height: 500px" in frame
+    assert '"' not in frame[len('<iframe srcdoc="') : frame.index('" style=')], "the page is escaped"
+    view.save(tmp_path / "v.html")
+    assert (tmp_path / "v.html").read_text(encoding="utf-8") == page
+    r = tube_model.export(tmp_path / "m.html")
+    assert r["targets"] == 6 and r["storage"] == "float32" and (tmp_path / "m.html").stat().st_size == r["bytes"]
+    with pytest.raises(meshdeco.ArgumentError, match="height"):
+        tube_model.show(height=5)
+    with pytest.raises(meshdeco.ArgumentTypeError, match="name"):
+        tube_model.html(name=3)
+    with pytest.raises(meshdeco.ArgumentError, match="apply to .glb and .usda only"):
+        tube_model.export(tmp_path / "x.html", animation=True)
+    assert not (tmp_path / "x.html").exists()
+
+
+def test_hdf5_export_reads_back_and_loads_as_a_sequence(tube_model, tmp_path):
+    h5py = pytest.importorskip("h5py")
+    r = tube_model.export(tmp_path / "m.h5")
+    k = tube_model.n_components
+    assert r["components"] == k and r["frames"] == 30 and r["blend_error"] < 1e-12
+    with h5py.File(tmp_path / "m.h5", "r") as f:
+        assert sorted(f.keys()) == sorted([f"comp{i:03d}" for i in range(k)] + ["default", "tris", "verts", "weights"])
+        np.testing.assert_array_equal(f["weights"][()], tube_model.train_weights)
+        np.testing.assert_array_equal(f["tris"][()], tube_model.faces)
+        default = f["default"][()]
+        np.testing.assert_allclose(default, tube_model.synthesize(np.zeros(k)), rtol=0, atol=1e-12)
+        for i in range(k):
+            np.testing.assert_allclose(f[f"comp{i:03d}"][()], tube_model.synthesize(np.eye(k)[i]), rtol=0, atol=1e-12)
+    # The file's `verts` (with its `tris`) is a sequence: the model's reconstruction of its frames.
+    frames, faces = meshdeco.load_sequence(tmp_path / "m.h5")
+    np.testing.assert_allclose(frames, tube_model.decode(tube_model.train_weights), rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(faces, tube_model.faces)
+    frames2, _, names = meshdeco.load_sequence(f"{tmp_path / 'm.h5'}:verts", return_names=True)
+    np.testing.assert_array_equal(frames2, frames)
+    assert names[0] == "verts_01"
+    with pytest.raises(meshdeco.ConfigError, match="no dataset `nope`"):
+        meshdeco.load_sequence(f"{tmp_path / 'm.h5'}:nope")
+
+
 def test_help_states_units_and_shapes():
     text = pydoc.render_doc(meshdeco.Model.pose, renderer=pydoc.plaintext)
     assert "data units" in text and "(N, 3)" in text

@@ -1,4 +1,5 @@
-//! `meshdeco export <model> --out F.glb`: glTF 2.0 with one morph target per component.
+//! `meshdeco export <model> --out F.glb|F.usda|F.html|F.h5`: glTF 2.0 with one morph target per
+//! component, USD blend shapes, the standalone viewer page, or the SPLOCS reference's HDF5 layout.
 
 use std::path::PathBuf;
 
@@ -17,9 +18,11 @@ and stored in asset.extras: Erms between the model's decoding of its training fr
 pub struct ExportArgs {
     /// Model directory written by `meshdeco train` (or its model.json).
     pub model: PathBuf,
-    /// Output file, written atomically: .glb (binary glTF 2.0: morph targets, animation) or
+    /// Output file, written atomically: .glb (binary glTF 2.0: morph targets, animation),
     /// .usda (USD text: UsdSkel blend shapes, the animation as a SkelAnimation; Y-up,
-    /// metersPerUnit 1 = one data unit).
+    /// metersPerUnit 1 = one data unit), .html (one self-contained viewer page: sliders, heat
+    /// maps, the training frames; opens from disk, no server) or .h5 (a linear model in the
+    /// SPLOCS reference's HDF5 layout: default, tris, comp000…, weights, verts).
     #[arg(long, short)]
     pub out: PathBuf,
     /// Add the training frames' weights as a glTF animation of the morph weights (one key per
@@ -58,11 +61,18 @@ fn parse_up(s: &str) -> std::result::Result<UpAxis, String> {
 
 pub fn run(a: ExportArgs) -> Result<()> {
     let ext = a.out.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).unwrap_or_default();
-    if ext != "glb" && ext != "usda" {
-        bail!("--out {}: name the file .glb (binary glTF 2.0) or .usda (USD text)", a.out.display());
+    let ext = if ext == "hdf5" || ext == "htm" { &ext[..ext.len() - 1] } else { ext.as_str() };
+    if !["glb", "usda", "html", "h5", "hdf"].contains(&ext) {
+        bail!(
+            "--out {}: name the file .glb (binary glTF 2.0), .usda (USD text), .html (standalone viewer page) or .h5 (SPLOCS's HDF5 layout)",
+            a.out.display()
+        );
     }
     if let Some(e) = meshdeco::export::gltf::fps_error(a.fps) {
         bail!(e);
+    }
+    if ext == "html" || ext == "h5" || ext == "hdf" {
+        return page_or_hdf5(&a, ext == "html");
     }
     let model = load_model(&a.model).with_context(|| format!("loading model {}", a.model.display()))?;
     let opts = ExportOptions {
@@ -117,6 +127,83 @@ pub fn run(a: ExportArgs) -> Result<()> {
                 );
             }
         }
+        None => outln!("additivity error: not measured (the model stores no training weights)"),
+    }
+    Ok(())
+}
+
+/// `--out view.html` (the standalone page) or `--out m.h5` (the SPLOCS layout). The glTF-only
+/// flags are refused by name.
+fn page_or_hdf5(a: &ExportArgs, html: bool) -> Result<()> {
+    let gltf_only = [
+        ("--animation", a.animation),
+        ("--colors", a.colors),
+        ("--bake", a.bake),
+        ("--up", a.up != UpAxis::Auto),
+        ("--fps", a.fps != 30.0),
+    ];
+    let mut refused: Vec<&str> = gltf_only.iter().filter(|(_, given)| *given).map(|(f, _)| *f).collect();
+    if !html {
+        let defaults = a.targets == "fitted" && a.fit_regularisation == meshdeco::export::gltf::FIT_REGULARISATION;
+        if !defaults {
+            refused.push("--targets/--fit-regularisation");
+        }
+    }
+    if !refused.is_empty() {
+        bail!(
+            "{} {} to .glb and .usda exports, not to --out {}",
+            refused.join(", "),
+            if refused.len() == 1 { "applies" } else { "apply" },
+            a.out.display()
+        );
+    }
+    let model = load_model(&a.model).with_context(|| format!("loading model {}", a.model.display()))?;
+    if !html {
+        let r = meshdeco::export::hdf5::export_splocs_h5(model.as_ref(), &a.out)?;
+        outln!(
+            "wrote {} ({} bytes): the SPLOCS reference's layout, default + tris + comp000…comp{:03} + weights ({} × {}) + verts ({} frames)",
+            a.out.display(),
+            r.bytes,
+            r.components.saturating_sub(1),
+            r.frames,
+            r.components,
+            r.frames
+        );
+        outln!(
+            "default + weights × (comp − default) equals the model's decoding to {:.1e} of the diagonal",
+            r.blend_error
+        );
+        return Ok(());
+    }
+    let opts = ExportOptions {
+        targets: if a.targets == "extreme" { TargetFit::Extreme } else { TargetFit::Fitted },
+        fit_regularisation: a.fit_regularisation,
+        ..ExportOptions::default()
+    };
+    let r = meshdeco::view::standalone::export_html(
+        model.as_ref(),
+        &meshdeco::view::standalone::page_name(&a.model),
+        &a.out,
+        &opts,
+    )?;
+    outln!(
+        "wrote {} ({} bytes): a standalone viewer page, {} blend targets ({}), {} training frames; open it in a browser (no server)",
+        a.out.display(),
+        r.bytes,
+        r.targets,
+        r.targets_kind,
+        r.frames
+    );
+    let rel = r.quantisation_max / r.diagonal.max(f64::MIN_POSITIVE);
+    outln!(
+        "targets stored as {}: int16 error on the training frames{} largest {rel:.1e} of the diagonal",
+        r.storage.name(),
+        r.quantisation_erms.map(|q| format!(" Erms {q:.2e},")).unwrap_or_default()
+    );
+    match r.additivity_erms {
+        Some(e) => outln!(
+            "additivity error: Erms {e:.4} of the blended targets against the model's own decoding of its training frames (shown on the page)"
+        ),
         None => outln!("additivity error: not measured (the model stores no training weights)"),
     }
     Ok(())

@@ -179,6 +179,9 @@ pub struct SplocsMethod {
     pub support: [f64; 2],
     /// `nonnegative` (Eq. 4) | `signed` (Eq. 3).
     pub weights: WeightConstraint,
+    /// Relative soft threshold of the weights (0: none, the reference).
+    #[serde(skip_serializing_if = "is_zero_f64")]
+    pub weight_sparsity: f64,
     pub max_iterations: usize,
     pub admm: AdmmConfig,
     /// Convergence: mean relative objective change over the last 5 iterations (0: never stop early).
@@ -226,7 +229,11 @@ macro_rules! splocs_keys {
     };
 }
 
-splocs_keys!(components, sparsity, support, weights, max_iterations, admm, tolerance, seed, threads);
+splocs_keys!(components, sparsity, support, weights, weight_sparsity, max_iterations, admm, tolerance, seed, threads);
+
+fn is_zero_f64(x: &f64) -> bool {
+    *x == 0.0
+}
 
 impl Default for SplocsMethod {
     fn default() -> Self {

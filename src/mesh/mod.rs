@@ -4,6 +4,7 @@
 //! 0-based vertex indices, counter-clockwise when seen from outside (the file's order is kept).
 
 pub mod arrays;
+pub mod hdf5;
 pub mod inspect;
 pub mod load;
 pub mod normals;

@@ -62,6 +62,11 @@ pub fn read_sequence(spec: &str) -> Result<LoadedSequence> {
 }
 
 fn read_sequence_untimed(spec: &str) -> Result<LoadedSequence> {
+    if let Some((file, _)) = super::hdf5::split_spec(spec) {
+        let sequence = super::hdf5::load_spec(spec)?;
+        let files = vec![PathBuf::from(file); sequence.n_frames()];
+        return Ok(LoadedSequence { sequence, files, warnings: Vec::new() });
+    }
     let files = resolve_spec(spec)?;
     let loaded: Vec<Result<super::LoadedMesh>> = files.par_iter().map(|p| read_mesh(p)).collect();
     let mut meshes = Vec::with_capacity(files.len());

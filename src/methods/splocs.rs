@@ -81,6 +81,13 @@ pub struct SplocsConfig {
     pub support: [f64; 2],
     /// Weight constraint: `nonnegative` (Eq. 4, default) or `signed` (Eq. 3).
     pub weights: WeightConstraint,
+    /// Sparse weights: each weight update soft-thresholds every component's weights by this
+    /// share of their largest magnitude before the constraint's projection
+    /// ([`super::splocs_admm::shrink_relative`]), so a component is active only in the frames
+    /// where it carries a clear share of its peak (in [0, 1); default 0, the reference: none).
+    /// Data made of a few deformations per frame then splits into those deformations rather
+    /// than into mixtures of them.
+    pub weight_sparsity: f64,
     /// Maximum number of outer iterations. Default 10 (the reference's fixed count).
     pub max_iterations: usize,
     /// ADMM penalty and inner iteration count.
@@ -110,6 +117,7 @@ impl Default for SplocsConfig {
             sparsity: 2.0,
             support: [0.1, 0.7],
             weights: WeightConstraint::Nonnegative,
+            weight_sparsity: 0.0,
             max_iterations: 10,
             admm: AdmmConfig::default(),
             tolerance: 1e-6,
@@ -135,6 +143,12 @@ impl SplocsConfig {
         }
         if d_min >= d_max {
             return Err(Error::config("support", format!("d_min ({d_min}) must be below d_max ({d_max})")));
+        }
+        if !(self.weight_sparsity.is_finite() && (0.0..1.0).contains(&self.weight_sparsity)) {
+            return Err(Error::config(
+                "weight_sparsity",
+                format!("weight_sparsity ({}) must be in [0, 1)", self.weight_sparsity),
+            ));
         }
         if self.weights == WeightConstraint::Unconstrained {
             return Err(Error::config(
@@ -679,7 +693,17 @@ impl<'a, P: SupportDistances + ?Sized> SplocsSolver<'a, P> {
         let (f, k, d, w) = (self.f, self.k, self.d, self.width);
         let e_count = self.x.n_elements();
         // (a) weights
-        update_weights(&mut self.wts, &self.xct, &self.cct, f, k, self.config.weights, 1e-8, &mut self.col);
+        update_weights(
+            &mut self.wts,
+            &self.xct,
+            &self.cct,
+            f,
+            k,
+            self.config.weights,
+            1e-8,
+            &mut self.col,
+            self.config.weight_sparsity,
+        );
         // (b) centres and Λ
         let n_fixed = self.config.fixed_centers.len();
         for (kk, (best, n2)) in self.blocks.argmax_groups(&self.c).into_iter().enumerate().skip(n_fixed) {

@@ -32,6 +32,25 @@ pub(crate) fn project_weights(w: &mut [f64], constraint: WeightConstraint) {
     }
 }
 
+/// Soft-thresholds one weight column relative to its peak (`weight_sparsity` of SPLOCS): every
+/// weight moves `shrink` × the column's largest magnitude towards 0 (non-negative weights: the
+/// largest positive one), stopping at 0; `shrink` = 0 changes nothing. Before the projection,
+/// which scales the peak back to 1: a component is left active only in the frames where it
+/// carries more than that share of its peak.
+pub(crate) fn shrink_relative(w: &mut [f64], shrink: f64, constraint: WeightConstraint) {
+    if shrink <= 0.0 {
+        return;
+    }
+    let peak = match constraint {
+        WeightConstraint::Nonnegative => w.iter().fold(0.0f64, |a, v| a.max(*v)),
+        _ => w.iter().fold(0.0f64, |a, v| a.max(v.abs())),
+    };
+    let t = shrink * peak;
+    for v in w.iter_mut() {
+        *v = v.signum() * (v.abs() - t).max(0.0);
+    }
+}
+
 /// One sweep of block-coordinate descent on the weights (F × K, row-major), each component in
 /// turn, exactly the reference's sequential update but in K-space: with A = X·Cᵀ (F × K) and
 /// G = C·Cᵀ (K × K), the residual product is R·C_k = A[:,k] − W·G[:,k], so
@@ -47,6 +66,7 @@ pub(crate) fn update_weights(
     constraint: WeightConstraint,
     zero_norm: f64,
     col: &mut [f64],
+    shrink: f64,
 ) {
     for c in 0..k {
         let g = cct[c * k + c];
@@ -64,6 +84,7 @@ pub(crate) fn update_weights(
             }
             col[r] = (xct[r * k + c] - s) / g + wr[c];
         }
+        shrink_relative(&mut col[..f], shrink, constraint);
         project_weights(&mut col[..f], constraint);
         for r in 0..f {
             weights[r * k + c] = col[r];
@@ -485,6 +506,25 @@ mod tests {
     use super::*;
 
     #[test]
+    fn relative_shrinkage_zeroes_the_small_weights_of_a_component() {
+        let close = |a: &[f64], b: &[f64]| a.len() == b.len() && a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-12);
+        // Non-negative: the peak is the largest positive weight; 10 % of it moves every weight.
+        let mut w = vec![-1.0, 2.0, 0.5, 0.1, 1.0];
+        shrink_relative(&mut w, 0.1, WeightConstraint::Nonnegative);
+        assert!(close(&w, &[-0.8, 1.8, 0.3, 0.0, 0.8]), "{w:?}");
+        project_weights(&mut w, WeightConstraint::Nonnegative);
+        assert!(close(&w, &[0.0, 1.0, 0.3 / 1.8, 0.0, 0.8 / 1.8]), "{w:?}");
+        // Signed: the peak is the largest magnitude, both signs shrink towards 0.
+        let mut w = vec![-4.0, 2.0, -0.3, 0.3];
+        shrink_relative(&mut w, 0.1, WeightConstraint::Signed);
+        assert!(close(&w, &[-3.6, 1.6, 0.0, 0.0]), "{w:?}");
+        // 0 changes nothing.
+        let mut w = vec![-4.0, 2.0, 0.01];
+        shrink_relative(&mut w, 0.0, WeightConstraint::Signed);
+        assert_eq!(w, vec![-4.0, 2.0, 0.01]);
+    }
+
+    #[test]
     fn projections() {
         let mut w = vec![-1.0, 2.0, 0.5];
         project_weights(&mut w, WeightConstraint::Nonnegative);
@@ -590,7 +630,7 @@ mod tests {
             }
         }
         let mut col = vec![0.0; f];
-        update_weights(&mut w_gram, &xct, &cct, f, k, WeightConstraint::Signed, 1e-8, &mut col);
+        update_weights(&mut w_gram, &xct, &cct, f, k, WeightConstraint::Signed, 1e-8, &mut col, 0.0);
         for (a, b) in w_res.iter().zip(&w_gram) {
             assert!((a - b).abs() < 1e-12, "{w_res:?} vs {w_gram:?}");
         }

@@ -21,6 +21,7 @@
 
 pub mod http;
 pub mod overview;
+pub mod standalone;
 
 use std::net::{SocketAddr, TcpListener};
 use std::path::{Path, PathBuf};
@@ -42,6 +43,9 @@ use http::{Request, Response};
 pub const INDEX_HTML: &str = include_str!("web/index.html");
 /// The page's script (WebGL2 viewer, panels, API client).
 pub const APP_JS: &str = include_str!("web/app.js");
+/// The standalone page's data source: the API's routes answered from embedded data
+/// ([`standalone`]; the live page does not load it).
+pub const EMBEDDED_JS: &str = include_str!("web/embedded.js");
 
 /// Most pins one `/api/pose` request may hold.
 pub const MAX_PINS: usize = 100;
@@ -275,8 +279,17 @@ fn soft_segmentation(components: &[model::Component], n: usize) -> Option<(Vec<u
     Some((labels, components.len()))
 }
 
-fn describe(s: &Session, model_path: &Path) -> Result<Shared> {
-    let m = s.model.as_ref();
+/// What the page's `/api/model` says about a model, with what it is computed from: the
+/// description JSON, the components in index order and each vertex's segmentation label. Shared
+/// by the live viewer and the standalone page ([`standalone`]); `frames`: the source and names
+/// of the frames to step through.
+pub(crate) struct Description {
+    pub json: Value,
+    pub components: Vec<model::Component>,
+    pub labels: Vec<u32>,
+}
+
+pub(crate) fn describe_model(m: &dyn Model, name: &str, frames: Option<(&str, &[String])>) -> Result<Description> {
     let rest = m.rest();
     let n = rest.n_vertices();
     let k = m.n_components();
@@ -304,9 +317,8 @@ fn describe(s: &Session, model_path: &Path) -> Result<Shared> {
             })
         })
         .collect();
-    let frames = s.frames.as_ref().map(|f| json!({ "source": s.data_name, "names": f.names }));
-    let name = model_path.file_name().map(|f| f.to_string_lossy().to_string()).unwrap_or_default();
-    let desc = json!({
+    let frames = frames.map(|(source, names)| json!({ "source": source, "names": names }));
+    let json = json!({
         "model": name,
         "kind": m.kind().name(),
         "representation": m.representation().name(),
@@ -325,6 +337,21 @@ fn describe(s: &Session, model_path: &Path) -> Result<Shared> {
         "pose_defaults": m.pose_defaults().to_json(),
         "pose_parameters": m.pose_parameters(),
     });
+    Ok(Description { json, components, labels })
+}
+
+/// The name a page shows for the model at `model_path` (its directory's name).
+pub(crate) fn model_name(model_path: &Path) -> String {
+    model_path.file_name().map(|f| f.to_string_lossy().to_string()).unwrap_or_default()
+}
+
+fn describe(s: &Session, model_path: &Path) -> Result<Shared> {
+    let m = s.model.as_ref();
+    let rest = m.rest();
+    let n = rest.n_vertices();
+    let k = m.n_components();
+    let frames = s.frames.as_ref().map(|f| (s.data_name.as_str(), f.names.as_slice()));
+    let Description { json: desc, components, labels } = describe_model(m, &model_name(model_path), frames)?;
     let faces_bytes = rest.faces.iter().flatten().flat_map(|&i| (i as u32).to_le_bytes()).collect();
     let heat = components.iter().map(|c| f32_bytes(c.magnitudes.iter().copied())).collect();
     let summary = format!(

@@ -226,6 +226,42 @@ pub fn npm_package(dir: &str, package: &str, spec: &str) -> Option<PathBuf> {
     Some(installed)
 }
 
+/// [`train_cli`] on the synthetic tube, every second frame: a model in about a second.
+pub fn train_tube(d: &Path, name: &str, method: &str) -> PathBuf {
+    train_cli(d, name, "path = \"synthetic:tube\"\ntrain = \"every:2\"", method)
+}
+
+/// A Python that can `import <imports>` (comma-separated): `$<env>`, else the venv
+/// `<target tmp>/<venv>` that `.ci/run` makes; `None` (with the reason printed and the skip
+/// recorded) when neither can. With `CI` set a missing one fails the test.
+pub fn python_with(env: &str, venv: &str, imports: &str) -> Option<PathBuf> {
+    let candidates = [
+        std::env::var_os(env).map(PathBuf::from),
+        Some(PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(venv).join("bin/python")),
+    ];
+    for p in candidates.into_iter().flatten() {
+        let ok = std::process::Command::new(&p)
+            .args(["-c", &format!("import {imports}")])
+            .output()
+            .is_ok_and(|o| o.status.success());
+        if ok {
+            return Some(p);
+        }
+    }
+    let missing =
+        format!("python with {imports} (${env} or {}/{venv}; .ci/run installs it)", env!("CARGO_TARGET_TMPDIR"));
+    assert!(std::env::var_os("CI").is_none(), "CI: no {missing}");
+    eprintln!("SKIPPED: no {missing}");
+    record_skip(&format!("python with {imports}"));
+    None
+}
+
+/// The rows of a model's `weights.csv` (header skipped, the frame name dropped).
+pub fn weights_csv(model: &Path) -> Vec<Vec<f64>> {
+    let text = std::fs::read_to_string(model.join("weights.csv")).unwrap();
+    text.lines().skip(1).map(|l| l.split(',').skip(1).map(|x| x.trim().parse().unwrap()).collect()).collect()
+}
+
 /// Trains `method` on `data` (the lines of a `[data]` table) with `meshdeco train`, as a user
 /// runs it, into `d/<name>` (config `d/<name>.toml`); panics with the command's output on failure.
 pub fn train_cli(d: &Path, name: &str, data: &str, method: &str) -> PathBuf {

@@ -37,6 +37,9 @@ pub struct Browser {
     ws: TcpStream,
     next: u64,
     _profile: PathBuf,
+    /// Every event received while waiting for a command's result (`{"method", "params"}`), in
+    /// order: e.g. `Network.requestWillBeSent` after `Network.enable`.
+    pub events: Vec<Value>,
 }
 
 impl Drop for Browser {
@@ -213,7 +216,7 @@ impl Browser {
             std::thread::sleep(Duration::from_millis(100));
         };
         let ws = ws_connect(&page_ws);
-        let mut b = Browser { child, ws, next: 0, _profile: profile };
+        let mut b = Browser { child, ws, next: 0, _profile: profile, events: Vec::new() };
         b.call(
             "Emulation.setDeviceMetricsOverride",
             json!({ "width": w, "height": h, "deviceScaleFactor": 1, "mobile": false }),
@@ -221,7 +224,7 @@ impl Browser {
         b
     }
 
-    /// Sends a command and waits for its result (events in between are skipped).
+    /// Sends a command and waits for its result (events in between are kept in `events`).
     pub fn call(&mut self, method: &str, params: Value) -> Value {
         self.next += 1;
         let id = self.next;
@@ -233,6 +236,9 @@ impl Browser {
                     panic!("{method}: {e}");
                 }
                 return m["result"].clone();
+            }
+            if m.get("method").is_some() {
+                self.events.push(m);
             }
         }
     }

@@ -1,5 +1,6 @@
-//! Helpers of the `meshdeco view` tests (tests/view_api.rs, tests/view_browser.rs): train a small
-//! model, start the viewer binary on a free port, speak HTTP to it, parse its binary shapes.
+//! Helpers of the `meshdeco view` tests (tests/view_api.rs, tests/view_browser.rs,
+//! tests/view_standalone.rs, tests/notebook.rs): train a small model, start the viewer binary on a
+//! free port, speak HTTP to it, parse its binary shapes; find Chromium and read the page's state.
 #![allow(dead_code)]
 
 pub mod cdp;
@@ -12,6 +13,39 @@ use std::time::Duration;
 
 use meshdeco::config::Config;
 use meshdeco::pipeline::Silent;
+
+/// The Chromium to drive ([`cdp::find_chromium`]), or `None` with the skip printed and recorded
+/// (`crate::common::record_skip`); with `CI` set a missing Chromium fails the test.
+pub fn chromium_or_skip() -> Option<PathBuf> {
+    if let Some(p) = cdp::find_chromium() {
+        return Some(p);
+    }
+    let test = std::thread::current().name().unwrap_or("?").to_string();
+    if std::env::var_os("CI").is_some() {
+        panic!("CI is set but no Chromium is installed (chromium-headless-shell or chromium; needed by {test})");
+    }
+    eprintln!("SKIPPED {test}: no chromium-headless-shell / chromium on the PATH (set MESHDECO_CHROMIUM to a binary)");
+    crate::common::record_skip("chromium (not installed)");
+    None
+}
+
+/// A JSON number of the page.
+pub fn num(v: &serde_json::Value) -> f64 {
+    v.as_f64().unwrap_or_else(|| panic!("not a number: {v}"))
+}
+
+/// The positions the page `meshdeco` object (in `window`, or `w` given as a JS expression) shows.
+pub fn page_positions(b: &mut cdp::Browser, w: &str) -> Vec<[f64; 3]> {
+    let p = b.eval(&format!("Array.from({w}.S.pos)"));
+    p.as_array().unwrap().chunks(3).map(|c| [num(&c[0]), num(&c[1]), num(&c[2])]).collect()
+}
+
+/// Waits until the page (`w`: its `meshdeco` object as a JS expression) has no request in flight
+/// or waiting.
+pub fn settle(b: &mut cdp::Browser, w: &str) {
+    std::thread::sleep(Duration::from_millis(50));
+    b.wait_for(&format!("{w}.idle()"), 120);
+}
 
 /// Trains `method` (TOML lines of `[method]`) on `data` (e.g. `synthetic:tube`) into `dir/name`.
 pub fn train(dir: &Path, name: &str, data: &str, method: &str) -> PathBuf {

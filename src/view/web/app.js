@@ -1,6 +1,10 @@
 // meshdeco view: hand-written WebGL2 viewer and API client (no library; served from the binary).
 // Geometry arrives as binary little-endian arrays (see src/view/mod.rs, `shape_bytes`).
+// Data source: the live server's HTTP API (`meshdeco view`), or — in a standalone page
+// (`meshdeco export --out view.html`, Python's `Model.show()`) — the same routes answered inside
+// the page from embedded blendshapes (embedded.js); `api` is the one place that differs.
 'use strict';
+let api = (url, init) => fetch(url, init);
 
 const $ = (id) => document.getElementById(id);
 // Writes an element's text / shows or hides it only when that changes (no needless relayout).
@@ -309,7 +313,7 @@ async function pump() {
   const job = pending; pending = null; inflight = true;
   try {
     const tSend = performance.now();
-    const r = await fetch(job.url, { method: job.body ? 'POST' : 'GET', body: job.body ? JSON.stringify(job.body) : undefined, headers: { 'Content-Type': 'application/json' } });
+    const r = await api(job.url, { method: job.body ? 'POST' : 'GET', body: job.body ? JSON.stringify(job.body) : undefined, headers: { 'Content-Type': 'application/json' } });
     if (r.status === 409) {
       // A newer pose request superseded this one on the server; its answer follows.
     } else if (!r.ok) {
@@ -339,7 +343,7 @@ function applyShape(buf, r, job) {
     S.frameRec = S.pos; S.frameTruth = new Float32Array(buf.slice(off + 12 * n, off + 24 * n));
     S.frameErr = new Float32Array(buf.slice(off + 24 * n, off + 28 * n));
     S.frameErms = r.headers.get('X-Frame-Erms');
-    $('frame-info').textContent = `${r.headers.get('X-Frame-Name')}: Erms ${(+S.frameErms).toPrecision(4)}`;
+    $('frame-info').textContent = `${r.headers.get('X-Frame-Name')}: ${S.frameErms === null ? 'its training weights, blended' : `Erms ${(+S.frameErms).toPrecision(4)}`}`;
     if (document.querySelector('input[name=fshow]:checked').value === 'frame') S.pos = S.frameTruth;
     if (S.overlay === 'error') colours();
   }
@@ -403,7 +407,7 @@ async function select(i) {
   S.selected = i;
   for (const [j, s] of sliders) s.row.classList.toggle('sel', j === i);
   if (!S.heat.has(i)) {
-    const r = await fetch(`/api/heat/${i}`);
+    const r = await api(`/api/heat/${i}`);
     if (!r.ok) { showError((await r.json()).error); return; }
     S.heat.set(i, new Float32Array(await r.arrayBuffer()));
   }
@@ -458,6 +462,7 @@ let ptr = null;
 canvas.addEventListener('contextmenu', (e) => e.preventDefault());
 canvas.addEventListener('pointerdown', (e) => {
   canvas.setPointerCapture(e.pointerId);
+  if (S.standalone && e.button === 0 && !e.shiftKey) { ptr = { mode: 'orbit', x: e.clientX, y: e.clientY }; return; }
   if (e.button === 0 && e.altKey) {
     // Alt-click: pin a point where it is, to hold its part in place while others are dragged.
     const v = pick(e.clientX, e.clientY);
@@ -521,7 +526,7 @@ function loadFrame(i) {
   submit({ url: `/api/frame/${i}`, kind: 'frame', t0: performance.now() });
 }
 async function save(fmt) {
-  const r = await fetch('/api/export', { method: 'POST', body: JSON.stringify({ format: fmt, weights: Array.from(S.weights) }) });
+  const r = await api('/api/export', { method: 'POST', body: JSON.stringify({ format: fmt, weights: Array.from(S.weights) }) });
   if (!r.ok) { showError((await r.json()).error); return; }
   const blob = await r.blob(), a = document.createElement('a');
   a.href = URL.createObjectURL(blob); a.download = fmt === 'json' ? 'weights.json' : `shape.${fmt}`; a.click();
@@ -531,7 +536,9 @@ async function save(fmt) {
 // ---------- start ----------
 async function start() {
   if (!gl) { showError('this browser has no WebGL2'); return; }
-  const get = async (u) => { const r = await fetch(u); if (!r.ok) throw new Error(`${u}: ${r.status}`); return r; };
+  const local = window.meshdecoEmbedded && await window.meshdecoEmbedded();
+  if (local) api = local;
+  const get = async (u) => { const r = await api(u); if (!r.ok) throw new Error(`${u}: ${r.status}`); return r; };
   S.desc = await (await get('/api/model')).json();
   S.n = S.desc.n_vertices; S.k = S.desc.n_components;
   S.faces = new Uint32Array(await (await get('/api/faces')).arrayBuffer());
@@ -542,6 +549,13 @@ async function start() {
   $('title').textContent = `${S.desc.model} — ${S.desc.kind}`;
   $('info').textContent = `${S.desc.representation} representation, ${S.n} vertices, ${S.desc.n_faces} faces, ${S.k} weights; start: ${S.desc.start.description}`;
   $('ranges').textContent = `(ranges: ${S.desc.ranges_from})`;
+  S.standalone = S.desc.standalone || null;
+  if (S.standalone) {
+    // No model to solve with: posing, the frame's own shape and its error need `meshdeco view`.
+    for (const id of ['pose-box', 'pose-hint', 'fshow']) $(id).style.display = 'none';
+    $('standalone').textContent = S.standalone.note; $('standalone').style.display = '';
+    document.title = `meshdeco — ${S.desc.model}`;
+  }
   // Pose options: the model's defaults, or ?gamma=…&beta=…&prior=shape|weights&spread=… in the page's URL.
   const Q = new URLSearchParams(location.search), g = S.desc.pose_defaults;
   $('gamma').value = Math.log10(+(Q.get('gamma') || g.gamma)); $('beta').value = Math.log10(+(Q.get('beta') || g.beta));
@@ -555,7 +569,7 @@ async function start() {
   if (!S.desc.pose_parameters.includes('beta')) $('beta-row').style.display = 'none';
   initGL(); frameCamera(); buildComponents(); showPins(); colours();
   // Start shape: the decoding of the start weights.
-  const r = await fetch('/api/decode', { method: 'POST', body: JSON.stringify({ weights: Array.from(S.weights) }) });
+  const r = await api('/api/decode', { method: 'POST', body: JSON.stringify({ weights: Array.from(S.weights) }) });
   applyShape(await r.arrayBuffer(), r, { kind: 'start' }); uploadGeometry();
   $('overlay').onchange = () => { S.overlay = $('overlay').value; if (S.overlay === 'heat' && S.selected < 0) select(S.desc.components[0].index); colours(); redraw(); };
   $('wire').onchange = () => { S.wire = $('wire').checked; redraw(); };
@@ -567,7 +581,7 @@ async function start() {
   window.addEventListener('keydown', (e) => { if ((e.ctrlKey || e.metaKey) && e.key === 'z') { e.preventDefault(); undo(); } });
   for (const b of document.querySelectorAll('button.save')) b.onclick = () => save(b.dataset.fmt);
   if (S.desc.frames) {
-    $('frames-box').style.display = ''; $('opt-error').disabled = false;
+    $('frames-box').style.display = ''; $('opt-error').disabled = !!S.standalone;
     $('frame-i').max = S.desc.frames.names.length;
     $('prev').onclick = () => loadFrame(+$('frame-i').value - 2);
     $('next').onclick = () => loadFrame(+$('frame-i').value);
