@@ -85,13 +85,12 @@ pub fn read_constraints(path: &Path, n_vertices: usize) -> Result<Constraints> {
     Ok(Constraints::from_json_text(&path.display().to_string(), &text, n_vertices)?)
 }
 
+/// `--gamma`, `--beta`, `--max-iterations`, `--prior`, `--spread`, `--reach` as given.
+type PoseFlags = (Option<f64>, Option<f64>, Option<usize>, Option<PosePrior>, Option<f64>, Option<f64>);
+
 /// The pose options of `model`'s kind ([`meshdeco::model::Model::pose_defaults`]) with the
 /// flags given; checks every value, naming the flag.
-fn options_from_flags(
-    model: &dyn meshdeco::model::Model,
-    flags: (Option<f64>, Option<f64>, Option<usize>, Option<PosePrior>, Option<f64>, Option<f64>),
-    freeze: bool,
-) -> Result<PoseOptions> {
+fn options_from_flags(model: &dyn meshdeco::model::Model, flags: PoseFlags, freeze: bool) -> Result<PoseOptions> {
     let (gamma, beta, max_iterations, prior, spread, reach) = flags;
     let d = model.pose_defaults();
     for (flag, v) in [("--gamma", gamma), ("--beta", beta)] {

@@ -439,7 +439,7 @@ pub fn plant(mesh: &TriMesh, source: &str, cfg: &PlantConfig) -> Result<PlantedS
     let n = p.len();
     let (lo, hi) = bounding_box(p);
     let diagonal = dist(lo, hi);
-    if !(diagonal > 0.0) {
+    if diagonal.is_nan() || diagonal <= 0.0 {
         return Err(Error::Invalid(format!("{source}: the mesh has no extent")));
     }
     let normals = vertex_normals(p, &rest.faces, NormalWeighting::Area);

@@ -383,9 +383,9 @@ pub fn decimate(positions: &[Vec3], faces: &[[usize; 3]], target: usize) -> Resu
     // Compact.
     let mut index = vec![usize::MAX; n];
     let mut out = Decimated { positions: Vec::with_capacity(count), faces: Vec::new(), source: Vec::new() };
-    for v in 0..n {
+    for (v, slot) in index.iter_mut().enumerate() {
         if w.alive[v] && !w.vertex_faces[v].is_empty() {
-            index[v] = out.positions.len();
+            *slot = out.positions.len();
             out.positions.push(w.pos[v]);
             out.source.push(v);
         }
