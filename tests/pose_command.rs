@@ -94,7 +94,7 @@ fn pose_command_lands_and_reports_locality() {
         assert!(err <= 0.05 * amount, "{name}: landing error {err} for a drag of {amount}\n{stdout}");
         assert!((parse_distance(&stdout, v) - err).abs() < 1e-5, "{stdout}");
         // Same pose through the library; energy shares.
-        let res = model.pose(&[v], &[t], &w0, &PoseOptions::default()).unwrap();
+        let res = model.pose(&[v], &[t], &w0, &model.pose_defaults()).unwrap();
         let (set_name, set) = model.locality_set(v).unwrap();
         let own = displacement_share(&res.start, &res.positions, &set);
         let planted_share = displacement_share(&res.start, &res.positions, &planted);
@@ -146,45 +146,69 @@ fn bad_constraint_files_fail_with_reasons() {
 }
 
 /// The drag benchmark as a user runs it, on test frames given as a NumPy `.npy` (its
-/// connectivity is the model's): the printed medians parse, the landing is small and the shape
-/// prior moves less collateral than the paper's weights prior on SPLOCS; `encode` reads the same
-/// `.npy`; a `.npz` without its array name is refused with the spelling to use.
+/// connectivity is the model's): the printed rows parse (the max motion's median ≤ p90 ≤ max,
+/// the null's columns, the README row), the landing is small and the posed Erms below the
+/// neutral's with the defaults (the data prior) and the shape prior; a bad --reach or --prior is
+/// refused naming it; `encode` reads the same `.npy`; a `.npz` without its array name is refused
+/// with the spelling to use.
 #[test]
 fn drag_bench_on_numpy_test_frames() {
     let d = tmp("bench");
     let model = train(&d, "splocs", "kind = \"splocs\"\ncomponents = 6\nsupport = [0.05, 0.3]\nweights = \"signed\"");
     let seq = synthetic::load("synthetic:bumps").unwrap();
     mesh::npy::write_npy(&d.join("test.npy"), &seq.frames[30..]).unwrap();
-    let run = |prior: &str| {
-        let o = meshdeco(
-            &["drag-bench", model.to_str().unwrap(), "test.npy", "--drags", "12", "--pins", "1,3", "--prior", prior],
-            &d,
-        );
+    let run = |extra: &[&str]| {
+        let mut args = vec!["drag-bench", model.to_str().unwrap(), "test.npy", "--drags", "12", "--pins", "1,3"];
+        args.extend_from_slice(extra);
+        let o = meshdeco(&args, &d);
         let text = String::from_utf8_lossy(&o.stdout).into_owned();
         assert!(o.status.success(), "{text}{}", String::from_utf8_lossy(&o.stderr));
-        // | pins | drags | landing | max motion | moved share | frame share | posed | neutral | improved | ms |
+        // | pins | drags | landing | max motion: median / p90 / max | moved share | frame share |
+        // posed | null | neutral | posed ÷ null | beats null | improved | ms |
         let rows: Vec<Vec<f64>> = text
             .lines()
             .filter(|l| l.starts_with("| 1 |") || l.starts_with("| 3 |"))
             .map(|l| {
-                l.split('|').map(|c| c.trim().trim_end_matches('%').trim()).filter_map(|c| c.parse().ok()).collect()
+                l.replace(" / ", " | ")
+                    .split('|')
+                    .map(|c| c.trim().trim_end_matches('%').trim())
+                    .filter_map(|c| c.parse().ok())
+                    .collect()
             })
             .collect();
         assert_eq!(rows.len(), 2, "{text}");
+        assert!(rows.iter().all(|r| r.len() == 15), "{text}");
+        assert!(text.lines().any(|l| l.starts_with("row: | ")), "{text}");
         rows
     };
-    let shape = run("shape");
-    let weights = run("weights");
+    // The defaults (the data prior for SPLOCS); the shape and the weights prior without reach.
+    let data = run(&[]);
+    let shape = run(&["--prior", "shape", "--reach", "0"]);
+    let weights = run(&["--prior", "weights", "--reach", "0"]);
     // One pin lands (three random pins may include vertices the data never moves).
-    assert!(shape[0][2] < 1.0, "one pin lands {}% of the drag away", shape[0][2]);
-    for r in &shape {
-        assert!(r[6] < r[7] + 1e-9, "posed Erms {} not below the neutral shape's {}", r[6], r[7]);
+    assert!(data[0][2] < 1.0 && shape[0][2] < 1.0, "one pin lands {} / {} % of the drag away", data[0][2], shape[0][2]);
+    for r in data.iter().chain(&shape) {
+        // Frozen weights are never better than the model by construction, but posed ÷ null is
+        // the median of the per-drag ratios: it is finite and positive.
+        assert!(r[11] > 0.0 && r[11].is_finite(), "{r:?}");
+        assert!(r[8] < r[10] + 1e-9, "posed Erms {} not below the neutral shape's {}", r[8], r[10]);
+        // Median ≤ p90 ≤ max of the max motion ÷ drag; posed ÷ null is the Erms ratio's median.
+        assert!(r[3] <= r[4] + 1e-9 && r[4] <= r[5] + 1e-9, "{r:?}");
     }
+    // Reach 1.3 bounds the model's shape; the landing correction adds at most the miss.
+    assert!(data[0][5] <= 1.3 + 1.0 + 1e-9, "{:?}", data[0]);
+    assert!(weights.iter().all(|r| r[3] <= r[4] + 1e-9 && r[4] <= r[5] + 1e-9), "{weights:?}");
+    let o = meshdeco(&["drag-bench", model.to_str().unwrap(), "test.npy", "--reach", "0.5"], &d);
     assert!(
-        shape[0][3] <= weights[0][3] + 1e-9,
-        "max motion ÷ drag: shape {} vs weights {}",
-        shape[0][3],
-        weights[0][3]
+        !o.status.success() && String::from_utf8_lossy(&o.stderr).contains("--reach 0.5"),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let o = meshdeco(&["drag-bench", model.to_str().unwrap(), "test.npy", "--prior", "most"], &d);
+    assert!(
+        !o.status.success() && String::from_utf8_lossy(&o.stderr).contains("most"),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
     );
     let o = meshdeco(&["encode", model.to_str().unwrap(), "test.npy", "--out", "enc"], &d);
     assert!(o.status.success(), "encode test.npy: {}", String::from_utf8_lossy(&o.stderr));
@@ -254,5 +278,78 @@ fn spread_lands_a_drag_the_components_cannot_make() {
     assert!(!o.status.success());
     assert!(String::from_utf8_lossy(&o.stderr).contains("--spread 2"), "{}", String::from_utf8_lossy(&o.stderr));
     assert!(!d.join("bad.obj").exists());
+    std::fs::remove_dir_all(&d).unwrap();
+}
+
+/// The drag benchmark's null row (the same drags posed by the landing correction alone, the
+/// weights frozen): on test frames the components can make (the tube's bumps, which SPLOCS
+/// learned) the posed shape is far closer to the frame than the null (posed ÷ null well below 1,
+/// most drags beat it); on frames they cannot make (the whole tube stretched along its axis:
+/// no bump moves any vertex along the axis) the model adds nothing (posed ÷ null ≈ 1, no drag
+/// beats it by more than 1 %). Frozen, the null equals the posed row.
+#[test]
+fn drag_bench_null_row_tells_what_the_components_add() {
+    use meshdeco::eval::drag::{DragBenchConfig, drag_bench};
+    use meshdeco::mesh::MeshSequence;
+    let d = tmp("null");
+    let dir = train(&d, "splocs", "kind = \"splocs\"\ncomponents = 3");
+    let model = load_model(&dir).unwrap();
+    let seq = synthetic::load("synthetic:bumps").unwrap();
+    let frames = |f: Vec<Vec<Vec3>>| MeshSequence {
+        faces: seq.faces.clone(),
+        names: (0..f.len()).map(|i| format!("f{i}")).collect(),
+        frames: f,
+    };
+    let can = frames(seq.frames[30..].to_vec());
+    let rest = model.rest().positions;
+    let (lo, hi) = model.rest().bounding_box();
+    let axis = (0..3).max_by(|&a, &b| (hi[a] - lo[a]).total_cmp(&(hi[b] - lo[b]))).unwrap();
+    let cannot = frames(
+        [0.03, -0.03, 0.05]
+            .iter()
+            .map(|s| {
+                rest.iter()
+                    .map(|p| {
+                        let mut q = *p;
+                        q[axis] = lo[axis] + (1.0 + s) * (p[axis] - lo[axis]);
+                        q
+                    })
+                    .collect()
+            })
+            .collect(),
+    );
+    // A landing radius of 5 % of the diagonal (the null carries the pins' neighbourhoods only),
+    // a weak pull and no reach: what the components can do, they do.
+    let options = PoseOptions { spread: 0.05, gamma: 0.001, reach: 0.0, ..model.pose_defaults() };
+    let cfg = DragBenchConfig { drags: 12, pins: vec![3, 10], seed: 0, options };
+    let (_, yes) = drag_bench(model.as_ref(), &can, &cfg).unwrap();
+    let (_, no) = drag_bench(model.as_ref(), &cannot, &cfg).unwrap();
+    for (y, n) in yes.iter().zip(&no) {
+        eprintln!(
+            "{} pins: can make: posed ÷ null {:.3}, beats null {:.0} %; cannot: {:.3}, {:.0} %",
+            y.pins,
+            y.medians.null_ratio,
+            100.0 * y.beats_null_share,
+            n.medians.null_ratio,
+            100.0 * n.beats_null_share
+        );
+        assert!(
+            y.medians.null_ratio < 0.8,
+            "{} pins, frames the model can make: posed ÷ null {}",
+            y.pins,
+            y.medians.null_ratio
+        );
+        assert!(y.beats_null_share >= 0.9, "{} pins: {} beat the null", y.pins, y.beats_null_share);
+        assert!(
+            (n.medians.null_ratio - 1.0).abs() < 0.02,
+            "{} pins, frames the model cannot make: posed ÷ null {}",
+            n.pins,
+            n.medians.null_ratio
+        );
+        assert!(n.beats_null_share <= 0.1, "{} pins: {} beat the null", n.pins, n.beats_null_share);
+    }
+    let frozen = DragBenchConfig { options: options.frozen(), ..cfg };
+    let (rows, _) = drag_bench(model.as_ref(), &can, &frozen).unwrap();
+    assert!(rows.iter().all(|r| (r.measures.null_ratio - 1.0).abs() < 1e-12), "frozen: the null is the posed shape");
     std::fs::remove_dir_all(&d).unwrap();
 }

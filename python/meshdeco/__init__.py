@@ -316,11 +316,14 @@ class Model:
         target positions in data units (finite). ``start``: ``None`` (the model's default start,
         e.g. the rest shape) or a shape ``(N, 3)`` in data units whose encoding is the start.
 
-        Options (``None``: the library's default, :func:`meshdeco pose`'s): ``gamma`` ≥ 0,
-        dimensionless pull towards the start (default 1); ``beta`` ≥ 0, boundary consistency
+        Options (``None``: the model kind's default, :func:`meshdeco pose`'s): ``gamma`` ≥ 0,
+        dimensionless pull towards the start, as strong wherever the pins are (default: PCA and
+        SPLOCS 5, region PCA 0.03, the autoencoder 1); ``beta`` ≥ 0, boundary consistency
         between regions (region PCA; default 1e-3); ``max_iterations`` 1..1000, Gauss–Newton
         iterations (autoencoder; default 30); ``prior``: ``"shape"`` (the pull measures the
-        shape's change, default) or ``"weights"`` (the papers' ‖w − w0‖²); ``spread`` 0..1, the
+        shape's change), ``"weights"`` (the papers' ‖w − w0‖²; region PCA's and the
+        autoencoder's default) or ``"data"`` (the weights measured by the training weights'
+        spread; PCA's and SPLOCS's default); ``spread`` 0..1, the
         landing correction's radius as a fraction of the bounding-box diagonal (default 0.2; 0:
         the model's own shape): what the model's shape leaves between a pin and its target is
         added as a smooth displacement that fades to zero that far along the surface, so every
@@ -352,7 +355,7 @@ class Model:
         ):
             raise ArgumentError(f"max_iterations: {max_iterations!r} is not a positive integer")
         if prior is not None and not isinstance(prior, str):
-            raise ArgumentTypeError(f"prior: {type(prior).__name__}; expected \"shape\" or \"weights\"")
+            raise ArgumentTypeError(f"prior: {type(prior).__name__}; expected \"shape\", \"weights\" or \"data\"")
         positions, weights, st = self._m.pose(
             json.dumps(obj),
             s,

@@ -372,7 +372,8 @@ impl NativeModel {
                 Some(mesh::arrays::mesh_from_arrays(("start", "faces"), &flat, &[0, 0, 0]).map_err(lib_err)?.positions)
             }
         };
-        let mut options = PoseOptions::default();
+        // The model kind's defaults (`meshdeco pose`'s and the viewer's).
+        let mut options = self.with(py, |m| Ok(m.pose_defaults()))?;
         if let Some(g) = gamma {
             options.gamma = g;
         }
@@ -384,7 +385,7 @@ impl NativeModel {
         }
         if let Some(p) = prior {
             options.prior = PosePrior::parse(p)
-                .ok_or_else(|| arg_err("prior", format!("`{p}`: expected \"shape\" or \"weights\"")))?;
+                .ok_or_else(|| arg_err("prior", format!("`{p}`: expected \"shape\", \"weights\" or \"data\"")))?;
         }
         if let Some(s) = spread {
             options.spread = s;

@@ -36,30 +36,43 @@ pub struct PoseArgs {
     /// each vertex moved (scalar property `displacement`).
     #[arg(long, short)]
     pub out: PathBuf,
-    /// γ: pull towards the start, dimensionless (Eq. 8/10 regulariser, scaled by the mean
-    /// squared response of one weight at the constrained vertices, measured as --prior says;
-    /// also the autoencoder's). Smaller asks more of the model's components (and, with --spread 0, lands the pins more exactly); larger leaves more to the landing correction.
-    #[arg(long, default_value_t = PoseOptions::default().gamma)]
-    pub gamma: f64,
+    /// γ: pull towards the start, dimensionless (in the whole shape's mean squared vertex motion,
+    /// measured as --prior says), as strong wherever the pins are; also the autoencoder's.
+    /// Smaller asks more of the model's components; larger leaves more to the landing
+    /// correction. Default: the model kind's (PCA and SPLOCS 5, region PCA 0.03, the
+    /// autoencoder 1; `model::PoseOptions::for_kind`).
+    #[arg(long)]
+    pub gamma: Option<f64>,
     /// β: boundary consistency between regions (region PCA only; squared vertex differences, as
     /// given). With few training shapes β = 1 couples the regions so strongly that a drag
     /// spreads like holistic PCA; the default 1e-3 keeps a one-pin drag the most local (docs/posing-drag-bench.md).
-    #[arg(long, default_value_t = PoseOptions::default().beta)]
-    pub beta: f64,
-    /// Gauss-Newton iterations at most (autoencoder only).
-    #[arg(long, default_value_t = PoseOptions::default().max_iterations)]
-    pub max_iterations: usize,
-    /// What the pull towards the start measures: `shape` (the whole shape's change: a drag moves
-    /// what it must and little else) or `weights` (the paper's ‖w − w0‖²).
-    #[arg(long, default_value = "shape", value_parser = parse_prior)]
-    pub prior: PosePrior,
-    /// Landing correction radius, a fraction of the rest mesh's bounding-box diagonal (0: off).
-    /// What the model's shape leaves between a pin and its target is added as a smooth
-    /// displacement that fades to zero this far along the surface from every pin, so every pin
-    /// lands even where the model's components cannot reach (the written weights are the
-    /// model's; the mesh is the landed shape).
-    #[arg(long, default_value_t = PoseOptions::default().spread)]
-    pub spread: f64,
+    #[arg(long)]
+    pub beta: Option<f64>,
+    /// Gauss-Newton iterations at most (autoencoder only; default 30).
+    #[arg(long)]
+    pub max_iterations: Option<usize>,
+    /// What the pull towards the start measures: `shape` (the whole shape's change), `weights`
+    /// (the paper's ‖w − w0‖²) or `data` (the weights measured by the training weights' spread;
+    /// PCA and SPLOCS). Default: the model kind's (PCA and SPLOCS data, region PCA and the
+    /// autoencoder weights).
+    #[arg(long, value_parser = parse_prior)]
+    pub prior: Option<PosePrior>,
+    /// Landing correction radius, a fraction of the rest mesh's bounding-box diagonal (0: off;
+    /// default 0.2). What the model's shape leaves between a pin and its target is added as a
+    /// smooth displacement that fades to zero this far along the surface from every pin, so
+    /// every pin lands even where the model's components cannot reach (the written weights are
+    /// the model's; the mesh is the landed shape).
+    #[arg(long)]
+    pub spread: Option<f64>,
+    /// The most any vertex of the model's shape may move, a multiple of the largest drag (0: no
+    /// bound; default 1.3): a pose that moves farther is taken back towards the start, and the
+    /// landing correction lands the pins.
+    #[arg(long)]
+    pub reach: Option<f64>,
+    /// Keep the weights at the start: the shape is the start shape plus the landing correction
+    /// alone (what the drag benchmark calls the null; with --spread 0 nothing moves).
+    #[arg(long)]
+    pub freeze: bool,
     /// Radius (fraction of the rest mesh's bounding-box diagonal) of the ball around each
     /// constrained vertex in which the reported displacement-energy share is measured.
     #[arg(long, default_value_t = 0.2)]
@@ -72,31 +85,57 @@ pub fn read_constraints(path: &Path, n_vertices: usize) -> Result<Constraints> {
     Ok(Constraints::from_json_text(&path.display().to_string(), &text, n_vertices)?)
 }
 
-/// Checks the numeric flags, naming the flag and the value.
-fn check_flags(a: &PoseArgs) -> Result<()> {
-    for (flag, v) in [("--gamma", a.gamma), ("--beta", a.beta)] {
-        if !(v.is_finite() && v >= 0.0) {
+/// `--gamma`, `--beta`, `--max-iterations`, `--prior`, `--spread`, `--reach` as given.
+type PoseFlags = (Option<f64>, Option<f64>, Option<usize>, Option<PosePrior>, Option<f64>, Option<f64>);
+
+/// The pose options of `model`'s kind ([`meshdeco::model::Model::pose_defaults`]) with the
+/// flags given; checks every value, naming the flag.
+fn options_from_flags(model: &dyn meshdeco::model::Model, flags: PoseFlags, freeze: bool) -> Result<PoseOptions> {
+    let (gamma, beta, max_iterations, prior, spread, reach) = flags;
+    let d = model.pose_defaults();
+    for (flag, v) in [("--gamma", gamma), ("--beta", beta)] {
+        if let Some(v) = v
+            && !(v.is_finite() && v >= 0.0)
+        {
             bail!("{flag} {v}: must be a finite number ≥ 0");
         }
     }
-    if !(a.local_radius.is_finite() && a.local_radius > 0.0) {
-        bail!("--local-radius {}: must be a positive fraction of the bounding-box diagonal", a.local_radius);
+    if let Some(n) = max_iterations
+        && !(1..=PoseOptions::MAX_ITERATIONS).contains(&n)
+    {
+        bail!("--max-iterations {n}: must be from 1 to {}", PoseOptions::MAX_ITERATIONS);
     }
-    if !(1..=PoseOptions::MAX_ITERATIONS).contains(&a.max_iterations) {
-        bail!("--max-iterations {}: must be from 1 to {}", a.max_iterations, PoseOptions::MAX_ITERATIONS);
-    }
-    if !(a.spread.is_finite() && (0.0..=PoseOptions::MAX_SPREAD).contains(&a.spread)) {
+    if let Some(x) = spread
+        && !(x.is_finite() && (0.0..=PoseOptions::MAX_SPREAD).contains(&x))
+    {
         bail!(
-            "--spread {}: must be from 0 (off) to {} (a fraction of the bounding-box diagonal)",
-            a.spread,
+            "--spread {x}: must be from 0 (off) to {} (a fraction of the bounding-box diagonal)",
             PoseOptions::MAX_SPREAD
         );
     }
-    Ok(())
+    if let Some(x) = reach
+        && !(x.is_finite() && (x == 0.0 || x >= 1.0))
+    {
+        bail!("--reach {x}: must be 0 (no bound) or a number ≥ 1 (a multiple of the largest drag)");
+    }
+    let options = PoseOptions {
+        gamma: gamma.unwrap_or(d.gamma),
+        beta: beta.unwrap_or(d.beta),
+        max_iterations: max_iterations.unwrap_or(d.max_iterations),
+        prior: prior.unwrap_or(d.prior),
+        time_limit: None,
+        spread: spread.unwrap_or(d.spread),
+        freeze,
+        reach: reach.unwrap_or(d.reach),
+    };
+    options.validate()?;
+    Ok(options)
 }
 
 pub fn run(a: PoseArgs) -> Result<()> {
-    check_flags(&a)?;
+    if !(a.local_radius.is_finite() && a.local_radius > 0.0) {
+        bail!("--local-radius {}: must be a positive fraction of the bounding-box diagonal", a.local_radius);
+    }
     let model = load_model(&a.model).with_context(|| format!("loading model {}", a.model.display()))?;
     let rest = model.rest();
     let n = rest.n_vertices();
@@ -118,15 +157,8 @@ pub fn run(a: PoseArgs) -> Result<()> {
             None
         }
     };
-    let opts = PoseOptions {
-        gamma: a.gamma,
-        beta: a.beta,
-        max_iterations: a.max_iterations,
-        prior: a.prior,
-        time_limit: None,
-        spread: a.spread,
-    };
-    opts.validate()?;
+    let opts =
+        options_from_flags(model.as_ref(), (a.gamma, a.beta, a.max_iterations, a.prior, a.spread, a.reach), a.freeze)?;
     let w0 = model.start_weights(from.as_deref())?;
     let Constraints { vertices, targets } = cons;
     check_targets(&rest, &vertices, &targets).with_context(|| format!("{}", a.constraints.display()))?;
@@ -199,7 +231,11 @@ to its position in a random test frame (centroid-aligned for models that align s
 defaults (or --gamma/--beta/--max-iterations) and measures: landing error (% of the drag), largest motion \
 of any vertex ÷ the largest drag, the share of vertices moved more than half the mean drag (and the same \
 share for the test frame itself), and the Erms of the posed and of the neutral shape against the frame. \
-Rows are medians over the drags.")]
+Every drag is also posed by the landing correction alone (the weights frozen at the start: the null), \
+giving the null's Erms and posed ÷ null (below 1: the model's components help). Rows are medians over \
+the drags, with the 90th percentile and maximum of the max motion ÷ drag and the shares of drags \
+that beat the null and that improve on the neutral shape, each by more than 1 %. The last line \
+(`row: | …`) is the README table's row.")]
 pub struct DragBenchArgs {
     /// Model directory written by `meshdeco train` (or its model.json).
     pub model: PathBuf,
@@ -226,12 +262,22 @@ pub struct DragBenchArgs {
     /// Iterations override (autoencoder).
     #[arg(long)]
     pub max_iterations: Option<usize>,
-    /// `shape` or `weights` (see `meshdeco pose --help`).
-    #[arg(long, default_value = "shape", value_parser = parse_prior)]
-    pub prior: PosePrior,
+    /// `shape`, `weights` or `data` (see `meshdeco pose --help`; default: the model kind's).
+    #[arg(long, value_parser = parse_prior)]
+    pub prior: Option<PosePrior>,
     /// Landing correction radius override (see `meshdeco pose --help`; 0: the model's shape only).
     #[arg(long)]
     pub spread: Option<f64>,
+    /// Reach override (see `meshdeco pose --help`; 0: no bound).
+    #[arg(long)]
+    pub reach: Option<f64>,
+    /// Pose with the weights frozen at the start (the landing correction alone; the null row
+    /// then equals the posed one).
+    #[arg(long)]
+    pub freeze: bool,
+    /// Name of the model in the last line (`row: | NAME | …`, the README table's row; default: MODEL).
+    #[arg(long)]
+    pub label: Option<String>,
     /// Also write every drag and the medians as JSON here.
     #[arg(long)]
     pub json: Option<PathBuf>,
@@ -247,19 +293,12 @@ pub fn drag_bench(a: DragBenchArgs) -> Result<()> {
         .split(',')
         .map(|t| t.trim().parse::<usize>().map_err(|_| anyhow::anyhow!("--pins `{}`: `{t}` is not a count", a.pins)))
         .collect::<Result<Vec<_>>>()?;
-    let d = PoseOptions::default();
-    let options = PoseOptions {
-        gamma: a.gamma.unwrap_or(d.gamma),
-        beta: a.beta.unwrap_or(d.beta),
-        max_iterations: a.max_iterations.unwrap_or(d.max_iterations),
-        prior: a.prior,
-        time_limit: None,
-        spread: a.spread.unwrap_or(d.spread),
-    };
+    let options =
+        options_from_flags(model.as_ref(), (a.gamma, a.beta, a.max_iterations, a.prior, a.spread, a.reach), a.freeze)?;
     let cfg = DragBenchConfig { drags: a.drags, pins, seed: a.seed, options };
     let (rows, summary) = drag_bench(model.as_ref(), &seq, &cfg)?;
     outln!(
-        "{} model {}, {} test frames of {}; pose options γ {} β {} iterations {} prior {} spread {}",
+        "{} model {}, {} test frames of {}; pose options γ {} β {} iterations {} prior {} spread {} reach {}{}",
         model.kind().name(),
         a.model.display(),
         seq.n_frames(),
@@ -268,28 +307,57 @@ pub fn drag_bench(a: DragBenchArgs) -> Result<()> {
         options.beta,
         options.max_iterations,
         options.prior.name(),
-        options.spread
+        options.spread,
+        options.reach,
+        if options.freeze { " freeze" } else { "" }
     );
     outln!(
-        "| pins | drags | landing % of drag | max motion ÷ drag | moved > ½ drag | test frame's own | posed Erms | neutral Erms | improved | pose ms |"
+        "| pins | drags | landing % of drag | max motion ÷ drag: median / p90 / max | moved > ½ drag | test frame's own | posed Erms | null Erms | neutral Erms | posed ÷ null | beats null | improved | pose ms |"
     );
-    outln!("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
+    outln!("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
     for s in &summary {
         let m = &s.medians;
         outln!(
-            "| {} | {} | {:.3} | {:.2} | {:.1} % | {:.1} % | {:.3} | {:.3} | {:.0} % | {:.1} |",
+            "| {} | {} | {:.3} | {:.2} / {:.2} / {:.2} | {:.1} % | {:.1} % | {:.3} | {:.3} | {:.3} | {:.3} | {:.0} % | {:.0} % | {:.1} |",
             s.pins,
             s.drags,
             m.landing_percent,
             m.max_motion_ratio,
+            s.max_motion_p90,
+            s.max_motion_max,
             100.0 * m.moved_share,
             100.0 * m.frame_moved_share,
             m.posed_erms,
+            m.null_erms,
             m.neutral_erms,
+            m.null_ratio,
+            100.0 * s.beats_null_share,
             100.0 * s.improved_share,
             1e3 * m.seconds
         );
     }
+    // One line for the README's table (scripts/drag-bench collects them): medians over the pin
+    // counts, the one-pin tail, Erms posed / null / neutral, posed ÷ null and the share beating it.
+    let join = |f: &dyn Fn(&meshdeco::eval::drag::DragSummary) -> String| {
+        summary.iter().map(f).collect::<Vec<_>>().join(" / ")
+    };
+    let first = &summary[0];
+    outln!(
+        "row: | {} | {} | {} | {} ({} pin: p90 {:.2}, max {:.2}) | {} | {} vs null {} vs neutral {} | {} | {} |",
+        a.label.as_deref().unwrap_or(&a.model.display().to_string()),
+        join(&|s| s.pins.to_string()),
+        join(&|s| format!("{:.2}", s.medians.landing_percent)),
+        join(&|s| format!("{:.2}", s.medians.max_motion_ratio)),
+        first.pins,
+        first.max_motion_p90,
+        first.max_motion_max,
+        join(&|s| format!("{:.0} %", 100.0 * s.medians.moved_share)),
+        join(&|s| format!("{:.1}", s.medians.posed_erms)),
+        join(&|s| format!("{:.1}", s.medians.null_erms)),
+        join(&|s| format!("{:.1}", s.medians.neutral_erms)),
+        join(&|s| format!("{:.2}", s.medians.null_ratio)),
+        join(&|s| format!("{:.0} %", 100.0 * s.beats_null_share)),
+    );
     if let Some(p) = &a.json {
         let v = serde_json::json!({ "summary": summary, "drags": rows });
         meshdeco::artifact::write_atomic(p, serde_json::to_string_pretty(&v)?.as_bytes())?;
@@ -299,5 +367,5 @@ pub fn drag_bench(a: DragBenchArgs) -> Result<()> {
 }
 
 fn parse_prior(s: &str) -> std::result::Result<PosePrior, String> {
-    PosePrior::parse(s).ok_or_else(|| format!("`{s}`: expected shape or weights"))
+    PosePrior::parse(s).ok_or_else(|| format!("`{s}`: expected shape, weights or data"))
 }

@@ -152,6 +152,7 @@ mod tests {
             model: lm,
             representation,
             shape_metric: Default::default(),
+            data_metric: Default::default(),
         }
     }
 

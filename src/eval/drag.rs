@@ -14,8 +14,16 @@
 //!   much may move much;
 //! - **Erms** of P and of P0 against T (the model's alignment).
 //!
+//! **The null.** Every drag is also posed with the weights frozen at the start
+//! ([`PoseOptions::frozen`]: P0 plus the landing correction alone, the same radius), giving the
+//! null shape Q: its Erms against T and its max motion ÷ drag. `posed ÷ null` is P's Erms ÷ Q's:
+//! what the model's components add to what the correction does anyway (below 1: the model
+//! helps).
+//!
 //! Drags whose mean drag is below 1e-6 × the bounding-box diagonal are redrawn (a pin that does
-//! not move says nothing). Each row of the report is the median over the drags.
+//! not move says nothing). Each row of the report is the median over the drags, with the share
+//! of drags that improve on the neutral shape and that beat the null, each by more than
+//! [`GAIN_TOLERANCE`], and the tail of the max motion ÷ drag (90th percentile and maximum).
 
 use serde::Serialize;
 
@@ -24,6 +32,10 @@ use crate::mesh::{MeshSequence, Vec3};
 use crate::metrics::erms::{Alignment, erms};
 use crate::model::{Model, PoseOptions};
 use crate::rng::Rng;
+
+/// A drag counts as improving on the neutral shape (beating the null) when its posed Erms is
+/// below (1 − this) × the neutral's (the null's): 1 %, so that a gain of rounding size is none.
+pub const GAIN_TOLERANCE: f64 = 0.01;
 
 /// What to run.
 #[derive(Debug, Clone)]
@@ -52,6 +64,12 @@ pub struct DragMeasures {
     /// Erms of the posed shape and of the neutral shape against the test frame.
     pub posed_erms: f64,
     pub neutral_erms: f64,
+    /// Erms of the null shape (weights frozen, the landing correction alone) against the frame.
+    pub null_erms: f64,
+    /// Posed Erms ÷ null Erms (below 1: the model's components help).
+    pub null_ratio: f64,
+    /// Largest motion of any vertex of the null shape ÷ the largest drag.
+    pub null_max_motion_ratio: f64,
     /// Wall time of the pose, seconds.
     pub seconds: f64,
 }
@@ -70,6 +88,9 @@ impl DragMeasures {
             frame_moved_share: col(|m| m.frame_moved_share),
             posed_erms: col(|m| m.posed_erms),
             neutral_erms: col(|m| m.neutral_erms),
+            null_erms: col(|m| m.null_erms),
+            null_ratio: col(|m| m.null_ratio),
+            null_max_motion_ratio: col(|m| m.null_max_motion_ratio),
             seconds: col(|m| m.seconds),
         }
     }
@@ -92,8 +113,25 @@ pub struct DragSummary {
     pub drags: usize,
     #[serde(flatten)]
     pub medians: DragMeasures,
-    /// Share of drags whose posed Erms is below the neutral shape's.
+    /// Share of drags whose posed Erms is below (1 − [`GAIN_TOLERANCE`]) × the neutral shape's.
     pub improved_share: f64,
+    /// Share of drags whose posed Erms is below (1 − [`GAIN_TOLERANCE`]) × the null's.
+    pub beats_null_share: f64,
+    /// 90th percentile and maximum over the drags of the max motion ÷ drag.
+    pub max_motion_p90: f64,
+    pub max_motion_max: f64,
+}
+
+/// The `q` quantile (0 ..= 1) of `values`, linear between order statistics (`values` not empty).
+pub fn quantile(values: &[f64], q: f64) -> f64 {
+    let mut v = values.to_vec();
+    v.sort_by(f64::total_cmp);
+    let x = q.clamp(0.0, 1.0) * (v.len().saturating_sub(1)) as f64;
+    let (i, f) = (x.floor() as usize, x.fract());
+    match v.get(i + 1) {
+        Some(&next) => v[i] + f * (next - v[i]),
+        None => v.get(i).copied().unwrap_or(0.0),
+    }
 }
 
 /// Runs the benchmark on `test` frames (the model's connectivity). Returns every drag and the
@@ -119,6 +157,7 @@ pub fn drag_bench(
         )));
     }
     cfg.options.validate()?;
+    let null_options = cfg.options.frozen();
     let w0 = model.start_weights(None)?;
     let p0 = model.decode(std::slice::from_ref(&w0))?.remove(0);
     let (lo, hi) = rest.bounding_box();
@@ -156,6 +195,7 @@ pub fn drag_bench(
             let r = crate::model::landed_pose(model, &spreader, &vertices, &targets, &w0, &cfg.options)?;
             let seconds = t0.elapsed().as_secs_f64();
             let p = r.positions;
+            let q = crate::model::landed_pose(model, &spreader, &vertices, &targets, &w0, &null_options)?.positions;
             let landing = vertices
                 .iter()
                 .zip(&drags)
@@ -164,25 +204,37 @@ pub fn drag_bench(
                 / pins as f64;
             let motion: Vec<f64> = p.iter().zip(&p0).map(|(a, b)| crate::mesh::dist(*a, *b)).collect();
             let max_drag = drags.iter().cloned().fold(0.0, f64::max);
+            let largest = |s: &[Vec3]| s.iter().zip(&p0).map(|(a, b)| crate::mesh::dist(*a, *b)).fold(0.0, f64::max);
             let share = |m: &dyn Fn(usize) -> f64| (0..n).filter(|&v| m(v) > 0.5 * mean_drag).count() as f64 / n as f64;
+            let against = |s: &[Vec3]| erms(std::slice::from_ref(&t), &[s.to_vec()], alignment);
+            let (posed_erms, null_erms) = (against(&p)?, against(&q)?);
             let measures = DragMeasures {
                 landing_percent: 100.0 * landing,
-                max_motion_ratio: motion.iter().cloned().fold(0.0, f64::max) / max_drag,
+                max_motion_ratio: largest(&p) / max_drag,
                 moved_share: share(&|v| motion[v]),
                 frame_moved_share: share(&|v| crate::mesh::dist(t[v], p0[v])),
-                posed_erms: erms(std::slice::from_ref(&t), std::slice::from_ref(&p), alignment)?,
-                neutral_erms: erms(std::slice::from_ref(&t), std::slice::from_ref(&p0), alignment)?,
+                posed_erms,
+                neutral_erms: against(&p0)?,
+                null_erms,
+                null_ratio: if null_erms > 0.0 { posed_erms / null_erms } else { 1.0 },
+                null_max_motion_ratio: largest(&q) / max_drag,
                 seconds,
             };
             rows.push(DragResult { pins, frame: f, vertices, measures });
         }
         let measures: Vec<DragMeasures> = rows.iter().map(|r| r.measures).collect();
-        let improved = measures.iter().filter(|m| m.posed_erms < m.neutral_erms).count();
+        let share = |beats: fn(&DragMeasures) -> bool| {
+            measures.iter().filter(|m| beats(m)).count() as f64 / measures.len() as f64
+        };
+        let ratios: Vec<f64> = measures.iter().map(|m| m.max_motion_ratio).collect();
         summaries.push(DragSummary {
             pins,
             drags: rows.len(),
             medians: DragMeasures::medians(&measures),
-            improved_share: improved as f64 / rows.len() as f64,
+            improved_share: share(|m| m.posed_erms < (1.0 - GAIN_TOLERANCE) * m.neutral_erms),
+            beats_null_share: share(|m| m.posed_erms < (1.0 - GAIN_TOLERANCE) * m.null_erms),
+            max_motion_p90: quantile(&ratios, 0.9),
+            max_motion_max: quantile(&ratios, 1.0),
         });
         all.extend(rows);
     }

@@ -7,22 +7,28 @@
 //! can be posed here; a triangle-gradient model's vertices come out of a Poisson solve and need
 //! a different (non-local) formulation.
 //!
-//! **γ is dimensionless.** The paper's γ (0.025) multiplies ‖c − c0‖² in mm² units with
-//! orthonormal PCA bases. To make one γ work for any units and any component normalisation
-//! (SPLOCS components are not unit vectors), the regulariser used is `γ·s·‖w − w0‖²` with
-//! `s = trace(data-term Hessian)/P`, the mean squared response of one weight at the constrained
-//! vertices (P weights). β (boundary consistency, region PCA) is used as given: both the data
-//! and the boundary term are squared vertex differences in the same units.
+//! **γ is dimensionless, and the pull's strength does not depend on the pins.** The paper's γ
+//! (0.025) multiplies ‖c − c0‖² in mm² units with orthonormal PCA bases. To make one γ work for
+//! any units and any component normalisation (SPLOCS components are not unit vectors), every
+//! pull of posing is measured in the whole shape's mean squared vertex motion ([`Pull`]):
+//! `γ·(w − w0)ᵀ M (w − w0)` with M the shape metric `G = BᵀB / N` (B the model's linear map from
+//! weights to the N×3 vertex positions), `m·I` (m = trace(G)/K, the weights prior) or the data
+//! metric ([`data_metric`]), so a drag costs the same wherever its pin is. (The papers' scaling
+//! by the components' mean squared response *at the pins*, [`Pull::AtPins`], made the pull 10×
+//! and more weaker at a pin the components barely move: one drag of non-negative SCAPE SPLOCS at
+//! the back swung an arm 5.8× the drag.) The pull is a prior of fixed strength: more pins ask
+//! more of the model. β (boundary consistency, region PCA) is used as given: both the data and
+//! the boundary term are squared vertex differences in the same units.
 //!
 //! **What the pull measures (`PosePrior`).** The paper's pull is on the weights, ‖w − w0‖². It
 //! lets the solver buy a pin's motion with whichever weights are cheapest *at the pin*: a
-//! component small at the pin and large elsewhere gets a large weight, and the body folds over
-//! (SCAPE SPLOCS, one pin on the back: the largest motion 5.3× the drag, 55 % of the vertices
-//! moved more than half of it). [`PosePrior::Shape`] (the default) measures the change of the
-//! whole shape instead: `(w − w0)ᵀ G (w − w0)` with `G = BᵀB / N` (B the model's linear map from
-//! weights to the N×3 vertex positions, so `(w − w0)ᵀG(w − w0)` is the mean squared motion of a
-//! vertex), scaled by `K / trace(G)` so that for `G ∝ I` it is the paper's term exactly and γ
-//! keeps its meaning. The solver then moves the pins with the least motion of everything else.
+//! component small at the pin and large elsewhere gets a large weight. [`PosePrior::Shape`]
+//! measures the change of the whole shape instead (the mean squared motion of a vertex), so the
+//! solver moves the pins with the least motion of everything else. [`PosePrior::Data`] (PCA
+//! and SPLOCS's default) measures the weights by the training weights' spread: a Gaussian prior
+//! whose cheap directions are those the training poses take together, so that a few pins pose
+//! the whole shape as the training poses do (the drag benchmark's gain over the correction
+//! alone: docs/posing-drag-bench.md).
 //!
 //! Factor once / solve many: a poser is built once per model and constraint-vertex set
 //! (assembling and factorising a P × P system) and then [`LinearPoser::solve`] /
@@ -64,14 +70,18 @@ pub enum PosePrior {
     Shape,
     /// The change of the weights, ‖w − w0‖² (paper 002 Eq. 8/10).
     Weights,
+    /// The change of the weights measured by the training weights' spread (a Gaussian prior:
+    /// [`data_metric`]); models that keep their training weights (PCA, SPLOCS).
+    Data,
 }
 
 impl PosePrior {
-    /// Parses `shape` | `weights`.
+    /// Parses `shape` | `weights` | `data`.
     pub fn parse(s: &str) -> Option<Self> {
         match s {
             "shape" => Some(PosePrior::Shape),
             "weights" => Some(PosePrior::Weights),
+            "data" => Some(PosePrior::Data),
             _ => None,
         }
     }
@@ -80,6 +90,7 @@ impl PosePrior {
         match self {
             PosePrior::Shape => "shape",
             PosePrior::Weights => "weights",
+            PosePrior::Data => "data",
         }
     }
 }
@@ -100,15 +111,37 @@ pub fn shape_metric(columns: &[Vec<f64>]) -> Mat<f64> {
     g
 }
 
-/// The pull `γ·s·P` (K × K) for the data term `data`: P = I for the weights prior, `K·G /
-/// trace(G)` for the shape metric `G` (module docs), s the mean diagonal of `data`. The system
-/// adds it to its Hessian ([`add_into`]) and its right-hand side takes `γ·s·P·w0`.
-fn pull_matrix(data: &Mat<f64>, gamma: f64, metric: Option<&Mat<f64>>) -> Result<Mat<f64>> {
+/// What the pull towards the start measures and how strong it is (module docs). K weights, G
+/// the shape metric ([`shape_metric`]), m = trace(G)/K the mean squared motion of a vertex per
+/// unit of one weight over the whole shape.
+#[derive(Debug, Clone, Copy)]
+pub enum Pull<'m> {
+    /// `γ·(w − w0)ᵀM(w − w0)` for a metric M in the shape's units: the shape metric G (the whole
+    /// shape's mean squared motion) or the data metric ([`data_metric`]). Its strength does not
+    /// depend on where the pins are.
+    Shape(&'m Mat<f64>),
+    /// `γ·m·‖w − w0‖²`: the papers' pull on the weights, as strong as the shape metric's on
+    /// average and likewise independent of where the pins are.
+    Weights,
+    /// `γ·s·‖w − w0‖²` with s the mean squared response of one weight *at the pins*: the papers'
+    /// pull scaled by what the components do at the constrained vertices, so that its strength
+    /// follows the pins (10× and more from vertex to vertex on a localized model). Kept for the
+    /// control-point fit of `meshdeco eval`, whose control points cover the shape.
+    AtPins,
+}
+
+/// The pull matrix (K × K) of `pull` for the data term `data` (its Hessian at the constrained
+/// vertices; read by [`Pull::AtPins`] only), `mean_response` m (used by [`Pull::Weights`] and,
+/// for a component the metric has no hold on, by [`Pull::Shape`]). The system adds it to its
+/// Hessian ([`add_into`]) and its right-hand side takes `pull·w0`.
+pub fn pull_matrix(data: &Mat<f64>, gamma: f64, pull: Pull<'_>, mean_response: f64) -> Result<Mat<f64>> {
     let k = data.nrows();
-    let s = (0..k).map(|i| data[(i, i)]).sum::<f64>() / k.max(1) as f64;
-    let pull = match metric {
-        None => Mat::<f64>::from_fn(k, k, |i, j| if i == j { gamma * s } else { 0.0 }),
-        Some(g) => {
+    let diagonal = |x: f64| Mat::<f64>::from_fn(k, k, |i, j| if i == j { x } else { 0.0 });
+    let strength = gamma;
+    Ok(match pull {
+        Pull::AtPins => diagonal(gamma * (0..k).map(|i| data[(i, i)]).sum::<f64>() / k.max(1) as f64),
+        Pull::Weights => diagonal(strength * mean_response),
+        Pull::Shape(g) => {
             if g.nrows() != k || g.ncols() != k {
                 return Err(Error::Invalid(format!(
                     "posing: a {}×{} shape metric for {k} weights",
@@ -116,17 +149,59 @@ fn pull_matrix(data: &Mat<f64>, gamma: f64, metric: Option<&Mat<f64>>) -> Result
                     g.ncols()
                 )));
             }
-            let tr = (0..k).map(|i| g[(i, i)]).sum::<f64>();
             // A component that moves nothing keeps the weights pull (the metric has no hold on it).
-            let floor = 1e-9 * tr / k.max(1) as f64;
-            let scale = if tr > 0.0 { gamma * s * k as f64 / tr } else { 0.0 };
+            let floor = 1e-9 * mean_response;
             Mat::<f64>::from_fn(k, k, |i, j| {
-                let x = scale * g[(i, j)];
-                if i == j && g[(i, i)] <= floor { x + gamma * s } else { x }
+                let x = strength * g[(i, j)];
+                if i == j && g[(i, i)] <= floor { x + strength * mean_response } else { x }
             })
         }
-    };
-    Ok(pull)
+    })
+}
+
+/// The data metric of [`PosePrior::Data`] (K × K, used as [`Pull::Shape`]): `m · (tr Σ / K) · (Σ + η (tr Σ / K) I)⁻¹`
+/// with Σ the covariance of the training weights (`weights`: F × K, row-major), m the mean
+/// response ([`linear_mean_response`]) and η = [`DATA_PRIOR_RIDGE`]. A weight change along a
+/// direction the training poses vary in is cheap, one they never take is dear: the Gaussian
+/// prior of the training weights (PCA posing's own), scaled so that for Σ ∝ I it is
+/// [`Pull::Weights`] (up to 1/(1 + η)). Errors when there are no training weights.
+pub fn data_metric(weights: &[f64], k: usize, m: f64) -> Result<Mat<f64>> {
+    let f = weights.len() / k.max(1);
+    if k == 0 || f < 2 || weights.len() != f * k {
+        return Err(Error::Invalid(format!(
+            "`prior` data: the model keeps {} training weights for {k} components; the data prior needs the weights of at least two training frames",
+            weights.len()
+        )));
+    }
+    let mean: Vec<f64> = (0..k).map(|j| (0..f).map(|i| weights[i * k + j]).sum::<f64>() / f as f64).collect();
+    let mut s = Mat::<f64>::from_fn(k, k, |a, b| {
+        (0..f).map(|i| (weights[i * k + a] - mean[a]) * (weights[i * k + b] - mean[b])).sum::<f64>() / f as f64
+    });
+    let tr = (0..k).map(|i| s[(i, i)]).sum::<f64>() / k as f64;
+    if !(tr.is_finite() && tr > 0.0) {
+        return Err(Error::Invalid(
+            "`prior` data: the training weights do not vary; use --prior shape or weights".into(),
+        ));
+    }
+    for i in 0..k {
+        s[(i, i)] += DATA_PRIOR_RIDGE * tr;
+    }
+    let llt = factor_spd(s, "posing (data prior)")?;
+    let mut inv = Mat::<f64>::identity(k, k);
+    llt.solve_in_place(inv.as_mut());
+    Ok(Mat::<f64>::from_fn(k, k, |a, b| m * tr * inv[(a, b)]))
+}
+
+/// η of [`data_metric`]: the ridge added to the training weights' covariance, as a share of its
+/// mean variance, so that a direction no training pose takes is dear but not forbidden. 0.1 (of
+/// 0.01 / 0.1 / 1, on validation drags: docs/posing-drag-bench.md): posed ÷ null within 0.02 of
+/// the best at three and ten pins on SCAPE PCA, SPLOCS signed and non-negative and the face's
+/// SPLOCS.
+pub const DATA_PRIOR_RIDGE: f64 = 0.1;
+
+/// m = trace(G)/K of a shape metric.
+fn metric_mean(g: &Mat<f64>) -> f64 {
+    (0..g.nrows()).map(|i| g[(i, i)]).sum::<f64>() / g.nrows().max(1) as f64
 }
 
 /// `h += m` (same shape).
@@ -203,21 +278,35 @@ pub fn linear_shape_metric(model: &LinearModel) -> Mat<f64> {
     shape_metric(&cols)
 }
 
+/// m = trace(G)/K of a per-vertex [`LinearModel`] (without building G): the mean over its
+/// components and vertices of a component's squared vertex motion.
+pub fn linear_mean_response(model: &LinearModel) -> f64 {
+    let k = model.n_components.max(1);
+    let n = model.n_elements.max(1);
+    model.components.iter().map(|x| x * x).sum::<f64>() / (n * k) as f64
+}
+
 impl<'a> LinearPoser<'a> {
-    /// Assembles and factorises `C_S C_Sᵀ + γ s I` for the constrained `vertices` (the paper's
-    /// weights prior).
+    /// Assembles and factorises `C_S C_Sᵀ + γ s I` for the constrained `vertices` (the papers'
+    /// weights prior scaled at the pins, [`Pull::AtPins`]: the control-point fit's).
     pub fn new(model: &'a LinearModel, vertices: &[usize], config: &PoseConfig) -> Result<Self> {
-        Self::with_metric(model, vertices, config, None)
+        Self::with_pull(model, vertices, config, Pull::AtPins)
     }
 
-    /// As [`LinearPoser::new`], with the pull measured by the shape `metric` when given
-    /// ([`linear_shape_metric`]; K × K).
+    /// As [`LinearPoser::new`], with the pull of posing: measured by the shape `metric` when
+    /// given ([`linear_shape_metric`]; K × K; [`Pull::Shape`]), else on the weights
+    /// ([`Pull::Weights`]); either as strong wherever the pins are.
     pub fn with_metric(
         model: &'a LinearModel,
         vertices: &[usize],
         config: &PoseConfig,
         metric: Option<&Mat<f64>>,
     ) -> Result<Self> {
+        Self::with_pull(model, vertices, config, metric.map_or(Pull::Weights, Pull::Shape))
+    }
+
+    /// Assembles and factorises the system of `pull` for the constrained `vertices`.
+    pub fn with_pull(model: &'a LinearModel, vertices: &[usize], config: &PoseConfig, pull: Pull<'_>) -> Result<Self> {
         config.validate()?;
         model.validate()?;
         if model.width != 3 {
@@ -238,7 +327,12 @@ impl<'a> LinearPoser<'a> {
                 }
             }
         }
-        let pull = pull_matrix(&h, config.gamma, metric)?;
+        let mean = match pull {
+            Pull::Shape(g) => metric_mean(g),
+            Pull::Weights => linear_mean_response(model),
+            Pull::AtPins => 0.0,
+        };
+        let pull = pull_matrix(&h, config.gamma, pull, mean)?;
         add_into(&mut h, &pull);
         let llt = factor_spd(h.clone(), "posing")?;
         Ok(LinearPoser { model, vertices: vertices.to_vec(), hessian: h, llt, pull })
@@ -312,20 +406,47 @@ pub fn region_shape_metric(model: &RegionPcaModel) -> Result<Mat<f64>> {
     Ok(shape_metric(&cols))
 }
 
+/// m = trace(G)/P of a [`RegionPcaModel`] (without building G, [`region_shape_metric`]): a
+/// coefficient moves the vertices of its region by its basis vector, each divided by the number
+/// of regions sharing the vertex (the boundary averaging of [`RegionPcaModel::reconstruct`]).
+pub fn region_mean_response(model: &RegionPcaModel) -> f64 {
+    let shared: Vec<f64> = model.memberships().iter().map(|m| m.len().max(1) as f64).collect();
+    let mut total = 0.0;
+    for r in &model.regions {
+        for k in 0..r.n_components {
+            for (l, &v) in r.vertices.iter().enumerate() {
+                total += (0..3).map(|c| r.at(k, l, c).powi(2)).sum::<f64>() / (shared[v] * shared[v]);
+            }
+        }
+    }
+    total / (model.n_vertices.max(1) * model.n_components().max(1)) as f64
+}
+
 impl<'a> RegionPoser<'a> {
-    /// Assembles and factorises the Eq. 10 system for the constrained `vertices` (the paper's
-    /// weights prior).
+    /// Assembles and factorises the Eq. 10 system for the constrained `vertices` (the papers'
+    /// weights prior scaled at the pins, [`Pull::AtPins`]: the control-point fit's).
     pub fn new(model: &'a RegionPcaModel, vertices: &[usize], config: &PoseConfig) -> Result<Self> {
-        Self::with_metric(model, vertices, config, None)
+        Self::with_pull(model, vertices, config, Pull::AtPins)
     }
 
-    /// As [`RegionPoser::new`], with the pull measured by the shape `metric` when given
-    /// ([`region_shape_metric`]; P × P).
+    /// As [`RegionPoser::new`], with the pull of posing: measured by the shape `metric` when
+    /// given ([`region_shape_metric`]; P × P; [`Pull::Shape`]), else on the coefficients
+    /// ([`Pull::Weights`]); either as strong wherever the pins are.
     pub fn with_metric(
         model: &'a RegionPcaModel,
         vertices: &[usize],
         config: &PoseConfig,
         metric: Option<&Mat<f64>>,
+    ) -> Result<Self> {
+        Self::with_pull(model, vertices, config, metric.map_or(Pull::Weights, Pull::Shape))
+    }
+
+    /// Assembles and factorises the Eq. 10 system of `pull` for the constrained `vertices`.
+    pub fn with_pull(
+        model: &'a RegionPcaModel,
+        vertices: &[usize],
+        config: &PoseConfig,
+        pull: Pull<'_>,
     ) -> Result<Self> {
         config.validate()?;
         check_vertices(vertices, model.n_vertices)?;
@@ -339,8 +460,13 @@ impl<'a> RegionPoser<'a> {
                 model.add_data_vertex(i, l, off[i], &mut h);
             }
         }
+        let mean = match pull {
+            Pull::Shape(g) => metric_mean(g),
+            Pull::Weights => region_mean_response(model),
+            Pull::AtPins => 0.0,
+        };
         // The pull is scaled by the data term alone (before the boundary term).
-        let pull = pull_matrix(&h, config.gamma, metric)?;
+        let pull = pull_matrix(&h, config.gamma, pull, mean)?;
         let pairs = model.shared_pairs();
         let mut dummy = vec![0.0; p];
         model.add_boundary(&pairs, config.beta, &mut h, &mut dummy);
@@ -451,7 +577,10 @@ mod tests {
                 }
             }
         }
-        let pull = pull_matrix(&h, gamma, g).unwrap();
+        let pull = match g {
+            Some(g) => pull_matrix(&h, gamma, Pull::Shape(g), metric_mean(g)).unwrap(),
+            None => pull_matrix(&h, gamma, Pull::Weights, linear_mean_response(m)).unwrap(),
+        };
         let mut data = 0.0;
         for (&vv, tt) in v.iter().zip(t) {
             for (c, &tc) in tt.iter().enumerate() {
@@ -500,9 +629,10 @@ mod tests {
     fn isotropic_metric_is_the_weights_prior_and_bounds_hold() {
         let m = toy(WeightConstraint::Signed);
         let cfg = PoseConfig { gamma: 0.025, beta: 0.0 };
-        let iso = Mat::<f64>::from_fn(3, 3, |i, j| if i == j { 7.0 } else { 0.0 });
+        let mean = linear_mean_response(&m);
+        let iso = Mat::<f64>::from_fn(3, 3, |i, j| if i == j { mean } else { 0.0 });
         let (v, t, w0) = ([0usize, 2], [[0.8, 0.1, 0.0], [0.0, 0.3, 0.0]], [0.3, 0.0, -0.1]);
-        let a = LinearPoser::new(&m, &v, &cfg).unwrap().solve(&t, &w0).unwrap();
+        let a = LinearPoser::with_metric(&m, &v, &cfg, None).unwrap().solve(&t, &w0).unwrap();
         let b = LinearPoser::with_metric(&m, &v, &cfg, Some(&iso)).unwrap().solve(&t, &w0).unwrap();
         for (x, y) in a.iter().zip(&b) {
             assert!((x - y).abs() < 1e-12, "{a:?} vs {b:?}");
@@ -672,5 +802,78 @@ mod tests {
         let p = LinearPoser::new(&pca, &[0], &PoseConfig::default()).unwrap();
         assert!(p.solve(&[[f64::NAN, 0.0, 0.0]], &[0.0; 3]).is_err());
         assert!(p.solve(&[[0.0; 3]], &[0.0; 2]).is_err());
+    }
+
+    /// One component, 0.1 at vertex 0 (x), 1 at vertex 1 and 0.5 at vertices 2..5: vertex 0 is
+    /// a pin where the component is weak, vertex 1 one where it is strong.
+    fn weak_and_strong() -> LinearModel {
+        let n = 6;
+        let mut comps = vec![0.0; 3 * n];
+        comps[0] = 0.1;
+        comps[3] = 1.0;
+        for v in 2..n {
+            comps[3 * v] = 0.5;
+        }
+        LinearModel {
+            n_elements: n,
+            width: 3,
+            n_components: 1,
+            n_frames: 2,
+            components: comps,
+            weights: vec![-1.0, 1.0],
+            offset: vec![0.0; 3 * n],
+            constraint: WeightConstraint::Signed,
+        }
+    }
+
+    /// The pull of posing is as strong wherever the pin is: its matrix is the same for a pin
+    /// where the component is weak and where it is strong (the papers' pull scaled at the pins
+    /// differs 100×), and the same drag at either pin moves no vertex more than 1.5 × the drag
+    /// (γ 1), where the pull scaled at the pins buys the weak pin's drag with a weight ten times
+    /// as large and swings the rest of the shape four and more times the drag.
+    #[test]
+    fn posing_pull_does_not_depend_on_the_pin() {
+        let m = weak_and_strong();
+        let g = linear_shape_metric(&m);
+        let data = |v: usize| Mat::<f64>::from_fn(1, 1, |_, _| m.components[3 * v].powi(2));
+        let mean = linear_mean_response(&m);
+        for pull in [Pull::Weights, Pull::Shape(&g)] {
+            let a = pull_matrix(&data(0), 0.1, pull, mean).unwrap();
+            let b = pull_matrix(&data(1), 0.1, pull, mean).unwrap();
+            assert!((a[(0, 0)] - b[(0, 0)]).abs() <= 1e-12 * b[(0, 0)].abs(), "{pull:?}: {a:?} vs {b:?}");
+            assert!(a[(0, 0)] > 0.0);
+        }
+        let a = pull_matrix(&data(0), 0.1, Pull::AtPins, 0.0).unwrap();
+        let b = pull_matrix(&data(1), 0.1, Pull::AtPins, 0.0).unwrap();
+        assert!((b[(0, 0)] / a[(0, 0)] - 100.0).abs() < 1e-6, "{a:?} vs {b:?}");
+        let cfg = PoseConfig { gamma: 1.0, beta: 0.0 };
+        let drag = 0.1;
+        // Largest motion of any vertex ÷ the drag, for the drag along x at pin v.
+        let motion = |v: usize, pull: Pull<'_>| {
+            let w = LinearPoser::with_pull(&m, &[v], &cfg, pull).unwrap().solve(&[[drag, 0.0, 0.0]], &[0.0]).unwrap();
+            (0..6).map(|u| (w[0] * m.components[3 * u]).abs()).fold(0.0, f64::max) / drag
+        };
+        for pull in [Pull::Weights, Pull::Shape(&g)] {
+            let (weak, strong) = (motion(0, pull), motion(1, pull));
+            assert!(weak <= 1.5 && strong <= 1.5, "{pull:?}: weak pin {weak} × the drag, strong pin {strong} ×");
+            assert!(weak > 0.0 && strong > 0.0);
+        }
+        let (weak, strong) = (motion(0, Pull::AtPins), motion(1, Pull::AtPins));
+        assert!(weak >= 4.0 * strong && weak >= 4.0, "pull at the pins: weak pin {weak}, strong pin {strong}");
+    }
+
+    /// The data prior charges a weight change along a direction the training weights never take
+    /// more than one along which they vary, and refuses a model without training weights.
+    #[test]
+    fn data_prior_follows_the_training_weights() {
+        // Two components; the training weights vary along the first only.
+        let w = [1.0, 0.0, -1.0, 0.0, 0.5, 0.0, -0.5, 0.0];
+        let g = data_metric(&w, 2, 1.0).unwrap();
+        assert!(g[(1, 1)] > 5.0 * g[(0, 0)], "{g:?}");
+        assert!(g[(0, 1)].abs() < 1e-12);
+        let err = data_metric(&[1.0, 2.0], 2, 1.0).unwrap_err().to_string();
+        assert!(err.contains("`prior` data"), "{err}");
+        let err = data_metric(&[0.0; 8], 2, 1.0).unwrap_err().to_string();
+        assert!(err.contains("do not vary"), "{err}");
     }
 }

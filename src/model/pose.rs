@@ -16,16 +16,18 @@ pub use crate::methods::posing::PosePrior;
 /// [`super::Model::pose_parameters`] and ignores the others.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PoseOptions {
-    /// γ ≥ 0, dimensionless: pull towards the start (paper 002 Eq. 8/10's regulariser, scaled
-    /// by the mean squared response of one weight at the constrained vertices and measured as
-    /// [`PoseOptions::prior`] says; the autoencoder's pull towards its start code likewise).
+    /// γ ≥ 0, dimensionless: pull towards the start (paper 002 Eq. 8/10's regulariser, in the
+    /// whole shape's mean squared vertex motion and measured as [`PoseOptions::prior`] says, as
+    /// strong wherever the pins are: [`crate::methods::posing::Pull`]; the autoencoder's pull
+    /// towards its start code likewise).
     pub gamma: f64,
     /// β ≥ 0: boundary consistency between regions (region PCA; squared vertex differences).
     pub beta: f64,
     /// Gauss–Newton iterations at most (the autoencoder), 1 ..= [`PoseOptions::MAX_ITERATIONS`].
     pub max_iterations: usize,
-    /// What the pull towards the start measures: the whole shape's change (default) or the
-    /// weights' (the paper's Eq. 8/10); see [`crate::methods::posing`].
+    /// What the pull towards the start measures: the whole shape's change, the weights' (the
+    /// paper's Eq. 8/10) or the weights' by the training weights' spread (PCA and SPLOCS); see
+    /// [`crate::methods::posing`].
     pub prior: PosePrior,
     /// Wall time an iterative solver (the autoencoder's) may take before it answers with the
     /// best shape so far (`None`: no limit; the viewer sets one).
@@ -36,25 +38,20 @@ pub struct PoseOptions {
     /// surface from every pin ([`crate::geometry::pin_spread`]), so that every pin lands; see
     /// [`landed_pose`].
     pub spread: f64,
+    /// The weights stay at the start (`false` by default): the shape is the start shape plus the
+    /// landing correction alone, the model's components do nothing. The drag benchmark's null
+    /// (what the correction gives without the model); with `spread` 0 nothing moves.
+    pub freeze: bool,
+    /// The most any vertex of the model's shape may move, as a multiple of the largest drag
+    /// (0: no bound): a pose that moves farther is taken back towards the start until it does
+    /// not, and the landing correction lands the pins ([`landed_pose`]). A drag of a few
+    /// centimetres never swings a limb a metre away, whatever the components.
+    pub reach: f64,
 }
 
 impl Default for PoseOptions {
-    /// The shape prior, γ = 1, β = 10⁻³, 30 iterations, no time limit, landing radius 0.2.
-    ///
-    /// Chosen with `meshdeco drag-bench` on *validation* drags (`DRAG_BENCH_FRAMES=validation
-    /// scripts/drag-bench`): the pose configs trained on part of the training frames (SCAPE
-    /// 1–30: `configs/scape-pca.toml` at K 29, `configs/scape.toml`,
-    /// `configs/scape-splocs-signed.toml`; face-poses 1–5: `configs/face-poses-region.toml` at
-    /// K 60, `configs/face-poses-splocs.toml`), pins moved towards the held-out training frames
-    /// (SCAPE 31–36, face-poses 6–7; never the test frames), 50 drags per pin count
-    /// (docs/posing-drag-bench.md). With the landing correction every pin lands whatever γ, so
-    /// γ no longer has to be small: γ = 1 is the smallest of 0.001 … 10 whose drags meet every
-    /// target on all five models (one pin: largest motion ≤ 1.5 × the drag; three and ten
-    /// pins: posed Erms below the neutral shape's; at 0.3 the face's SPLOCS moves 1.55 × its
-    /// one-pin drag and its three-pin Erms rises above the neutral's); radius 0.2 (of 0.05 /
-    /// 0.1 / 0.2) gives the lowest posed Erms at three and ten pins on every model; β = 10⁻³
-    /// (of 10⁻⁶ … 1) moves the least for one pin on the face's region PCA (1.17 × the drag;
-    /// 10⁻⁶: 1.39 ×, 1: 1.48 ×).
+    /// The shape prior, γ = 1, β = 10⁻³, 30 iterations, no time limit, landing radius 0.2,
+    /// reach 1.3; each model kind's defaults are [`PoseOptions::for_kind`].
     fn default() -> Self {
         PoseOptions {
             gamma: 1.0,
@@ -63,11 +60,40 @@ impl Default for PoseOptions {
             prior: PosePrior::Shape,
             time_limit: None,
             spread: 0.2,
+            freeze: false,
+            reach: 1.3,
         }
     }
 }
 
 impl PoseOptions {
+    /// The defaults of a model `kind` ([`super::Model::pose_defaults`]): every pull as strong
+    /// wherever the pins are, the landing correction at radius 0.2 and reach 1.3, and
+    ///
+    /// - PCA and SPLOCS: the data prior ([`PosePrior::Data`]), γ = 5;
+    /// - region PCA: the weights prior, γ = 0.03, β = 10⁻³;
+    /// - the autoencoder: the weights (code) prior, γ = 1.
+    ///
+    /// Chosen with `meshdeco drag-bench` on *validation* drags (`DRAG_BENCH_FRAMES=validation
+    /// scripts/drag-bench`): the pose configs (and the non-negative `configs/scape-splocs.toml`)
+    /// trained on part of the training frames (SCAPE 1–30, face-poses 1–5; region PCA K 60,
+    /// PCA K 29), pins moved towards the held-out training frames (SCAPE 31–36, face-poses
+    /// 6–7; never the test frames), 50 drags per pin count (docs/posing-drag-bench.md): per
+    /// kind, the setting with the lowest posed ÷ null Erms at three and ten pins whose one-pin
+    /// drags keep the 90th percentile of max motion ÷ drag within 2 (γ 0.001 … 3, shape /
+    /// weights / data prior, reach off / 1 / 1.3, radius 0.05 / 0.1 / 0.2). Reach 1.3 (of 1 and
+    /// 1.3) bounds the one-pin tail (without it, non-negative SPLOCS swings a limb 3.6 × its
+    /// drag at γ 0.3) at the least cost in Erms.
+    pub fn for_kind(kind: crate::config::MethodKind) -> PoseOptions {
+        use crate::config::MethodKind;
+        let d = PoseOptions::default();
+        match kind {
+            MethodKind::Pca | MethodKind::Splocs => PoseOptions { prior: PosePrior::Data, gamma: 5.0, ..d },
+            MethodKind::RegionPca => PoseOptions { prior: PosePrior::Weights, gamma: 0.03, ..d },
+            MethodKind::Autoencoder => PoseOptions { prior: PosePrior::Weights, ..d },
+        }
+    }
+
     /// The largest `max_iterations` accepted.
     pub const MAX_ITERATIONS: usize = 1000;
     /// The largest `spread` accepted (the whole diagonal).
@@ -88,6 +114,12 @@ impl PoseOptions {
                 Self::MAX_SPREAD
             )));
         }
+        if !(self.reach.is_finite() && (self.reach == 0.0 || self.reach >= 1.0)) {
+            return Err(Error::Invalid(format!(
+                "`reach` {}: must be 0 (no bound) or a number ≥ 1 (a multiple of the largest drag)",
+                self.reach
+            )));
+        }
         if !(1..=Self::MAX_ITERATIONS).contains(&self.max_iterations) {
             return Err(Error::Invalid(format!(
                 "`max_iterations` {}: must be an integer from 1 to {}",
@@ -98,7 +130,8 @@ impl PoseOptions {
         Ok(())
     }
 
-    /// The options as JSON (`{"gamma", "beta", "max_iterations", "prior", "spread"}`), as the viewer offers them.
+    /// The options as JSON (`{"gamma", "beta", "max_iterations", "prior", "spread", "freeze",
+    /// "reach"}`), as the viewer offers them.
     pub fn to_json(&self) -> Value {
         serde_json::json!({
             "gamma": self.gamma,
@@ -106,7 +139,15 @@ impl PoseOptions {
             "max_iterations": self.max_iterations,
             "prior": self.prior.name(),
             "spread": self.spread,
+            "freeze": self.freeze,
+            "reach": self.reach,
         })
+    }
+
+    /// These options with the weights frozen at the start ([`PoseOptions::freeze`]): the drag
+    /// benchmark's null.
+    pub fn frozen(&self) -> PoseOptions {
+        PoseOptions { freeze: true, ..*self }
     }
 }
 
@@ -115,7 +156,9 @@ impl PoseOptions {
 /// surroundings by `spreader` (built once per model from its rest mesh: [`spreader`]), zero
 /// farther than `spread` × the rest's bounding-box diagonal along the surface from every pin.
 /// [`PoseResult::positions`] are then the landed shape, while [`PoseResult::weights`] stay the
-/// model's (their decoding is the model's own shape); with `spread` 0 both agree.
+/// model's (their decoding is the model's own shape); with `spread` 0 both agree. With
+/// `options.freeze` the model is not asked: the weights are `w0` and the model's shape is their
+/// decoding (the landing correction alone moves it).
 pub fn landed_pose(
     model: &dyn super::Model,
     spreader: &PinSpread,
@@ -124,7 +167,15 @@ pub fn landed_pose(
     w0: &[f64],
     options: &PoseOptions,
 ) -> Result<PoseResult> {
-    let mut r = model.pose(vertices, targets, w0, options)?;
+    let mut r = if options.freeze {
+        let start = model.decode(&[w0.to_vec()])?.remove(0);
+        PoseResult { positions: start.clone(), start, weights: w0.to_vec() }
+    } else {
+        model.pose(vertices, targets, w0, options)?
+    };
+    if options.reach > 0.0 && !options.freeze {
+        reach_back(model, vertices, targets, w0, options.reach, &mut r)?;
+    }
     if options.spread > 0.0 {
         if spreader.n_vertices() != r.positions.len() {
             return Err(Error::Invalid(format!(
@@ -140,6 +191,35 @@ pub fn landed_pose(
         }
     }
     Ok(r)
+}
+
+/// [`PoseOptions::reach`]: when the model's shape moves some vertex farther than `reach` × the
+/// largest drag (‖target − start‖ over the pins), the weights are taken back along the straight
+/// line to `w0` until it does not (exact for linear models; a few steps for the autoencoder,
+/// whose decoding is not linear in its code).
+fn reach_back(
+    model: &dyn super::Model,
+    vertices: &[usize],
+    targets: &[Vec3],
+    w0: &[f64],
+    reach: f64,
+    r: &mut PoseResult,
+) -> Result<()> {
+    let drag = vertices.iter().zip(targets).map(|(&v, t)| crate::mesh::dist(r.start[v], *t)).fold(0.0, f64::max);
+    let limit = reach * drag;
+    let mut scale = 1.0;
+    let full = r.weights.clone();
+    for _ in 0..4 {
+        let most = r.positions.iter().zip(&r.start).map(|(p, q)| crate::mesh::dist(*p, *q)).fold(0.0, f64::max);
+        if most <= limit * (1.0 + 1e-9) || most.is_nan() || most <= 0.0 {
+            break;
+        }
+        scale *= limit / most;
+        let w: Vec<f64> = w0.iter().zip(&full).map(|(a, b)| a + scale * (b - a)).collect();
+        r.positions = model.decode(std::slice::from_ref(&w))?.remove(0);
+        r.weights = w;
+    }
+    Ok(())
 }
 
 /// The pin spreader of `model`'s rest mesh (for [`landed_pose`]).

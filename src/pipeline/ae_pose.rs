@@ -2,14 +2,18 @@
 //! reconstructed mesh puts a few constrained vertices at target positions.
 //!
 //! ```text
-//! min_z  Σ_a ‖p_a(z) − t_a‖² + λ‖z − z0‖²,      λ = γ · trace(J(z0)ᵀJ(z0)) / K
+//! min_z  Σ_a ‖p_a(z) − t_a‖² + (z − z0)ᵀ Λ (z − z0),      Λ = γ · G   (or γ · (trace G / K) · I)
 //! ```
 //!
 //! where p_a(z) is constrained vertex a of `ACAP-decode(unscale(decoder(z)))` in the model's
 //! space (unit box when the model was trained with `data.unit_box`; targets are given in data
-//! units and mapped there), J the Jacobian of the stacked p_a, and γ dimensionless (like
-//! [`crate::methods::posing::PoseConfig::gamma`]: λ is relative to the mean squared response of
-//! one latent dimension at the constrained vertices).
+//! units and mapped there) and G = J_allᵀJ_all / N the shape metric of the code at the start z0
+//! (J_all the Jacobian of all N decoded vertices, by forward differences of
+//! [`AeArtifact::decode_codes`]): the pull is the whole shape's mean squared motion
+//! ([`PosePrior::Shape`], the linear models' pull, linearised at the start), or the same
+//! strength on the code itself ([`PosePrior::Weights`], the default). Either way γ is
+//! dimensionless and the pull's strength does not depend on where the pins are (like
+//! [`crate::methods::posing::Pull`]).
 //!
 //! **Gradient.** The ACAP decoder is affine in the per-vertex gradients T_i = exp(logR_i)·S_i
 //! and treats the coordinates alike: p_a = Σ_i T_i g_{a,i} + κ_a with g_{a,i} ∈ R³. The weights
@@ -24,7 +28,7 @@
 //! network's K dimensions, see [`super::autoencoder`]); placing the pieces is affine in τ, so
 //! p_a gains `Σ_r ∂x_a/∂t_r · τ_r` ([`crate::representation::piece_placement::PiecePlacement::derivative`]) and J constant columns.
 //!
-//! **Solver.** Gauss–Newton on the K unknowns (normal equations JᵀJ + λI, Cholesky) with
+//! **Solver.** Gauss–Newton on the K unknowns (normal equations JᵀJ + Λ, Cholesky) with
 //! backtracking on the true objective; stops when the objective decreases by less than
 //! `tolerance` (relative) or after `max_iterations`.
 //!
@@ -39,6 +43,8 @@ use super::autoencoder::AeArtifact;
 use crate::error::{Error, Result};
 use crate::math::mat3::Mat3;
 use crate::mesh::Vec3;
+use crate::methods::posing::{PosePrior, Pull, pull_matrix};
+use crate::model::Model;
 use crate::nn::latent_fit::DecoderVjp;
 use crate::representation::acap::{Acap, feature_transform, feature_transform_jacobian};
 
@@ -55,11 +61,14 @@ pub struct AePoseConfig {
     /// Stop after the iteration that passes this wall time (None: no limit).
     #[serde(skip)]
     pub time_limit: Option<std::time::Duration>,
+    /// What the pull measures (module docs). Default: the shape.
+    #[serde(default)]
+    pub prior: PosePrior,
 }
 
 impl Default for AePoseConfig {
     fn default() -> Self {
-        AePoseConfig { gamma: 0.025, max_iterations: 30, tolerance: 1e-6, time_limit: None }
+        AePoseConfig { gamma: 0.025, max_iterations: 30, tolerance: 1e-6, time_limit: None, prior: PosePrior::Shape }
     }
 }
 
@@ -265,6 +274,64 @@ impl<'a> AePoser<'a> {
         Ok(self.eval(z)?.into_iter().map(|p| ub.invert(p)).collect())
     }
 
+    /// The shape metric G = J_allᵀJ_all / N (model units², code length squared) at the code
+    /// `z0`: forward differences of every decoded vertex along each code dimension, the step
+    /// 10⁻³ of that dimension's range over the training codes. Cached for the last few start
+    /// codes (a drag in the viewer poses from the same start many times).
+    pub fn start_metric(&self, z0: &[f64]) -> Result<Mat<f64>> {
+        let a = self.artifact;
+        let k = z0.len();
+        let ub = a.header.unit_box;
+        let x0: Vec<Vec3> = a.decode_codes(&[z0.to_vec()])?.remove(0).into_iter().map(|p| ub.apply(p)).collect();
+        let key = {
+            use std::hash::{Hash, Hasher};
+            let mut h = std::hash::DefaultHasher::new();
+            z0.iter().for_each(|x| x.to_bits().hash(&mut h));
+            x0.iter().flatten().for_each(|x| x.to_bits().hash(&mut h));
+            h.finish()
+        };
+        let cache = METRIC_CACHE.get_or_init(Default::default);
+        if let Some((_, g)) = cache.lock().ok().and_then(|c| c.iter().find(|e| e.0 == key).cloned()) {
+            return Ok(g);
+        }
+        let train = Model::train_weights(a).unwrap_or_default();
+        let steps: Vec<f64> = (0..k)
+            .map(|i| {
+                let (lo, hi) =
+                    train.iter().filter_map(|c| c.get(i)).fold((f64::MAX, f64::MIN), |(l, h), &x| (l.min(x), h.max(x)));
+                let range = if hi > lo { hi - lo } else { 1.0 };
+                1e-3 * range
+            })
+            .collect();
+        let codes: Vec<Vec<f64>> = (0..k)
+            .map(|i| {
+                let mut z = z0.to_vec();
+                z[i] += steps[i];
+                z
+            })
+            .collect();
+        let shapes = a.decode_codes(&codes)?;
+        let cols: Vec<Vec<f64>> = shapes
+            .iter()
+            .zip(&steps)
+            .map(|(x, h)| {
+                x.iter()
+                    .zip(&x0)
+                    .flat_map(|(p, q)| {
+                        let p = ub.apply(*p);
+                        (0..3).map(move |c| (p[c] - q[c]) / h)
+                    })
+                    .collect()
+            })
+            .collect();
+        let g = crate::methods::posing::shape_metric(&cols);
+        if let Ok(mut c) = cache.lock() {
+            c.insert(0, (key, g.clone()));
+            c.truncate(4);
+        }
+        Ok(g)
+    }
+
     /// Posed code and mesh: `targets` (one per constrained vertex, data units), start code `z0`
     /// (K numbers, e.g. the current pose's). Returns (code z, all N positions in data units).
     pub fn solve(&self, targets: &[Vec3], z0: &[f64]) -> Result<(Vec<f64>, Vec<Vec3>)> {
@@ -294,7 +361,23 @@ impl<'a> AePoser<'a> {
             p.iter().zip(&t).map(|(a, b)| (0..3).map(|c| (a[c] - b[c]).powi(2)).sum::<f64>()).sum()
         };
         let mut z = z0.to_vec();
-        let mut lambda = None;
+        let g = self.start_metric(z0)?;
+        let pull = match self.config.prior {
+            PosePrior::Shape => Pull::Shape(&g),
+            PosePrior::Weights => Pull::Weights,
+            PosePrior::Data => {
+                return Err(Error::Invalid(
+                    "`prior` data: the autoencoder's posing measures the pull by the shape or the code; use shape or weights"
+                        .into(),
+                ));
+            }
+        };
+        let mean = (0..k).map(|i| g[(i, i)]).sum::<f64>() / k as f64;
+        let lam = pull_matrix(&Mat::<f64>::zeros(k, k), self.config.gamma, pull, mean)?;
+        let reg = |z: &[f64]| -> f64 {
+            let d: Vec<f64> = z.iter().zip(z0).map(|(a, b)| a - b).collect();
+            (0..k).map(|i| d[i] * (0..k).map(|j| lam[(i, j)] * d[j]).sum::<f64>()).sum()
+        };
         let mut start_cost = f64::NAN;
         let mut cost = f64::NAN;
         let mut iterations = 0;
@@ -306,26 +389,21 @@ impl<'a> AePoser<'a> {
             }
             let (p, jac) = self.positions_and_jacobian(&z)?;
             let dc = data_cost(&p);
-            let lam = *lambda.get_or_insert_with(|| {
-                let tr: f64 = jac.iter().flatten().map(|x| x * x).sum();
-                self.config.gamma * tr / k as f64
-            });
-            let reg = |z: &[f64]| lam * z.iter().zip(z0).map(|(a, b)| (a - b).powi(2)).sum::<f64>();
             if it == 0 {
                 start_cost = dc;
                 cost = dc + reg(&z);
             }
-            // Normal equations (JᵀJ + λI) δ = −(Jᵀr + λ(z − z0)).
+            // Normal equations (JᵀJ + Λ) δ = −(Jᵀr + Λ(z − z0)).
             let r: Vec<f64> = p.iter().zip(&t).flat_map(|(a, b)| (0..3).map(move |c| a[c] - b[c])).collect();
-            let mut h = Mat::<f64>::from_fn(k, k, |i, j| {
-                jac.iter().map(|row| row[i] * row[j]).sum::<f64>() + if i == j { lam } else { 0.0 }
-            });
+            let mut h =
+                Mat::<f64>::from_fn(k, k, |i, j| jac.iter().map(|row| row[i] * row[j]).sum::<f64>() + lam[(i, j)]);
             let md = (0..k).map(|i| h[(i, i)]).fold(0.0f64, f64::max);
             for i in 0..k {
                 h[(i, i)] += 1e-12 * md + 1e-300;
             }
             let mut rhs = Mat::<f64>::from_fn(k, 1, |i, _| {
-                -(jac.iter().zip(&r).map(|(row, ri)| row[i] * ri).sum::<f64>() + lam * (z[i] - z0[i]))
+                -(jac.iter().zip(&r).map(|(row, ri)| row[i] * ri).sum::<f64>()
+                    + (0..k).map(|j| lam[(i, j)] * (z[j] - z0[j])).sum::<f64>())
             });
             let llt = h.llt(faer::Side::Lower).map_err(|e| Error::Numerical(format!("autoencoder posing: {e:?}")))?;
             llt.solve_in_place(rhs.as_mut());
@@ -363,6 +441,13 @@ impl<'a> AePoser<'a> {
         Ok((z, positions, AePoseReport { iterations, start_cost, final_cost }))
     }
 }
+
+/// [`AePoser::start_metric`]'s last few metrics, keyed by a hash of the start code and its
+/// decoded shape.
+static METRIC_CACHE: std::sync::OnceLock<std::sync::Mutex<Vec<CachedMetric>>> = std::sync::OnceLock::new();
+
+/// One entry of [`METRIC_CACHE`]: (hash of the start code and shape, metric).
+type CachedMetric = (u64, Mat<f64>);
 
 /// One-shot [`AePoser`]: posed (code, data-unit positions) meeting `targets` at `vertices` from
 /// `z0`.

@@ -547,6 +547,7 @@ impl Model for AeArtifact {
                 gamma: options.gamma,
                 max_iterations: options.max_iterations,
                 time_limit: options.time_limit,
+                prior: options.prior,
                 ..Default::default()
             },
         )?

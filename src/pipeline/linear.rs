@@ -19,7 +19,7 @@ use crate::config::{ConsistencyName, MethodConfig, MethodKind, PcaMethod, Splocs
 use crate::error::{Error, Result};
 use crate::mesh::{MeshSequence, TriMesh, Vec3};
 use crate::methods::pca::{Pca, PcaConfig, RandomizedSvd};
-use crate::methods::posing::{LinearPoser, PoseConfig, linear_shape_metric};
+use crate::methods::posing::{LinearPoser, PoseConfig, data_metric, linear_mean_response, linear_shape_metric};
 use crate::methods::splocs::SplocsSolver;
 use crate::methods::support_map::{
     ComponentLocality, SupportDistances, TriangleSupport, component_locality, support_ramp,
@@ -62,6 +62,9 @@ pub struct LinearArtifact {
     /// The posing shape metric ([`crate::methods::posing::linear_shape_metric`]), computed on
     /// the first pose.
     pub shape_metric: std::sync::OnceLock<faer::Mat<f64>>,
+    /// The posing data metric ([`crate::methods::posing::data_metric`]), computed on the first
+    /// pose with [`PosePrior::Data`].
+    pub data_metric: std::sync::OnceLock<faer::Mat<f64>>,
 }
 
 fn parse_consistency(s: Option<&str>) -> Consistency {
@@ -108,7 +111,14 @@ impl LinearArtifact {
             constraint: header.constraint,
         };
         model.validate()?;
-        Ok(LinearArtifact { header, rest, model, representation, shape_metric: Default::default() })
+        Ok(LinearArtifact {
+            header,
+            rest,
+            model,
+            representation,
+            shape_metric: Default::default(),
+            data_metric: Default::default(),
+        })
     }
 
     /// Saves the model into `dir` (model.json + model.bin).
@@ -266,6 +276,7 @@ fn artifact_of(
         model,
         representation,
         shape_metric: Default::default(),
+        data_metric: Default::default(),
     }
 }
 
@@ -587,6 +598,14 @@ impl Model for LinearArtifact {
         let metric = match options.prior {
             PosePrior::Shape => Some(self.shape_metric.get_or_init(|| linear_shape_metric(&self.model))),
             PosePrior::Weights => None,
+            PosePrior::Data => {
+                if self.data_metric.get().is_none() {
+                    let m =
+                        data_metric(&self.model.weights, self.model.n_components, linear_mean_response(&self.model))?;
+                    let _ = self.data_metric.set(m);
+                }
+                self.data_metric.get()
+            }
         };
         let config = PoseConfig { gamma: options.gamma, beta: options.beta };
         let weights = LinearPoser::with_metric(&self.model, vertices, &config, metric)?.solve(&t, w0)?;

@@ -377,6 +377,11 @@ impl Model for RegionArtifact {
                 self.shape_metric.get()
             }
             PosePrior::Weights => None,
+            PosePrior::Data => {
+                return Err(Error::Invalid(
+                    "`prior` data: region PCA keeps no training coefficients to measure; use shape or weights".into(),
+                ));
+            }
         };
         let config = PoseConfig { gamma: options.gamma, beta: options.beta };
         let weights = RegionPoser::with_metric(&self.model, vertices, &config, metric)?.solve(&t, w0)?;

@@ -92,6 +92,9 @@ struct Shared {
     /// Number of the newest `/api/pose` request: an older one still waiting for the model
     /// thread is answered 409 without solving (a newer drag supersedes it).
     pose_seq: Arc<AtomicU64>,
+    /// The model kind's pose options ([`crate::model::Model::pose_defaults`]): what a request
+    /// leaves out.
+    pose_defaults: PoseOptions,
 }
 
 /// A started viewer: the model is loaded and the address bound; [`Viewer::serve`] answers.
@@ -331,7 +334,7 @@ pub(crate) fn describe_model(m: &dyn Model, name: &str, frames: Option<(&str, &[
         "view_sign": view_sign,
         "segmentation_groups": groups,
         "frames": frames,
-        "pose_defaults": PoseOptions::default().to_json(),
+        "pose_defaults": m.pose_defaults().to_json(),
         "pose_parameters": m.pose_parameters(),
     });
     Ok(Description { json, components, labels })
@@ -370,6 +373,7 @@ fn describe(s: &Session, model_path: &Path) -> Result<Shared> {
         rest,
         summary,
         pose_seq: Arc::new(AtomicU64::new(0)),
+        pose_defaults: m.pose_defaults(),
     })
 }
 
@@ -543,7 +547,8 @@ fn decode(req: &Request, shared: &Shared, jobs: &Sender<Job>) -> ApiResult<Respo
 }
 
 /// `POST /api/pose`: `{"constraints": [{"vertex": v, "target": [x, y, z]}, …], "start": [K
-/// weights] (optional), "gamma", "beta", "max_iterations", "prior", "spread" (optional)}`: the
+/// weights] (optional), "gamma", "beta", "max_iterations", "prior", "spread", "freeze", "reach" (optional;
+/// the model kind's defaults otherwise)}`: the
 /// landed shape ([`model::landed_pose`]) with the model's weights and dials.
 fn pose(req: &Request, shared: &Shared, jobs: &Sender<Job>) -> ApiResult<Response> {
     let body = parse_json(&req.body)?;
@@ -564,7 +569,7 @@ fn pose(req: &Request, shared: &Shared, jobs: &Sender<Job>) -> ApiResult<Respons
         Some(s) => Some(vector(s, "start", shared.k, false)?),
         None => None,
     };
-    let d = PoseOptions::default();
+    let d = shared.pose_defaults;
     let param = |key: &str, default: f64| -> ApiResult<f64> {
         match body.get(key) {
             None => Ok(default),
@@ -582,7 +587,11 @@ fn pose(req: &Request, shared: &Shared, jobs: &Sender<Job>) -> ApiResult<Respons
         Some(v) => v
             .as_str()
             .and_then(crate::model::PosePrior::parse)
-            .ok_or_else(|| bad(format!("`prior` {v}: must be \"shape\" or \"weights\"")))?,
+            .ok_or_else(|| bad(format!("`prior` {v}: must be \"shape\", \"weights\" or \"data\"")))?,
+    };
+    let freeze = match body.get("freeze") {
+        None => d.freeze,
+        Some(v) => v.as_bool().ok_or_else(|| bad(format!("`freeze` {v}: must be true or false")))?,
     };
     let options = PoseOptions {
         gamma: param("gamma", d.gamma)?,
@@ -591,6 +600,8 @@ fn pose(req: &Request, shared: &Shared, jobs: &Sender<Job>) -> ApiResult<Respons
         prior,
         time_limit: Some(POSE_TIME_LIMIT),
         spread: param("spread", d.spread)?,
+        freeze,
+        reach: param("reach", d.reach)?,
     };
     options.validate().map_err(|e| bad(e.to_string()))?;
     let seq = shared.pose_seq.clone();
