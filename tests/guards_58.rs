@@ -217,7 +217,8 @@ fn auto_validation_draws_its_share_of_the_training_selection() {
 }
 
 /// The pose options as the viewer offers and checks them (`PoseOptions::to_json`, `validate`):
-/// the README's defaults (shape prior, γ 1, β 1e-3, 30 iterations, radius 0.2), every option
+/// the README's defaults (shape prior, γ 1, β 1e-3, 30 iterations, radius 0.2, not frozen,
+/// reach 1.3), every option
 /// named in its JSON, and each bound refused naming the option — `spread` from 0 (off) to 1 (the
 /// whole diagonal) inclusive; the command line checks `--spread` itself, the viewer relies on
 /// `validate`.
@@ -226,8 +227,8 @@ fn pose_options_read_back_and_are_checked_at_their_bounds() {
     use meshdeco::model::{PoseOptions, PosePrior};
     let d = PoseOptions::default();
     assert_eq!(
-        (d.gamma, d.beta, d.max_iterations, d.prior, d.time_limit, d.spread),
-        (1.0, 1e-3, 30, PosePrior::Shape, None, 0.2)
+        (d.gamma, d.beta, d.max_iterations, d.prior, d.time_limit, d.spread, d.freeze, d.reach),
+        (1.0, 1e-3, 30, PosePrior::Shape, None, 0.2, false, 1.3)
     );
     let o = PoseOptions {
         gamma: 0.25,
@@ -236,10 +237,13 @@ fn pose_options_read_back_and_are_checked_at_their_bounds() {
         prior: PosePrior::Weights,
         time_limit: None,
         spread: 0.05,
+        freeze: true,
+        reach: 2.0,
     };
     assert_eq!(
         o.to_json(),
-        serde_json::json!({"gamma": 0.25, "beta": 2.5, "max_iterations": 7, "prior": "weights", "spread": 0.05})
+        serde_json::json!({"gamma": 0.25, "beta": 2.5, "max_iterations": 7, "prior": "weights", "spread": 0.05,
+            "freeze": true, "reach": 2.0})
     );
     let check = |o: PoseOptions| o.validate().map_err(|e| e.to_string());
     for ok in [
@@ -248,6 +252,8 @@ fn pose_options_read_back_and_are_checked_at_their_bounds() {
         PoseOptions { gamma: 0.0, beta: 0.0, ..d },
         PoseOptions { max_iterations: 1, ..d },
         PoseOptions { max_iterations: PoseOptions::MAX_ITERATIONS, ..d },
+        PoseOptions { reach: 0.0, ..d },
+        PoseOptions { reach: 1.0, ..d },
     ] {
         assert_eq!(check(ok), Ok(()), "{ok:?}");
     }
@@ -260,6 +266,8 @@ fn pose_options_read_back_and_are_checked_at_their_bounds() {
         (PoseOptions { beta: f64::NAN, ..d }, "`beta`"),
         (PoseOptions { max_iterations: 0, ..d }, "`max_iterations`"),
         (PoseOptions { max_iterations: PoseOptions::MAX_ITERATIONS + 1, ..d }, "`max_iterations`"),
+        (PoseOptions { reach: 0.5, ..d }, "`reach`"),
+        (PoseOptions { reach: f64::NAN, ..d }, "`reach`"),
     ] {
         let e = check(bad).expect_err(&format!("{bad:?} accepted"));
         assert!(e.contains(key), "{bad:?}: {e}");
