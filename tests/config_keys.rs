@@ -65,6 +65,7 @@ fn every_autoencoder_network_field_is_a_method_key() {
         ("encoder", "encoder = \"least-squares\"", json!("least-squares")),
         ("lambda_orthogonal", "lambda_orthogonal = 10.0", json!(10.0)),
         ("lambda_vertex", "lambda_vertex = 3.0", json!(3.0)),
+        ("lambda_code", "lambda_code = 0.5", json!(0.5)),
         ("vertex_batch", "vertex_batch = 4", json!(4)),
         ("vertex_warmup", "vertex_warmup = 0.5", json!(0.5)),
         ("vertex_clip", "vertex_clip = 2.0", json!(2.0)),
@@ -103,6 +104,7 @@ fn every_splocs_solver_field_is_a_method_key() {
         ("seed", "seed = 3", json!(3)),
         ("fixed_centers", "fixed_centers = [[1, 2]]", json!([[1, 2]])),
         ("threads", "threads = 2", json!(2)),
+        ("weight_sparsity", "weight_sparsity = 0.1", json!(0.1)),
     ];
     // The method's defaults: every core (threads = 0) where the solver's own default is 1.
     let method_default = serde_json::to_value(SplocsMethod::default().solver_config().unwrap()).unwrap();

@@ -433,8 +433,8 @@ fn view_api_decodes_an_autoencoder_like_synthesize() {
         let want = dist(*t, [r[0] + shift[0], r[1] + shift[1], r[2] + shift[2]]);
         assert!((e - want).abs() <= 1e-5 * size, "vertex {i}: error {e} against {want}");
     }
-    // The model kind's pose defaults (`PoseOptions::for_kind`), not one set for every kind.
-    let d = meshdeco::model::PoseOptions::for_kind(m.kind());
+    // The model kind's pose defaults (`Model::pose_defaults`), not one set for every kind.
+    let d = m.pose_defaults();
     assert_eq!(desc["pose_defaults"]["gamma"], json!(d.gamma));
     assert_eq!(desc["pose_defaults"]["prior"], json!(d.prior.name()));
     assert_eq!(desc["pose_defaults"]["reach"], json!(d.reach));

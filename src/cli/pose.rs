@@ -40,7 +40,7 @@ pub struct PoseArgs {
     /// measured as --prior says), as strong wherever the pins are; also the autoencoder's.
     /// Smaller asks more of the model's components; larger leaves more to the landing
     /// correction. Default: the model kind's (PCA and SPLOCS 5, region PCA 0.03, the
-    /// autoencoder 1; `model::PoseOptions::for_kind`).
+    /// autoencoder 1; `Model::pose_defaults`).
     #[arg(long)]
     pub gamma: Option<f64>,
     /// β: boundary consistency between regions (region PCA only; squared vertex differences, as

@@ -149,9 +149,11 @@ pub trait Model {
     /// `options` is checked by the caller ([`PoseOptions::validate`]); the model reads those of
     /// [`Model::pose_parameters`].
     fn pose(&self, vertices: &[usize], targets: &[Vec3], w0: &[f64], options: &PoseOptions) -> Result<PoseResult>;
-    /// The pose options a front end starts from ([`PoseOptions::for_kind`] of [`Model::kind`]).
+    /// The pose options a front end starts from: the model kind's, chosen on validation drags
+    /// ([`PoseOptions::linear_defaults`] and its siblings); [`PoseOptions::default`] unless the
+    /// kind names its own.
     fn pose_defaults(&self) -> PoseOptions {
-        PoseOptions::for_kind(self.kind())
+        PoseOptions::default()
     }
     /// The [`PoseOptions`] this model's [`Model::pose`] reads (`gamma`, `beta`,
     /// `max_iterations`): what a front end offers to set.

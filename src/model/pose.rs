@@ -51,7 +51,7 @@ pub struct PoseOptions {
 
 impl Default for PoseOptions {
     /// The shape prior, γ = 1, β = 10⁻³, 30 iterations, no time limit, landing radius 0.2,
-    /// reach 1.3; each model kind's defaults are [`PoseOptions::for_kind`].
+    /// reach 1.3; each model kind's defaults are its [`super::Model::pose_defaults`].
     fn default() -> Self {
         PoseOptions {
             gamma: 1.0,
@@ -67,7 +67,8 @@ impl Default for PoseOptions {
 }
 
 impl PoseOptions {
-    /// The defaults of a model `kind` ([`super::Model::pose_defaults`]): every pull as strong
+    /// The defaults of PCA and SPLOCS ([`super::Model::pose_defaults`]; each model kind's file
+    /// names its own): every pull as strong
     /// wherever the pins are, the landing correction at radius 0.2 and reach 1.3, and
     ///
     /// - PCA and SPLOCS: the data prior ([`PosePrior::Data`]), γ = 5;
@@ -84,14 +85,18 @@ impl PoseOptions {
     /// weights / data prior, reach off / 1 / 1.3, radius 0.05 / 0.1 / 0.2). Reach 1.3 (of 1 and
     /// 1.3) bounds the one-pin tail (without it, non-negative SPLOCS swings a limb 3.6 × its
     /// drag at γ 0.3) at the least cost in Erms.
-    pub fn for_kind(kind: crate::config::MethodKind) -> PoseOptions {
-        use crate::config::MethodKind;
-        let d = PoseOptions::default();
-        match kind {
-            MethodKind::Pca | MethodKind::Splocs => PoseOptions { prior: PosePrior::Data, gamma: 5.0, ..d },
-            MethodKind::RegionPca => PoseOptions { prior: PosePrior::Weights, gamma: 0.03, ..d },
-            MethodKind::Autoencoder => PoseOptions { prior: PosePrior::Weights, ..d },
-        }
+    pub fn linear_defaults() -> PoseOptions {
+        PoseOptions { prior: PosePrior::Data, gamma: 5.0, ..PoseOptions::default() }
+    }
+
+    /// Region PCA's defaults (see [`PoseOptions::linear_defaults`]): the weights prior, γ = 0.03.
+    pub fn region_defaults() -> PoseOptions {
+        PoseOptions { prior: PosePrior::Weights, gamma: 0.03, ..PoseOptions::default() }
+    }
+
+    /// The autoencoder's defaults (see [`PoseOptions::linear_defaults`]): the code prior, γ = 1.
+    pub fn autoencoder_defaults() -> PoseOptions {
+        PoseOptions { prior: PosePrior::Weights, ..PoseOptions::default() }
     }
 
     /// The largest `max_iterations` accepted.

@@ -538,6 +538,9 @@ impl Model for AeArtifact {
     fn pose_parameters(&self) -> &'static [&'static str] {
         &["gamma", "max_iterations"]
     }
+    fn pose_defaults(&self) -> PoseOptions {
+        PoseOptions::autoencoder_defaults()
+    }
     fn pose(&self, vertices: &[usize], targets: &[Vec3], w0: &[f64], options: &PoseOptions) -> Result<PoseResult> {
         let start = self.decode_codes(&[w0.to_vec()])?.remove(0);
         let (weights, positions) = AePoser::new(

@@ -584,6 +584,9 @@ impl Model for LinearArtifact {
     fn start_description(&self) -> &'static str {
         "all weights 0 (the model's offset: the training mean for PCA, the rest shape for SPLOCS)"
     }
+    fn pose_defaults(&self) -> PoseOptions {
+        PoseOptions::linear_defaults()
+    }
     fn pose(&self, vertices: &[usize], targets: &[Vec3], w0: &[f64], options: &PoseOptions) -> Result<PoseResult> {
         if !self.per_vertex() {
             return Err(Error::Invalid(format!(

@@ -366,6 +366,9 @@ impl Model for RegionArtifact {
     fn pose_parameters(&self) -> &'static [&'static str] {
         &["gamma", "beta"]
     }
+    fn pose_defaults(&self) -> PoseOptions {
+        PoseOptions::region_defaults()
+    }
     fn pose(&self, vertices: &[usize], targets: &[Vec3], w0: &[f64], options: &PoseOptions) -> Result<PoseResult> {
         let start = self.decode(&[w0.to_vec()])?.remove(0);
         let t = model_targets(vertices, targets, self.header.unit_box, Some(&self.rest.positions));
