@@ -1291,12 +1291,12 @@ fn http_idle_connections_cannot_lock_out_the_page() {
     // Every slot is held: 7 new keep-alive requests (their connections stay open) are answered
     // at once, each closing the connection that has waited longest without a whole request.
     let mut pages = Vec::new();
-    for i in 0..7 {
+    for (i, waiting) in silent.iter_mut().enumerate().take(7) {
         let t0 = Instant::now();
         let mut page = TcpStream::connect(&addr).unwrap();
         assert_eq!(status_of(&ask(&mut page, "/page")), 200, "request {i}");
         assert!(t0.elapsed() < Duration::from_secs(1), "request {i} waited {:?}", t0.elapsed());
-        let (raw, _) = read_until_closed(&mut silent[i], Duration::from_secs(1));
+        let (raw, _) = read_until_closed(waiting, Duration::from_secs(1));
         assert!(raw.is_empty(), "connection {i} was closed without an answer: {}", String::from_utf8_lossy(&raw));
         pages.push(page);
         n += 1;
