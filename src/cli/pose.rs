@@ -36,6 +36,24 @@ pub struct PoseArgs {
     /// each vertex moved (scalar property `displacement`).
     #[arg(long, short)]
     pub out: PathBuf,
+    #[command(flatten)]
+    pub pose: PoseFlags,
+    /// Radius (fraction of the rest mesh's bounding-box diagonal) of the ball around each
+    /// constrained vertex in which the reported displacement-energy share is measured.
+    #[arg(long, default_value_t = 0.2)]
+    pub local_radius: f64,
+}
+
+/// Reads a constraints file (either spelling of [`Constraints::from_json`]).
+pub fn read_constraints(path: &Path, n_vertices: usize) -> Result<Constraints> {
+    let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    Ok(Constraints::from_json_text(&path.display().to_string(), &text, n_vertices)?)
+}
+
+/// The pose option flags of `pose` and `drag-bench`, as given (unset: the model kind's
+/// default, [`meshdeco::model::Model::pose_defaults`]).
+#[derive(Debug, Args)]
+pub struct PoseFlags {
     /// γ: pull towards the start, dimensionless (in the whole shape's mean squared vertex motion,
     /// measured as --prior says), as strong wherever the pins are; also the autoencoder's.
     /// Smaller asks more of the model's components; larger leaves more to the landing
@@ -70,66 +88,55 @@ pub struct PoseArgs {
     #[arg(long)]
     pub reach: Option<f64>,
     /// Keep the weights at the start: the shape is the start shape plus the landing correction
-    /// alone (what the drag benchmark calls the null; with --spread 0 nothing moves).
+    /// alone (what the drag benchmark calls the null, whose row then equals the posed one; with
+    /// --spread 0 nothing moves).
     #[arg(long)]
     pub freeze: bool,
-    /// Radius (fraction of the rest mesh's bounding-box diagonal) of the ball around each
-    /// constrained vertex in which the reported displacement-energy share is measured.
-    #[arg(long, default_value_t = 0.2)]
-    pub local_radius: f64,
 }
 
-/// Reads a constraints file (either spelling of [`Constraints::from_json`]).
-pub fn read_constraints(path: &Path, n_vertices: usize) -> Result<Constraints> {
-    let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-    Ok(Constraints::from_json_text(&path.display().to_string(), &text, n_vertices)?)
-}
-
-/// `--gamma`, `--beta`, `--max-iterations`, `--prior`, `--spread`, `--reach` as given.
-type PoseFlags = (Option<f64>, Option<f64>, Option<usize>, Option<PosePrior>, Option<f64>, Option<f64>);
-
-/// The pose options of `model`'s kind ([`meshdeco::model::Model::pose_defaults`]) with the
-/// flags given; checks every value, naming the flag.
-fn options_from_flags(model: &dyn meshdeco::model::Model, flags: PoseFlags, freeze: bool) -> Result<PoseOptions> {
-    let (gamma, beta, max_iterations, prior, spread, reach) = flags;
-    let d = model.pose_defaults();
-    for (flag, v) in [("--gamma", gamma), ("--beta", beta)] {
-        if let Some(v) = v
-            && !(v.is_finite() && v >= 0.0)
-        {
-            bail!("{flag} {v}: must be a finite number ≥ 0");
+impl PoseFlags {
+    /// The pose options of `model`'s kind with these flags; checks every value, naming the flag.
+    fn options(&self, model: &dyn meshdeco::model::Model) -> Result<PoseOptions> {
+        let PoseFlags { gamma, beta, max_iterations, prior, spread, reach, freeze } = *self;
+        let d = model.pose_defaults();
+        for (flag, v) in [("--gamma", gamma), ("--beta", beta)] {
+            if let Some(v) = v
+                && !(v.is_finite() && v >= 0.0)
+            {
+                bail!("{flag} {v}: must be a finite number ≥ 0");
+            }
         }
+        if let Some(n) = max_iterations
+            && !(1..=PoseOptions::MAX_ITERATIONS).contains(&n)
+        {
+            bail!("--max-iterations {n}: must be from 1 to {}", PoseOptions::MAX_ITERATIONS);
+        }
+        if let Some(x) = spread
+            && !(x.is_finite() && (0.0..=PoseOptions::MAX_SPREAD).contains(&x))
+        {
+            bail!(
+                "--spread {x}: must be from 0 (off) to {} (a fraction of the bounding-box diagonal)",
+                PoseOptions::MAX_SPREAD
+            );
+        }
+        if let Some(x) = reach
+            && !(x.is_finite() && (x == 0.0 || x >= 1.0))
+        {
+            bail!("--reach {x}: must be 0 (no bound) or a number ≥ 1 (a multiple of the largest drag)");
+        }
+        let options = PoseOptions {
+            gamma: gamma.unwrap_or(d.gamma),
+            beta: beta.unwrap_or(d.beta),
+            max_iterations: max_iterations.unwrap_or(d.max_iterations),
+            prior: prior.unwrap_or(d.prior),
+            time_limit: None,
+            spread: spread.unwrap_or(d.spread),
+            freeze,
+            reach: reach.unwrap_or(d.reach),
+        };
+        options.validate()?;
+        Ok(options)
     }
-    if let Some(n) = max_iterations
-        && !(1..=PoseOptions::MAX_ITERATIONS).contains(&n)
-    {
-        bail!("--max-iterations {n}: must be from 1 to {}", PoseOptions::MAX_ITERATIONS);
-    }
-    if let Some(x) = spread
-        && !(x.is_finite() && (0.0..=PoseOptions::MAX_SPREAD).contains(&x))
-    {
-        bail!(
-            "--spread {x}: must be from 0 (off) to {} (a fraction of the bounding-box diagonal)",
-            PoseOptions::MAX_SPREAD
-        );
-    }
-    if let Some(x) = reach
-        && !(x.is_finite() && (x == 0.0 || x >= 1.0))
-    {
-        bail!("--reach {x}: must be 0 (no bound) or a number ≥ 1 (a multiple of the largest drag)");
-    }
-    let options = PoseOptions {
-        gamma: gamma.unwrap_or(d.gamma),
-        beta: beta.unwrap_or(d.beta),
-        max_iterations: max_iterations.unwrap_or(d.max_iterations),
-        prior: prior.unwrap_or(d.prior),
-        time_limit: None,
-        spread: spread.unwrap_or(d.spread),
-        freeze,
-        reach: reach.unwrap_or(d.reach),
-    };
-    options.validate()?;
-    Ok(options)
 }
 
 pub fn run(a: PoseArgs) -> Result<()> {
@@ -157,8 +164,7 @@ pub fn run(a: PoseArgs) -> Result<()> {
             None
         }
     };
-    let opts =
-        options_from_flags(model.as_ref(), (a.gamma, a.beta, a.max_iterations, a.prior, a.spread, a.reach), a.freeze)?;
+    let opts = a.pose.options(model.as_ref())?;
     let w0 = model.start_weights(from.as_deref())?;
     let Constraints { vertices, targets } = cons;
     check_targets(&rest, &vertices, &targets).with_context(|| format!("{}", a.constraints.display()))?;
@@ -253,28 +259,8 @@ pub struct DragBenchArgs {
     /// Seed of the draws.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    /// γ override (default: the pose default).
-    #[arg(long)]
-    pub gamma: Option<f64>,
-    /// β override (region PCA).
-    #[arg(long)]
-    pub beta: Option<f64>,
-    /// Iterations override (autoencoder).
-    #[arg(long)]
-    pub max_iterations: Option<usize>,
-    /// `shape`, `weights` or `data` (see `meshdeco pose --help`; default: the model kind's).
-    #[arg(long, value_parser = parse_prior)]
-    pub prior: Option<PosePrior>,
-    /// Landing correction radius override (see `meshdeco pose --help`; 0: the model's shape only).
-    #[arg(long)]
-    pub spread: Option<f64>,
-    /// Reach override (see `meshdeco pose --help`; 0: no bound).
-    #[arg(long)]
-    pub reach: Option<f64>,
-    /// Pose with the weights frozen at the start (the landing correction alone; the null row
-    /// then equals the posed one).
-    #[arg(long)]
-    pub freeze: bool,
+    #[command(flatten)]
+    pub pose: PoseFlags,
     /// Name of the model in the last line (`row: | NAME | …`, the README table's row; default: MODEL).
     #[arg(long)]
     pub label: Option<String>,
@@ -293,8 +279,7 @@ pub fn drag_bench(a: DragBenchArgs) -> Result<()> {
         .split(',')
         .map(|t| t.trim().parse::<usize>().map_err(|_| anyhow::anyhow!("--pins `{}`: `{t}` is not a count", a.pins)))
         .collect::<Result<Vec<_>>>()?;
-    let options =
-        options_from_flags(model.as_ref(), (a.gamma, a.beta, a.max_iterations, a.prior, a.spread, a.reach), a.freeze)?;
+    let options = a.pose.options(model.as_ref())?;
     let cfg = DragBenchConfig { drags: a.drags, pins, seed: a.seed, options };
     let (rows, summary) = drag_bench(model.as_ref(), &seq, &cfg)?;
     outln!(
