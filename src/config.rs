@@ -46,7 +46,7 @@
 //! | `stall_restarts` | autoencoder | 2 (paper: 0) | a run still at or above its first step's reconstruction error at 10 % of `iterations` (step ≥ 50) restarts with halved step sizes, at most this many times; in 0..=8 |
 //! | `beta1`, `beta2` | autoencoder | 0.9, 0.99 (paper 0.999) | Adam's moment decay rates, each in [0, 1) |
 //! | `learning_rate_final` | autoencoder | 1e-4 (paper: constant rate) | step size of the last step, reached by a cosine decay from `learning_rate` |
-//! | `batch_size` | autoencoder | full batch | shapes per step |
+//! | `batch_size` | autoencoder | full batch up to 64 shapes, 32 beyond | shapes per step |
 //! | `layers` | autoencoder | 1 | convolution layers L |
 //! | `lambda1`, `lambda2` | autoencoder | 4 (paper 0.5), 0.5 | weights of the sparsity and max-weight terms |
 //! | `theta` | autoencoder | 5.0 | hinge threshold of the max-weight term |

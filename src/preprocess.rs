@@ -93,8 +93,9 @@ pub struct Prepared {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct MemoryLimits {
     /// A C-order `.npy`, or a folder (pattern) of mesh files, whose frames take more than this in
-    /// `f64` (F · N · 24 bytes) is read a frame at a time when used ([`PreparedFrames::Streamed`]). Default 1 GiB (~8 500 frames of
-    /// 5 000 vertices); `MESHDECO_STREAM_BYTES`.
+    /// `f64` (F · N · 24 bytes) is read a frame at a time when used ([`PreparedFrames::Streamed`]). Default 256 MiB (~2 200 frames
+    /// of 5 000 vertices: 5 000 frames of the cactus' 5 261 held whole took the autoencoder's run
+    /// to 1.44 GB, streamed 0.84 GB; docs/training-budget.md); `MESHDECO_STREAM_BYTES`.
     pub stream_bytes: u64,
     /// PCA and SPLOCS hold their training features in `f32` when the `f64` matrix would take
     /// more than this (F · E·W · 8 bytes), and PCA then uses a randomized SVD. Default 1 GiB;
@@ -104,7 +105,7 @@ pub struct MemoryLimits {
 
 impl Default for MemoryLimits {
     fn default() -> Self {
-        MemoryLimits { stream_bytes: 1 << 30, compact_bytes: 1 << 30 }
+        MemoryLimits { stream_bytes: 256 << 20, compact_bytes: 1 << 30 }
     }
 }
 

@@ -83,6 +83,13 @@ impl Progress for Bars {
         }
     }
 
+    fn note(&mut self, text: &str) {
+        match &self.bar {
+            Some(b) => b.println(format!("note: {text}")),
+            None => eprintln!("note: {text}"),
+        }
+    }
+
     fn finish_stage(&mut self) {
         if let Some(l) = &self.lines {
             l.finish();

@@ -52,8 +52,10 @@ pub struct AutoencoderConfig {
     pub epsilon: f64,
     /// Number of optimisation steps.
     pub iterations: usize,
-    /// Shapes per step; `None` (or ≥ the number of shapes) means full batch. Mini-batches are
-    /// drawn without replacement from the seeded generator, independently every step.
+    /// Shapes per step; a number ≥ the number of shapes means full batch; `None`: full batch up
+    /// to [`FULL_BATCH_UP_TO`] shapes, mini-batches of [`DEFAULT_MINI_BATCH`] beyond
+    /// ([`AutoencoderConfig::batch_for`]). Mini-batches are drawn without replacement from the
+    /// seeded generator, a shuffled pass over the shapes per epoch.
     pub batch_size: Option<usize>,
     /// Weight λ1 of the geodesic-weighted ℓ2,1 sparsity term on C.
     pub lambda1: f64,
@@ -239,7 +241,24 @@ impl Default for AutoencoderConfig {
     }
 }
 
+/// Training sets of up to this many shapes train on the full batch unless `batch_size` says
+/// otherwise (SCAPE 36, horse, cactus and the face poses: the step the README's table measured).
+pub const FULL_BATCH_UP_TO: usize = 64;
+
+/// The default mini-batch of larger sets: chosen on the ground-truth face's validation set
+/// (200 shapes × 4 000 vertices, docs/training-budget.md).
+pub const DEFAULT_MINI_BATCH: usize = 32;
+
 impl AutoencoderConfig {
+    /// Shapes per step for a training set of `n_shapes` (see [`AutoencoderConfig::batch_size`]).
+    pub fn batch_for(&self, n_shapes: usize) -> usize {
+        match self.batch_size {
+            Some(b) => b.min(n_shapes),
+            None if n_shapes <= FULL_BATCH_UP_TO => n_shapes,
+            None => DEFAULT_MINI_BATCH,
+        }
+    }
+
     /// meshdeco's default setting of `kind = "autoencoder"` (issue 31; chosen on validation
     /// frames of SCAPE, horse gallop, cactus, face poses and Spacetime faces:
     /// docs/autoencoder-default-candidates.md): the paper's model and loss, trained with a step
@@ -465,6 +484,14 @@ impl AutoencoderConfig {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_default_batch_is_full_up_to_64_shapes_then_32() {
+        let d = AutoencoderConfig::default();
+        assert_eq!((d.batch_for(36), d.batch_for(64), d.batch_for(65), d.batch_for(20_000)), (36, 64, 32, 32));
+        let b = AutoencoderConfig { batch_size: Some(100), ..Default::default() };
+        assert_eq!((b.batch_for(36), b.batch_for(200)), (36, 100));
+    }
 
     #[test]
     fn learning_rate_norm_scales_only_larger_features() {

@@ -75,6 +75,9 @@ pub struct IterationReport {
     pub step_seconds: f64,
     /// Whether a checkpoint was written after this step.
     pub checkpointed: bool,
+    /// The encode–decode feature error on the validation shapes, on the steps that measured it
+    /// (every `validate_every` and the last; `None` without validation shapes).
+    pub validation_error: Option<f64>,
 }
 
 /// Wall time of the phases of the last step, seconds.
@@ -343,7 +346,7 @@ impl<'a> Trainer<'a> {
         c: Vec<f32>,
     ) -> Result<Self> {
         let n = data.n_vertices();
-        let b = config.batch_size.unwrap_or(data.n_shapes()).min(data.n_shapes());
+        let b = config.batch_for(data.n_shapes());
         let bp = padded_width(b + config.augment + rest_lanes(&config));
         let workspace = Workspace::new(n, config.components, config.layers, bp);
         let full_batch =
@@ -438,8 +441,7 @@ impl<'a> Trainer<'a> {
             && rest_lanes(&self.config) > 0
         {
             let bp = self.workspace.width();
-            let lane =
-                self.config.batch_size.unwrap_or(self.data.n_shapes()).min(self.data.n_shapes()) + self.config.augment;
+            let lane = self.config.batch_for(self.data.n_shapes()) + self.config.augment;
             for (row, &v) in features.iter().enumerate() {
                 x[row * bp + lane] = v;
             }
@@ -693,7 +695,7 @@ impl<'a> Trainer<'a> {
         }
         let t2 = Instant::now();
         let n_shapes = self.data.n_shapes();
-        let b = self.config.batch_size.unwrap_or(n_shapes).min(n_shapes);
+        let b = self.config.batch_for(n_shapes);
         if self.config.engine == Engine::Graph {
             let idx: Vec<usize> = if b == n_shapes {
                 (0..n_shapes).collect()
@@ -1068,10 +1070,11 @@ impl<'a> Trainer<'a> {
                 && first.is_some_and(|f| recent.iter().sum::<f64>() / recent.len() as f64 >= f);
             // A stalled step is reported, but neither validated nor checkpointed.
             let mut checkpointed = false;
+            let mut validation_error = None;
             if !stalled {
                 let ve = self.config.validate_every.max(1);
                 if self.iteration.is_multiple_of(ve) || self.iteration == total {
-                    self.validate()?;
+                    validation_error = self.validate()?;
                 }
                 let every = self.config.checkpoint_every;
                 if let Some(path) = &options.checkpoint
@@ -1087,6 +1090,7 @@ impl<'a> Trainer<'a> {
                 loss,
                 step_seconds: dt,
                 checkpointed,
+                validation_error,
             });
             if stalled {
                 break;

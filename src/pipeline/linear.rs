@@ -449,6 +449,7 @@ pub fn fit_splocs(m: &SplocsMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -
             refine_test: false,
             feature_norm: None,
             warning: None,
+            training_gain: None,
         },
         method: MethodConfig::Splocs(m.clone()),
     })

@@ -103,6 +103,10 @@ pub trait Progress {
     fn step(&mut self, i: u64, message: &str);
     /// The current stage finished.
     fn finish_stage(&mut self) {}
+    /// A line for the person running the command (printed above a bar; `note: ` prefixed).
+    fn note(&mut self, text: &str) {
+        eprintln!("note: {text}");
+    }
 }
 
 /// A [`Progress`] that reports nothing (tests, library use).
@@ -111,4 +115,5 @@ pub struct Silent;
 impl Progress for Silent {
     fn stage(&mut self, _: &str, _: u64) {}
     fn step(&mut self, _: u64, _: &str) {}
+    fn note(&mut self, _: &str) {}
 }

@@ -51,6 +51,10 @@ pub struct FitStats {
     /// A warning about the fit that the artefact keeps (`metrics.json`'s `training_warning`):
     /// the autoencoder's run that did not train.
     pub warning: Option<String>,
+    /// Autoencoder: the share of what the best K linear components gain over decoding every
+    /// training shape as the rest shape that its decoding makes (`metrics.json`'s
+    /// `training_gain`; 1: as good as the linear components).
+    pub training_gain: Option<f64>,
 }
 
 /// A fitted model with its statistics and the resolved method config (every default written

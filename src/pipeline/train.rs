@@ -209,6 +209,7 @@ fn fit_measure_write(
         feature_norm: stats.feature_norm.map(|(n, _)| n),
         learning_rate_scale: stats.feature_norm.map(|(_, s)| s),
         training_warning: stats.warning.clone(),
+        training_gain: stats.training_gain,
     };
 
     crate::timing::record("measure", t.elapsed().as_secs_f64());
