@@ -891,7 +891,7 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
                     "the autoencoder trained only partly: it stopped after {} steps, {:.0} % of the default's {}, \
                      and its decoding of the training shapes makes {:.1} % of what the best {} linear components \
                      gain over the rest shape (feature error {err:.4}; rest shape {base:.4}, linear {linear:.4}; \
-                     default runs: SCAPE 99 %, the noisy test face 81 %): the step size decays to a run's end, so a short \
+                     default runs: SCAPE 99 %; noisy data less): the step size decays to a run's end, so a short \
                      run ends flat but far from the fit. Raise `method.iterations`",
                     summary.iterations_done,
                     100.0 * summary.iterations_done as f64 / default_steps as f64,
@@ -1082,20 +1082,20 @@ fn art_rest_t(code: &[f64], k: usize) -> Vec<f64> {
 /// stuck, a few per cent).
 pub const NOT_TRAINED_GAIN: f64 = 0.2;
 
-/// A run that trained ([`NOT_TRAINED_GAIN`]) trained only partly (a warning naming
-/// `iterations`) when it makes less than [`PARTLY_TRAINED_GAIN`] of the linear gain, or when it
-/// ran fewer than this share of the default's steps and makes less than
-/// [`SHORT_RUN_GAIN`]. SCAPE (seed 0): 100 steps make 54 % of the gain (test Erms 45.5), 300
-/// steps 94 % (15.1), the default 2 000 steps 99.3 % (4.67); the ground-truth validation face
-/// (200 shapes, batch 32): 1 000 steps 40 % (6.37), 2 000 steps on the seed-0 test face 81 % (test Erms 2.96).
+/// A run that trained ([`NOT_TRAINED_GAIN`]) but ran fewer than this share of the default's
+/// steps and makes less than [`SHORT_RUN_GAIN`] of the linear gain trained only partly (a
+/// warning naming `iterations`). SCAPE (seed 0): 100 steps make 54 % of the gain (test Erms
+/// 45.5), 300 steps 94 % (15.1), the default 2 000 steps 99.3 % (4.67). The share alone does not
+/// tell a short run from noisy data: the ground-truth validation face at 1 000 steps makes 40 %
+/// (held-out Erms 6.37 against 2.62 at 2 000), the noisiest ground-truth body (1e-3) at the
+/// default 2 000 steps 35 % (test Erms 3.05, better than the full batch's 3.29), the noisy test
+/// face (1e-4) 81 %.
 pub const PARTLY_TRAINED_STEPS: f64 = 0.25;
 pub const SHORT_RUN_GAIN: f64 = 0.97;
-pub const PARTLY_TRAINED_GAIN: f64 = 0.5;
 
 /// Whether a run that trained stopped too early ([`PARTLY_TRAINED_STEPS`]).
 fn partly_trained(share: f64, steps: usize, default_steps: usize) -> bool {
-    share < PARTLY_TRAINED_GAIN
-        || ((steps as f64) < PARTLY_TRAINED_STEPS * default_steps as f64 && share < SHORT_RUN_GAIN)
+    (steps as f64) < PARTLY_TRAINED_STEPS * default_steps as f64 && share < SHORT_RUN_GAIN
 }
 
 /// The share of the linear gain `base − linear` that a decoding error `err` makes (`base`: every
@@ -1206,8 +1206,8 @@ mod tests {
         assert!(partly_trained(0.54, 100, 2000) && partly_trained(0.94, 300, 2000));
         assert!(!partly_trained(0.993, 2000, 2000) && !partly_trained(0.6, 500, 2000));
         assert!(!partly_trained(0.98, 100, 2000));
-        // The validation face at 1 000 steps (40 %) and the test face at the default 2 000 (81 %).
-        assert!(partly_trained(0.40, 1000, 2000) && !partly_trained(0.81, 2000, 2000));
+        // Noisy data at the default's steps is not a short run: the body at noise 1e-3 (35 %).
+        assert!(!partly_trained(0.345, 2000, 2000) && !partly_trained(0.81, 2000, 2000));
         assert_eq!((gain_share(0.5, 1.0, 1.0), gain_share(1.5, 1.0, 1.0)), (1.0, 0.0));
     }
 
