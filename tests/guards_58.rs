@@ -380,3 +380,28 @@ fn streamed_shapes_are_the_cached_frames_they_name() {
     }
     let _ = std::fs::remove_dir_all(&d);
 }
+
+/// Each model kind's pose defaults are the ones the README states (`meshdeco pose` without
+/// `--gamma`/`--prior`): PCA and SPLOCS the data prior, γ 5; region PCA the weights prior,
+/// γ 0.03, β 1e-3; the autoencoder the weights prior, γ 1; all 30 iterations, landing radius 0.2,
+/// reach 1.3, nothing frozen, no time limit.
+#[test]
+fn each_kinds_pose_defaults_are_the_documented_ones() {
+    use meshdeco::model::{PoseOptions, PosePrior};
+    let shared = |o: &PoseOptions| {
+        assert_eq!((o.beta, o.max_iterations, o.spread, o.reach, o.freeze), (1e-3, 30, 0.2, 1.3, false), "{o:?}");
+        assert!(o.time_limit.is_none(), "{o:?}");
+    };
+    let l = PoseOptions::linear_defaults();
+    assert_eq!((l.prior, l.gamma), (PosePrior::Data, 5.0), "{l:?}");
+    let r = PoseOptions::region_defaults();
+    assert_eq!((r.prior, r.gamma), (PosePrior::Weights, 0.03), "{r:?}");
+    let a = PoseOptions::autoencoder_defaults();
+    assert_eq!((a.prior, a.gamma), (PosePrior::Weights, 1.0), "{a:?}");
+    for o in [&l, &r, &a] {
+        shared(o);
+    }
+    let d = PoseOptions::default();
+    assert_eq!((d.prior, d.gamma), (PosePrior::Shape, 1.0), "{d:?}");
+    shared(&d);
+}
