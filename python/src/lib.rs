@@ -600,6 +600,9 @@ impl Progress for ChannelProgress {
     fn step(&mut self, i: u64, message: &str) {
         let _ = self.0.send(Event::Step(i, message.to_string()));
     }
+    /// The command line's notes (the training's time estimate) are not printed from Python: the
+    /// callback's steps carry the progress, and `progress=False` stays quiet.
+    fn note(&mut self, _: &str) {}
 }
 
 /// What a training thread returns.

@@ -60,6 +60,19 @@ pub struct CheckpointHeader {
     pub neighbor_fingerprint: u64,
     /// Loss of the last completed step.
     pub last_loss: Option<LossTerms>,
+    /// Shapes a step of the run ([`AutoencoderConfig::batch_for`]); absent in checkpoints
+    /// written before the default batch depended on the set's size (issue 57), whose rule was
+    /// `batch_size` or the full batch ([`CheckpointHeader::batch`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub batch: Option<usize>,
+}
+
+impl CheckpointHeader {
+    /// Shapes a step of the run that wrote it: the recorded batch, or the rule before issue 57
+    /// (`batch_size`, else the full batch).
+    pub fn batch(&self) -> usize {
+        self.batch.unwrap_or_else(|| self.config.batch_size.unwrap_or(self.n_shapes).min(self.n_shapes))
+    }
 }
 
 /// A checkpoint in memory.
@@ -359,6 +372,7 @@ mod tests {
             n_vertices: 2,
             n_shapes: 4,
             neighbor_fingerprint: 0xdead_beef_f00d,
+            batch: Some(3),
             last_loss: Some(LossTerms {
                 total: MISREAD[4],
                 reconstruction: MISREAD[2],

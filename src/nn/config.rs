@@ -451,6 +451,10 @@ impl AutoencoderConfig {
         b.iterations = 0;
         a.checkpoint_every = 0;
         b.checkpoint_every = 0;
+        // Compared as the batch each resolves to, by `Trainer::resume_from` (a checkpoint's
+        // header records it): `None` meant the full batch before issue 57.
+        a.batch_size = None;
+        b.batch_size = None;
         // Inference only.
         a.encoder_passes = 0;
         b.encoder_passes = 0;

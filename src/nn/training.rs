@@ -25,7 +25,7 @@ use serde::Serialize;
 use super::adam::ComponentAdam;
 use super::augment::Augmenter;
 use super::checkpoint::{self, Checkpoint, CheckpointHeader, CheckpointParts};
-use super::config::{AutoencoderConfig, ComputeDevice, EncoderKind, Engine};
+use super::config::{AutoencoderConfig, ComputeDevice, DEFAULT_MINI_BATCH, EncoderKind, Engine, FULL_BATCH_UP_TO};
 use super::data::TrainingData;
 use super::engine::{self, Grads, Weights, Workspace, layer_weights, tensor_to_vec};
 use super::inference::Autoencoder;
@@ -597,6 +597,20 @@ impl<'a> Trainer<'a> {
                 data.n_shapes()
             )));
         }
+        // The default batch depends on the set's size since issue 57: a checkpoint of a run on
+        // another batch (an older full-batch run of more than 64 shapes) resumes only with its own.
+        let (saved, now) = (ck.header.batch(), config.batch_for(data.n_shapes()));
+        if saved != now {
+            return Err(Error::config(
+                "batch_size",
+                format!(
+                    "{}: the checkpoint was trained with {saved} shapes a step, this run would take {now} \
+                     (the default is the full batch up to {FULL_BATCH_UP_TO} shapes, {DEFAULT_MINI_BATCH} beyond): \
+                     set method.batch_size = {saved} to resume it",
+                    checkpoint.display()
+                ),
+            ));
+        }
         Self::check_sizes(&config, data, neighbors)?;
         let n = neighbors.n_vertices();
         if ck.columns != 9 * n || ck.components.len() != config.components * 9 * n {
@@ -991,6 +1005,7 @@ impl<'a> Trainer<'a> {
             n_shapes: self.data.n_shapes(),
             neighbor_fingerprint: self.neighbors.fingerprint(),
             last_loss: self.last_loss,
+            batch: Some(self.config.batch_for(self.data.n_shapes())),
         }
     }
 
@@ -1189,6 +1204,42 @@ mod tests {
             assert!(fused.grads.c.is_empty(), "the fused path stored the gradient of C");
         }
     }
+    /// A checkpoint resumes only on the batch it was trained with: one of a full-batch run of
+    /// 70 shapes (as every run of more than 64 shapes was before issue 57) is refused under the
+    /// default, which would take 32, naming `batch_size`; with `batch_size = 70` it resumes.
+    #[test]
+    fn a_checkpoint_resumes_only_on_its_own_batch() {
+        let (n, faces) = grid(5, 4);
+        let nb = NeighborIndex::from_faces(n, &faces).unwrap();
+        let dist = HopDistances::new(&nb);
+        let mut rng = Rng::new(3);
+        let mut feats = Features::zeros(70, n, 9);
+        for v in feats.data.iter_mut() {
+            *v = rng.uniform() * 1.8 - 0.9;
+        }
+        let data = TrainingData::from_features(&feats).unwrap();
+        let full = AutoencoderConfig { components: 3, iterations: 2, batch_size: Some(70), ..Default::default() };
+        let mut t = Trainer::new(full.clone(), &data, &nb, &dist).unwrap();
+        t.step().unwrap();
+        let dir = std::env::temp_dir().join(format!("meshdeco-batch-resume-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let ck = dir.join("checkpoint.bin");
+        t.save_checkpoint(&ck).unwrap();
+        let default = AutoencoderConfig { batch_size: None, ..full.clone() };
+        let err = Trainer::resume(&ck, default, &data, &nb, &dist).err().expect("refused").to_string();
+        assert!(err.contains("batch_size") && err.contains("70 shapes a step") && err.contains("take 32"), "{err}");
+        assert_eq!(Trainer::resume(&ck, full, &data, &nb, &dist).unwrap().iteration(), 1);
+        // A checkpoint from before the batch was recorded: `batch_size`, else the full batch.
+        let mut h = Checkpoint::load(&ck).unwrap().header;
+        h.batch = None;
+        assert_eq!(h.batch(), 70);
+        h.config.batch_size = None;
+        assert_eq!(h.batch(), 70);
+        h.config.batch_size = Some(8);
+        assert_eq!(h.batch(), 8);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
     #[test]
     fn epoch_batches_visit_every_shape_once_and_resume_alike() {
         let (s, b) = (23, 5);

@@ -833,7 +833,8 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
     let mut warning = None;
     let mut training_gain = None;
     // Shapes one step decodes (the batch and its synthetic shapes) × vertices: the estimate's unit.
-    let step_shapes = ae_cfg.batch_for(data.n_shapes()) + ae_cfg.augment;
+    let batch = ae_cfg.batch_for(data.n_shapes());
+    let step_shapes = batch + ae_cfg.augment;
     let mut estimate = StepEstimate::new(ESTIMATE_AFTER_STEPS);
     let summary = loop {
         let stall_check = if restart < ae_cfg.stall_restarts { stall_check_step(ae_cfg.iterations) } else { None };
@@ -1047,8 +1048,20 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
             warning,
             training_gain,
         },
-        method: MethodConfig::Autoencoder(m.clone()),
+        method: MethodConfig::Autoencoder(written_method(m, batch, data.n_shapes())),
     })
+}
+
+/// The method config the artefact's `config.toml` records: `m`, with the mini-batch the default
+/// chose for `n_shapes` training shapes written out (more than
+/// [`crate::nn::config::FULL_BATCH_UP_TO`]), so that the file trains the same run under any
+/// later default.
+fn written_method(m: &AutoencoderMethod, batch: usize, n_shapes: usize) -> AutoencoderMethod {
+    let mut out = m.clone();
+    if out.batch_size.is_none() && batch < n_shapes {
+        out.batch_size = Some(batch);
+    }
+    out
 }
 
 /// Locality of the latent components: the rows C_k of the latent matrix, grouped per vertex
@@ -1099,12 +1112,13 @@ fn partly_trained(share: f64, steps: usize, default_steps: usize) -> bool {
 }
 
 /// The share of the linear gain `base − linear` that a decoding error `err` makes (`base`: every
-/// shape decoded as the rest shape); 1 when there is nothing to gain and `err ≤ base`.
+/// shape decoded as the rest shape). With nothing linear to gain, 1 or 0 as [`trained`] decides
+/// (within 80 % of the rest error), so `training_gain` never contradicts the warning.
 fn gain_share(err: f64, base: f64, linear: f64) -> f64 {
     let gain = base - linear;
     if gain > 1e-12 * base.max(f64::MIN_POSITIVE) {
         (base - err) / gain
-    } else if err <= base {
+    } else if err < 0.8 * base || base == 0.0 {
         1.0
     } else {
         0.0
@@ -1209,6 +1223,19 @@ mod tests {
         // Noisy data at the default's steps is not a short run: the body at noise 1e-3 (35 %).
         assert!(!partly_trained(0.345, 2000, 2000) && !partly_trained(0.81, 2000, 2000));
         assert_eq!((gain_share(0.5, 1.0, 1.0), gain_share(1.5, 1.0, 1.0)), (1.0, 0.0));
+        // Nothing to gain: the share says what `trained` says.
+        assert_eq!((gain_share(0.9, 1.0, 1.0), trained(0.9, 1.0, 1.0)), (0.0, false));
+    }
+
+    #[test]
+    fn config_toml_names_the_mini_batch_the_default_chose() {
+        let m = AutoencoderMethod::default();
+        assert_eq!(m.batch_size, None);
+        // 200 shapes: the default's 32 is written out; 36 shapes: the full batch stays implicit.
+        assert_eq!(written_method(&m, 32, 200).batch_size, Some(32));
+        assert_eq!(written_method(&m, 36, 36).batch_size, None);
+        let own = AutoencoderMethod { batch_size: Some(8), ..m };
+        assert_eq!(written_method(&own, 8, 200).batch_size, Some(8));
     }
 
     #[test]
