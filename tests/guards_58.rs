@@ -405,3 +405,79 @@ fn each_kinds_pose_defaults_are_the_documented_ones() {
     assert_eq!((d.prior, d.gamma), (PosePrior::Shape, 1.0), "{d:?}");
     shared(&d);
 }
+
+/// `--reach` only ever takes a pose back (`src/model/pose.rs`, `reach_back`): with a reach far
+/// beyond the pose's motion the shape is the model's own pose (`--reach 0`) exactly, and with
+/// `--reach 1` no vertex moves farther than the drag while the unbounded pose moved one farther.
+#[test]
+fn reach_only_takes_a_pose_back() {
+    let d = fresh_dir("guards58", "reach-back");
+    let (frames, _) = scaled_bumps(&d, 1.0);
+    let cfg = Config::from_toml(&format!(
+        "name = \"pca\"\n[data]\npath = \"{}\"\ntemplate = \"{}\"\ntrain = \"1-30\"\ntest = \"rest\"\n[method]\nkind = \"pca\"\ncomponents = 3\n",
+        d.join("s.npy").display(),
+        d.join("s.obj").display()
+    ))
+    .unwrap();
+    let model = d.join("pca");
+    meshdeco::pipeline::train(&cfg, &model, &TrainOptions::default(), &mut Silent).unwrap();
+    let rest = &frames[0];
+    // A vertex the training frames move a fifth as far as the one they move most, dragged 5 %
+    // of the diagonal along its own motion with a weak pull on the weights: landing it moves
+    // others farther.
+    let motion = |v: usize| frames.iter().map(|f| mesh::dist(f[v], rest[v])).fold(0.0, f64::max);
+    let top = (0..rest.len()).map(motion).fold(0.0, f64::max);
+    let moving = (0..rest.len())
+        .min_by(|&a, &b| (motion(a) - 0.2 * top).abs().total_cmp(&(motion(b) - 0.2 * top).abs()).then(a.cmp(&b)))
+        .unwrap();
+    let (lo, hi) = mesh::bounding_box(rest);
+    let drag = 0.05 * mesh::dist(lo, hi);
+    let p = rest[moving];
+    // Along the vertex's motion in the frame that moves it most.
+    let f = frames.iter().max_by(|a, b| mesh::dist(a[moving], p).total_cmp(&mesh::dist(b[moving], p))).unwrap();
+    let u = mesh::dist(f[moving], p);
+    let t: Vec<f64> = (0..3).map(|c| p[c] + drag * (f[moving][c] - p[c]) / u).collect();
+    std::fs::write(d.join("c.json"), format!("{{\"{moving}\": [{}, {}, {}]}}", t[0], t[1], t[2])).unwrap();
+    let pose = |reach: &str, out: &str| {
+        let args = [
+            "pose",
+            model.to_str().unwrap(),
+            "-c",
+            "c.json",
+            "--out",
+            out,
+            "--spread",
+            "0",
+            "--prior",
+            "weights",
+            "--gamma",
+            "0.001",
+            "--reach",
+            reach,
+        ];
+        let o = meshdeco(&args, &d);
+        assert!(o.status.success(), "pose --reach {reach}: {}", output_text(&o));
+        mesh::load_mesh(&d.join(out)).unwrap().positions
+    };
+    // The pose starts from the model's neutral shape (`--freeze` with `--spread 0`: nothing
+    // moves), which the reach and the drag are measured from.
+    let o = meshdeco(
+        &["pose", model.to_str().unwrap(), "-c", "c.json", "--out", "start.obj", "--spread", "0", "--freeze"],
+        &d,
+    );
+    assert!(o.status.success(), "pose --freeze: {}", output_text(&o));
+    let start = mesh::load_mesh(&d.join("start.obj")).unwrap().positions;
+    let drag = mesh::dist(start[moving], [t[0], t[1], t[2]]);
+    let most = |ps: &[Vec3]| ps.iter().zip(&start).map(|(a, b)| mesh::dist(*a, *b)).fold(0.0, f64::max);
+    let free = pose("0", "free.obj");
+    let far = pose("1000", "far.obj");
+    assert_eq!(free, far, "a reach of 1000 × the drag changed a pose that moved {} × the drag", most(&free) / drag);
+    assert!(
+        most(&free) > 1.05 * drag,
+        "the unbounded pose moves {} × the drag: nothing to take back",
+        most(&free) / drag
+    );
+    let bounded = pose("1", "bounded.obj");
+    assert!(most(&bounded) <= drag * (1.0 + 1e-6), "--reach 1 moved a vertex {} × the drag", most(&bounded) / drag);
+    let _ = std::fs::remove_dir_all(&d);
+}
