@@ -22,7 +22,7 @@ use std::time::Duration;
 
 use meshdeco::config::Config;
 use meshdeco::mesh::{self, MeshSequence, Vec3};
-use meshdeco::model::{Constraints, Model, PoseOptions, PosePrior};
+use meshdeco::model::{Constraints, Model, PosePrior};
 use meshdeco::pipeline::{self, Progress, TrainOptions};
 use numpy::ndarray::{Array2, Array3};
 use numpy::{PyArray1, PyArray2, PyArray3, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3};
