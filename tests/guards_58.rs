@@ -439,49 +439,44 @@ fn reach_only_takes_a_pose_back() {
     let u = mesh::dist(f[moving], p);
     let t: Vec<f64> = (0..3).map(|c| p[c] + drag * (f[moving][c] - p[c]) / u).collect();
     std::fs::write(d.join("c.json"), format!("{{\"{moving}\": [{}, {}, {}]}}", t[0], t[1], t[2])).unwrap();
-    let pose = |reach: &str, out: &str| {
-        let args = [
-            "pose",
-            model.to_str().unwrap(),
-            "-c",
-            "c.json",
-            "--out",
-            out,
-            "--spread",
-            "0",
-            "--prior",
-            "weights",
-            "--gamma",
-            "0.001",
-            "--reach",
-            reach,
-        ];
-        let o = meshdeco(&args, &d);
-        assert!(o.status.success(), "pose --reach {reach}: {}", output_text(&o));
-        mesh::load_mesh(&d.join(out)).unwrap().positions
-    };
-    // The pose starts from the model's neutral shape (`--freeze` with `--spread 0`: nothing
-    // moves), which the reach and the drag are measured from.
-    let o = meshdeco(
-        &["pose", model.to_str().unwrap(), "-c", "c.json", "--out", "start.obj", "--spread", "0", "--freeze"],
-        &d,
-    );
-    assert!(o.status.success(), "pose --freeze: {}", output_text(&o));
-    let start = mesh::load_mesh(&d.join("start.obj")).unwrap().positions;
-    let drag = mesh::dist(start[moving], [t[0], t[1], t[2]]);
-    let most = |ps: &[Vec3]| ps.iter().zip(&start).map(|(a, b)| mesh::dist(*a, *b)).fold(0.0, f64::max);
-    let free = pose("0", "free.obj");
-    let far = pose("1000", "far.obj");
-    assert!(free == far, "a reach of 1000 × the drag changed a pose that moved {} × the drag", most(&free) / drag);
-    assert!(
-        most(&free) > 1.05 * drag,
-        "the unbounded pose moves {} × the drag: nothing to take back",
-        most(&free) / drag
-    );
-    let bounded = pose("1", "bounded.obj");
-    // Taken back along the straight line to the start just as far as needed (exact for a linear
-    // model): the farthest vertex ends at the drag's distance.
-    let r = most(&bounded) / drag;
-    assert!((r - 1.0).abs() < 1e-6, "--reach 1: the farthest vertex moved {r} × the drag, expected 1");
+    // From the model's neutral shape (weights 0) and from a training frame's weights (not 0:
+    // the line back to the start is w0 + s (w − w0), not s w).
+    let faces = meshdeco::synthetic::load("synthetic:bumps").unwrap().faces;
+    mesh::write::write_obj(&d.join("f.obj"), &TriMesh::new(frames[20].clone(), faces)).unwrap();
+    for from in [None, Some("f.obj")] {
+        let run = |extra: &[&str], out: &str| {
+            let mut args = vec!["pose", model.to_str().unwrap(), "-c", "c.json", "--out", out, "--spread", "0"];
+            if let Some(f) = from {
+                args.extend(["--from", f]);
+            }
+            args.extend(extra);
+            let o = meshdeco(&args, &d);
+            assert!(o.status.success(), "pose {args:?}: {}", output_text(&o));
+            mesh::load_mesh(&d.join(out)).unwrap().positions
+        };
+        let pose = |reach: &str, out: &str| run(&["--prior", "weights", "--gamma", "0.001", "--reach", reach], out);
+        // The pose's start (`--freeze` with `--spread 0`: nothing moves), which the reach and
+        // the drag are measured from.
+        let start = run(&["--freeze"], "start.obj");
+        let drag = mesh::dist(start[moving], [t[0], t[1], t[2]]);
+        let most = |ps: &[Vec3]| ps.iter().zip(&start).map(|(a, b)| mesh::dist(*a, *b)).fold(0.0, f64::max);
+        let free = pose("0", "free.obj");
+        let far = pose("1000", "far.obj");
+        assert!(
+            free == far,
+            "{from:?}: a reach of 1000 × the drag changed a pose that moved {} × the drag",
+            most(&free) / drag
+        );
+        assert!(
+            most(&free) > 1.05 * drag,
+            "{from:?}: the unbounded pose moves {} × the drag: nothing to take back",
+            most(&free) / drag
+        );
+        let bounded = pose("1", "bounded.obj");
+        // Taken back along the straight line to the start just as far as needed (exact for a
+        // linear model): the farthest vertex ends at the drag's distance.
+        let r = most(&bounded) / drag;
+        assert!((r - 1.0).abs() < 1e-6, "{from:?}, --reach 1: the farthest vertex moved {r} × the drag, expected 1");
+    }
     let _ = std::fs::remove_dir_all(&d);
 }
