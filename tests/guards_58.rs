@@ -477,6 +477,15 @@ fn reach_only_takes_a_pose_back() {
         // linear model): the farthest vertex ends at the drag's distance.
         let r = most(&bounded) / drag;
         assert!((r - 1.0).abs() < 1e-6, "{from:?}, --reach 1: the farthest vertex moved {r} × the drag, expected 1");
+        // On the line from the start to the unbounded pose: start + s (free − start).
+        let s = drag / most(&free);
+        let off = (0..start.len())
+            .map(|v| {
+                let on: Vec3 = [0, 1, 2].map(|c| start[v][c] + s * (free[v][c] - start[v][c]));
+                mesh::dist(bounded[v], on)
+            })
+            .fold(0.0, f64::max);
+        assert!(off < 1e-9 * drag, "{from:?}, --reach 1: the pose is {off} off the line back to the start");
     }
     let _ = std::fs::remove_dir_all(&d);
 }
