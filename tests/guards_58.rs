@@ -31,12 +31,10 @@ fn scaled_bumps(d: &Path, scale: f64) -> (Vec<Vec<Vec3>>, Vec<[usize; 3]>) {
     (frames, seq.faces)
 }
 
-/// What one landed drag reaches on the bumps tube scaled by `scale`: (the largest straight-line
-/// distance from the pin of a vertex the landing correction moved, the radius `spread` × the
-/// rest's bounding-box diagonal, the landed pin's distance to its target / the drag).
-fn landing_reach(scale: f64, spread: f64) -> (f64, f64, f64) {
-    let d = fresh_dir("guards58", &format!("reach-{scale}"));
-    let (frames, _) = scaled_bumps(&d, scale);
+/// PCA (K 3) trained on the first 30 frames of the bumps tube scaled by `scale`, in `d/pca`;
+/// returns the scaled frames and the model's directory.
+fn bumps_pca(d: &Path, scale: f64) -> (Vec<Vec<Vec3>>, std::path::PathBuf) {
+    let (frames, _) = scaled_bumps(d, scale);
     let cfg = Config::from_toml(&format!(
         "name = \"pca\"\n[data]\npath = \"{}\"\ntemplate = \"{}\"\ntrain = \"1-30\"\ntest = \"rest\"\n[method]\nkind = \"pca\"\ncomponents = 3\n",
         d.join("s.npy").display(),
@@ -45,6 +43,15 @@ fn landing_reach(scale: f64, spread: f64) -> (f64, f64, f64) {
     .unwrap();
     let model = d.join("pca");
     meshdeco::pipeline::train(&cfg, &model, &TrainOptions::default(), &mut Silent).unwrap();
+    (frames, model)
+}
+
+/// What one landed drag reaches on the bumps tube scaled by `scale`: (the largest straight-line
+/// distance from the pin of a vertex the landing correction moved, the radius `spread` × the
+/// rest's bounding-box diagonal, the landed pin's distance to its target / the drag).
+fn landing_reach(scale: f64, spread: f64) -> (f64, f64, f64) {
+    let d = fresh_dir("guards58", &format!("reach-{scale}"));
+    let (frames, model) = bumps_pca(&d, scale);
     let rest = &frames[0];
     // A vertex no training frame moves: the linear model cannot move it, so the whole drag is
     // the landing correction's.
@@ -413,15 +420,7 @@ fn each_kinds_pose_defaults_are_the_documented_ones() {
 #[test]
 fn reach_only_takes_a_pose_back() {
     let d = fresh_dir("guards58", "reach-back");
-    let (frames, _) = scaled_bumps(&d, 1.0);
-    let cfg = Config::from_toml(&format!(
-        "name = \"pca\"\n[data]\npath = \"{}\"\ntemplate = \"{}\"\ntrain = \"1-30\"\ntest = \"rest\"\n[method]\nkind = \"pca\"\ncomponents = 3\n",
-        d.join("s.npy").display(),
-        d.join("s.obj").display()
-    ))
-    .unwrap();
-    let model = d.join("pca");
-    meshdeco::pipeline::train(&cfg, &model, &TrainOptions::default(), &mut Silent).unwrap();
+    let (frames, model) = bumps_pca(&d, 1.0);
     let rest = &frames[0];
     // A vertex the training frames move a fifth as far as the one they move most, dragged 5 %
     // of the diagonal along its own motion with a weak pull on the weights: landing it moves

@@ -884,7 +884,8 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
             let share = gain_share(err, base, linear);
             training_gain = Some(share);
             let default_steps = AutoencoderConfig::default().iterations;
-            if trained(err, base, linear) && partly_trained(share, summary.iterations_done, default_steps) {
+            let did_train = trained(err, base, linear);
+            if did_train && partly_trained(share, summary.iterations_done, default_steps) {
                 // Trained, but stopped too early: the step size decays to the run's end, so its
                 // error has flattened by then (`still_improving` does not see it), yet longer runs
                 // fit far better (SCAPE: test Erms 45 at 100 steps, 15 at 300, 4.7 at 2 000).
@@ -903,7 +904,7 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
                 eprintln!("warning: {w}");
                 warning = Some(w);
             }
-            if !trained(err, base, linear) {
+            if !did_train {
                 let improving = still_improving(&recs);
                 let text = format!(
                     "the autoencoder did not train: after {} steps its decoding of the training shapes has a feature \
@@ -1118,7 +1119,7 @@ fn gain_share(err: f64, base: f64, linear: f64) -> f64 {
     let gain = base - linear;
     if gain > 1e-12 * base.max(f64::MIN_POSITIVE) {
         (base - err) / gain
-    } else if err < 0.8 * base || base == 0.0 {
+    } else if trained(err, base, linear) {
         1.0
     } else {
         0.0
