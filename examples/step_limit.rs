@@ -242,12 +242,6 @@ fn mesh(rel: &str, fallback_subdivisions: usize) -> (usize, Vec<[usize; 3]>, Str
     }
 }
 
-fn median(v: &mut [f64]) -> f64 {
-    v.sort_by(f64::total_cmp);
-    let m = v.len() / 2;
-    if v.len().is_multiple_of(2) { 0.5 * (v[m - 1] + v[m]) } else { v[m] }
-}
-
 struct Rates {
     fma: f64,
     gemm: f64,
@@ -282,7 +276,9 @@ fn time_case(rel: &str, fallback: usize, shapes: usize, steps: usize, rates: &Ra
         upd.push(p.optimizer);
     }
     let fastest = total.iter().copied().fold(f64::INFINITY, f64::min);
-    let (t, fb, upd) = (median(&mut total), median(&mut fb), median(&mut upd));
+    // The library's median (mean of the two middle values for even lengths); steps ≥ 1.
+    let median = |v: &[f64]| meshdeco::pipeline::metrics_file::median(v).expect("at least one timed step");
+    let (t, fb, upd) = (median(&total), median(&fb), median(&upd));
     let sv = (n * per_step) as f64;
     let flops = step_flops(k, d, l).per_shape_vertex(per_step);
     let achieved = flops * sv / t;
