@@ -227,3 +227,71 @@ fn a_run_stopped_too_early_says_it_did_not_train() {
     assert!(text.contains("note: training estimate: about") && text.contains("µs per shape-vertex"), "{text}");
     let _ = std::fs::remove_dir_all(&d);
 }
+
+/// The autoencoder's dials are a basis of its latent space fitted to the training codes
+/// (`dial_sparsity`, issue 53): dials and codes map into each other exactly, dials 0 are the
+/// rest code, each dial reaches about 1 on the training frames and the training dials are
+/// nearly non-negative; with `dial_sparsity = 0` the dials are the latent dimensions (the
+/// paper). A damaged basis in `model.json` (its checksum re-recorded) is refused by name.
+#[test]
+fn the_autoencoders_dials_are_a_sparse_basis_of_its_training_codes() {
+    use meshdeco::pipeline::registry::load_model;
+    let d = fresh_dir("planted", "dials");
+    let o = plant(&d, "set", &["--deformations", "4", "--train", "40", "--test", "10", "--noise", "0"]);
+    assert!(o.status.success(), "{}", output_text(&o));
+    let data = "path = \"set/frames.npy\"\ntemplate = \"set/template.obj\"\nrest = \"set/template.obj\"\ntrain = \"1-40\"\ntest = \"41-50\"";
+    let method = "kind = \"autoencoder\"\ncomponents = 5\niterations = 300\nfit_test = false\nencoder_steps = 0";
+    let with = common::train_cli(&d, "ae", data, method);
+    let header: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(with.join("model.json")).unwrap()).unwrap();
+    let basis = header["dial_basis"].as_array().expect("a dial basis by default");
+    assert_eq!(basis.len(), 5);
+    let model = load_model(&with).unwrap();
+    let k = model.n_components();
+    assert_eq!(k, 5);
+    // Dials ↔ codes, both ways.
+    for dials in [vec![0.0; 5], vec![1.0, 0.0, 0.0, 0.0, 0.0], vec![0.3, -0.7, 1.2, 0.0, 0.5]] {
+        let w = model.synthesis_weights(&dials).unwrap();
+        let back = model.dials(&w).unwrap();
+        for (a, b) in back.iter().zip(&dials) {
+            assert!((a - b).abs() < 1e-8, "dials {dials:?} came back as {back:?}");
+        }
+    }
+    // Dials 0 are the rest code (the model's start), and a dial moves the code along its
+    // direction: the code of dial m at 1 minus the rest code is basis[m].
+    let rest = model.synthesis_weights(&[0.0; 5]).unwrap();
+    let start = model.start_weights(None).unwrap();
+    assert!(rest.iter().zip(&start).all(|(a, b)| (a - b).abs() < 1e-9), "{rest:?} vs the start {start:?}");
+    let one = model.synthesis_weights(&[0.0, 0.0, 1.0, 0.0, 0.0]).unwrap();
+    for (c, b) in basis[2].as_array().unwrap().iter().enumerate() {
+        assert!((one[c] - rest[c] - b.as_f64().unwrap()).abs() < 1e-12);
+    }
+    // The training frames' dials: each is 1 at its extreme (the largest in magnitude), and
+    // few are negative.
+    let train: Vec<Vec<f64>> = model.train_weights().unwrap().iter().map(|w| model.dials(w).unwrap()).collect();
+    for m in 0..k {
+        let ext = train.iter().map(|t| t[m]).max_by(|a, b| a.abs().total_cmp(&b.abs())).unwrap();
+        assert!((ext - 1.0).abs() < 1e-6, "dial {m}'s training extreme is {ext}");
+    }
+    let negative = train.iter().flatten().filter(|&&x| x < -0.2).count();
+    assert!(negative * 10 <= train.len() * k, "{negative} of {} training dials below −0.2", train.len() * k);
+    // The paper's per-dimension dials.
+    let without = common::train_cli(&d, "ae0", data, &format!("{method}\ndial_sparsity = 0"));
+    let header0 = std::fs::read_to_string(without.join("model.json")).unwrap();
+    assert!(!header0.contains("dial_basis"), "dial_sparsity = 0 wrote a basis");
+    // A damaged basis is refused, naming it.
+    let mut v = header.clone();
+    v["dial_basis"][1] = v["dial_basis"][0].clone();
+    std::fs::write(with.join("model.json"), serde_json::to_string_pretty(&v).unwrap()).unwrap();
+    let m = meshdeco::artifact::compute_manifest(&with).unwrap();
+    std::fs::write(with.join("manifest.json"), serde_json::to_string_pretty(&m).unwrap()).unwrap();
+    let err = load_model(&with).err().expect("a basis that does not span is refused").to_string();
+    assert!(err.contains("dial_basis") && err.contains("model.json"), "{err}");
+    v["dial_basis"][1] = serde_json::json!([1.0, 2.0]);
+    std::fs::write(with.join("model.json"), serde_json::to_string_pretty(&v).unwrap()).unwrap();
+    let m = meshdeco::artifact::compute_manifest(&with).unwrap();
+    std::fs::write(with.join("manifest.json"), serde_json::to_string_pretty(&m).unwrap()).unwrap();
+    let err = load_model(&with).err().expect("a short direction is refused").to_string();
+    assert!(err.contains("dial_basis"), "{err}");
+    let _ = std::fs::remove_dir_all(&d);
+}

@@ -332,7 +332,7 @@ impl RegionPcaMethod {
 /// (except `d_min`/`d_max`, written `support = [d_min, d_max]`), with its meaning documented
 /// there; [`network_keys!`] maps the two both ways, naming every field, so a new network field
 /// does not compile until it is a key. The method's own keys: `geodesic_m`, `scaling`,
-/// `scaling_quantile`, `scaling_fence`, `consistency`, `fit_test`. Keys at their default that older configs did not have are left out
+/// `scaling_quantile`, `scaling_fence`, `consistency`, `fit_test`, `dial_sparsity`. Keys at their default that older configs did not have are left out
 /// of a written `config.toml` (`skip_serializing_if`); they parse back to the same value.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -382,6 +382,11 @@ pub struct AutoencoderMethod {
     pub device: ComputeDevice,
     /// Also report `test_erms_fitted`.
     pub fit_test: bool,
+    /// Sparsity λ (share of the largest training code's distance from the rest code) of the
+    /// dial basis fitted after training ([`crate::methods::sparse_dials`]): the dials are K
+    /// directions of the latent space in which the training codes are sparse non-negative
+    /// combinations; 0: one latent dimension per dial (the paper).
+    pub dial_sparsity: f64,
     /// Synthetic shapes per training step (augmentation in feature space; 0: none).
     pub augment: usize,
     /// `local` | `blend` | `mixed` (default `local`).
@@ -470,8 +475,15 @@ macro_rules! network_keys {
             /// The method whose network keys are `c`'s and whose own keys are `own`'s.
             fn from_network(c: AutoencoderConfig, own: AutoencoderOwnKeys) -> Self {
                 let AutoencoderConfig { d_min, d_max, $($field),* } = c;
-                let AutoencoderOwnKeys { geodesic_m, scaling, scaling_quantile, scaling_fence, consistency, fit_test } =
-                    own;
+                let AutoencoderOwnKeys {
+                    geodesic_m,
+                    scaling,
+                    scaling_quantile,
+                    scaling_fence,
+                    consistency,
+                    fit_test,
+                    dial_sparsity,
+                } = own;
                 AutoencoderMethod {
                     support: [d_min, d_max],
                     geodesic_m,
@@ -480,6 +492,7 @@ macro_rules! network_keys {
                     scaling_fence,
                     consistency,
                     fit_test,
+                    dial_sparsity,
                     $($field),*
                 }
             }
@@ -494,6 +507,7 @@ macro_rules! network_keys {
                     scaling_fence: _,
                     consistency: _,
                     fit_test: _,
+                    dial_sparsity: _,
                     $($field),*
                 } = self.clone();
                 AutoencoderConfig { d_min: support[0], d_max: support[1], $($field),* }
@@ -547,10 +561,15 @@ struct AutoencoderOwnKeys {
     scaling_fence: f64,
     consistency: ConsistencyName,
     fit_test: bool,
+    dial_sparsity: f64,
 }
 
 /// Default `scaling_quantile` of a config file (the paper's is 0: minimum and maximum).
 pub const AE_SCALING_QUANTILE: f64 = 1e-3;
+
+/// Default `dial_sparsity` of a config file (chosen on the ground-truth validation sets,
+/// docs/ground-truth.md; 0 is the paper's one latent dimension per dial).
+pub const AE_DIAL_SPARSITY: f64 = 0.03;
 
 /// Default `scaling_fence` of a config file.
 pub const AE_SCALING_FENCE: f64 = 1.0;
@@ -566,6 +585,7 @@ impl Default for AutoencoderMethod {
                 scaling_fence: AE_SCALING_FENCE,
                 consistency: ConsistencyName::Global,
                 fit_test: true,
+                dial_sparsity: AE_DIAL_SPARSITY,
             },
         )
     }
@@ -744,6 +764,12 @@ impl MethodSettings for AutoencoderMethod {
             return Err(Error::config(
                 "method.scaling_fence",
                 format!("{} must be a finite number ≥ 0", self.scaling_fence),
+            ));
+        }
+        if !(0.0..1.0).contains(&self.dial_sparsity) {
+            return Err(Error::config(
+                "method.dial_sparsity",
+                format!("{} must be in [0, 1) (0: one latent dimension per dial)", self.dial_sparsity),
             ));
         }
         positive("method.geodesic_m", self.geodesic_m)

@@ -18,6 +18,7 @@ pub mod pca;
 pub mod posing;
 pub mod region_pca;
 pub mod segmentation;
+pub mod sparse_dials;
 pub mod splocs;
 mod splocs_admm;
 pub mod support_map;

@@ -17,7 +17,8 @@
 //! model's own coordinates (linear models: component weights; region PCA: the concatenated
 //! per-region coefficients ζ; the autoencoder: the latent code z). Synthesis "dials"
 //! ([`Model::synthesis_weights`]) are the user-facing weights of `meshdeco synthesize`: equal to
-//! the weights for linear models, and `z_i = Z_r,i + (Z_h,i − Z_r,i)·w_i` for the autoencoder.
+//! the weights for linear models; for the autoencoder `z = Z_r + Σ_m w_m·b_m` with its dial basis
+//! (`dial_sparsity`, the default) or `z_i = Z_r,i + (Z_h,i − Z_r,i)·w_i` without one.
 
 pub mod pose;
 
@@ -101,7 +102,8 @@ pub trait Model {
         Ok(dials.to_vec())
     }
     /// The dials whose [`Model::synthesis_weights`] are `weights` (its inverse; the identity for
-    /// linear and region models; the autoencoder: `(z_i − Z_r,i) / (Z_h,i − Z_r,i)`).
+    /// linear and region models; the autoencoder: the solution of `Σ_m w_m·b_m = z − Z_r` with a
+    /// dial basis, `(z_i − Z_r,i) / (Z_h,i − Z_r,i)` without).
     fn dials(&self, weights: &[f64]) -> Result<Vec<f64>> {
         check_len("weights", weights.len(), self.n_components())?;
         Ok(weights.to_vec())
@@ -238,14 +240,15 @@ pub fn component_fields(model: &dyn Model) -> Result<Vec<Vec<Vec3>>> {
     let mut fields = Vec::with_capacity(k);
     // A few components at a time: the decoded shapes of all K are never held at once.
     for start in (0..k).step_by(16) {
+        // Dial i moved by +1 from the start's dials: the weights move by what the dial adds
+        // (the dials map to weights affinely: dimension by dimension, or through a dial basis).
+        let s0 = model.synthesis_weights(&d0)?;
         let codes = (start..(start + 16).min(k))
             .map(|i| {
                 let mut d = d0.clone();
                 d[i] += 1.0;
-                // Only dimension i moves (the dials map dimension by dimension).
-                let mut w = w0.clone();
-                w[i] = model.synthesis_weights(&d)?[i];
-                Ok(w)
+                let s1 = model.synthesis_weights(&d)?;
+                Ok(w0.iter().zip(s1.iter().zip(&s0)).map(|(w, (a, b))| w + (a - b)).collect())
             })
             .collect::<Result<Vec<_>>>()?;
         for shape in model.decode(&codes)? {

@@ -486,6 +486,69 @@ impl Autoencoder {
         Ok(ComponentAnalysis { reference, z_reference: zr, reference_features, components: comps })
     }
 
+    /// Component analysis of dial directions (a dial basis, [`crate::methods::sparse_dials`]):
+    /// per direction m the decoding of `zr + directions[m]` against that of `zr` — distance,
+    /// centre (the vertex of largest feature change), support (vertices changing ≥ 10 % of the
+    /// peak) and rank. `dial_ranges[m]` is the training dials' (min, max) of direction m; the
+    /// summaries are in dial units (`z_min`, `z_max` that range, `z_extreme` 1).
+    pub fn analyze_directions(
+        &self,
+        zr: &[f64],
+        directions: &[Vec<f64>],
+        dial_ranges: &[(f64, f64)],
+    ) -> Result<Vec<ComponentSummary>> {
+        let k = self.weights.k;
+        if zr.len() != k || directions.len() != k || dial_ranges.len() != k || directions.iter().any(|d| d.len() != k) {
+            return Err(Error::Invalid(format!(
+                "component analysis of dial directions: {} directions and a reference of {} numbers for {k} dimensions",
+                directions.len(),
+                zr.len()
+            )));
+        }
+        let codes: Vec<Vec<f64>> = std::iter::once(zr.to_vec())
+            .chain(directions.iter().map(|d| zr.iter().zip(d).map(|(a, b)| a + b).collect()))
+            .collect();
+        let mut reference_features = Vec::new();
+        let mut comps = Vec::with_capacity(k);
+        self.decode_each(&codes, ANALYSIS_BATCH, |i, frame| {
+            if i == 0 {
+                reference_features = frame;
+                return;
+            }
+            let m = i - 1;
+            let change: Vec<f64> = frame
+                .chunks_exact(WIDTH)
+                .zip(reference_features.chunks_exact(WIDTH))
+                .map(|(a, b)| a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum::<f64>().sqrt())
+                .collect();
+            let distance = change.iter().map(|v| v * v).sum::<f64>().sqrt();
+            let (mut center, mut peak) = (0, 0.0);
+            for (v, &c) in change.iter().enumerate() {
+                if c > peak {
+                    (center, peak) = (v, c);
+                }
+            }
+            let support_size = if peak > 0.0 { change.iter().filter(|&&v| v >= 0.1 * peak).count() } else { 0 };
+            comps.push(ComponentSummary {
+                dim: m,
+                rank: 0,
+                z_min: dial_ranges[m].0,
+                z_max: dial_ranges[m].1,
+                z_extreme: 1.0,
+                distance,
+                center,
+                support_size,
+                piece: None,
+            });
+        })?;
+        let mut order: Vec<usize> = (0..comps.len()).collect();
+        order.sort_by(|&a, &b| comps[b].distance.total_cmp(&comps[a].distance).then(a.cmp(&b)));
+        for (r, &m) in order.iter().enumerate() {
+            comps[m].rank = r;
+        }
+        Ok(comps)
+    }
+
     /// Synthesis code `z_k = Z_r,k + (Z_h,k − Z_r,k)·w_k` for the given `(dimension, weight)`
     /// pairs (other dimensions keep the reference's value).
     pub fn synthesis_code(&self, analysis: &ComponentAnalysis, weights: &[(usize, f64)]) -> Result<Vec<f64>> {

@@ -38,6 +38,7 @@ use crate::artifact::{self, ArrayStore};
 use crate::config::{AutoencoderMethod, MethodConfig, MethodKind};
 use crate::error::{Error, Result};
 use crate::mesh::{self, MeshSequence, TriMesh, Vec3};
+use crate::methods::sparse_dials::SparseDials;
 use crate::methods::support_map::{ComponentLocality, SupportDistances, component_locality, support_ramp};
 use crate::model::{Component, Model, PointFit, PoseOptions, PoseResult, RefineOptions, Refined};
 use crate::nn::ComponentSummary;
@@ -82,8 +83,16 @@ pub struct AeHeader {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub rest_code: Option<Vec<f64>>,
     /// Component analysis: per latent dimension (index = dimension) the extreme code kept,
-    /// the feature-space distance, its rank (0 = largest) and centre vertex.
+    /// the feature-space distance, its rank (0 = largest) and centre vertex. With a
+    /// `dial_basis`, the network's K entries describe the K dial directions instead (index =
+    /// dial; `z_min`, `z_max` the training dials' range, `z_extreme` 1: dial units).
     pub analysis: Vec<ComponentSummary>,
+    /// The dial basis (`dial_sparsity > 0`, [`crate::methods::sparse_dials`]): K directions of
+    /// K numbers (code units); dial m moves the network's code by direction m, and dials 0 are
+    /// the rest code. Absent: one latent dimension per dial (the paper; models trained before
+    /// it).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub dial_basis: Option<Vec<Vec<f64>>>,
 }
 
 /// Heat-geodesic distances normalised by the largest geodesic distance (the trainer's
@@ -203,6 +212,17 @@ impl AeArtifact {
                 format!("`rest_code` has {} numbers (the model {k} dimensions) or a non-finite one", z.len()),
             ));
         }
+        if let Some(b) = &header.dial_basis {
+            let dials = SparseDials { directions: b.clone() };
+            if dials.len() != header.components {
+                return Err(Error::parse(
+                    dir.join("model.json"),
+                    None,
+                    format!("`dial_basis` has {} directions; the network has {}", dials.len(), header.components),
+                ));
+            }
+            dials.check().map_err(|e| Error::parse(dir.join("model.json"), None, format!("`dial_basis`: {e}")))?;
+        }
         let train_codes = codes.chunks_exact(k.max(1)).map(<[f64]>::to_vec).collect();
         Ok(AeArtifact { header, rest, representation, model, train_codes })
     }
@@ -294,15 +314,24 @@ impl AeArtifact {
         }
     }
 
-    /// Synthesis code: z_i = Z_r,i + (Z_h,i − Z_r,i)·w_i for the given (dimension, weight)
-    /// pairs; other dimensions keep Z_r.
+    /// Synthesis code for the given (dial, weight) pairs: with a dial basis, Z_r + Σ w_m·b_m
+    /// over the network's dials; otherwise (and for a piece translation's dimension)
+    /// z_i = Z_r,i + (Z_h,i − Z_r,i)·w_i. Other dimensions keep Z_r.
     pub fn synthesis_code(&self, weights: &[(usize, f64)]) -> Result<Vec<f64>> {
         let mut z = self.reference_code().to_vec();
+        let k = self.header.components;
         for &(i, w) in weights {
             let s = self.header.analysis.get(i).ok_or_else(|| {
                 Error::Invalid(format!("component {i} does not exist ({} components)", self.n_dims()))
             })?;
-            z[i] = z[i] + (s.z_extreme - z[i]) * w;
+            match &self.header.dial_basis {
+                Some(b) if i < k => {
+                    for (zc, bc) in z[..k].iter_mut().zip(&b[i]) {
+                        *zc += w * bc;
+                    }
+                }
+                _ => z[i] = z[i] + (s.z_extreme - z[i]) * w,
+            }
         }
         Ok(z)
     }
@@ -319,12 +348,9 @@ impl AeArtifact {
         let mut order: Vec<ComponentSummary> = self.header.analysis.clone();
         order.sort_by_key(|c| c.rank);
         let codes: Vec<Vec<f64>> = std::iter::once(zr.clone())
-            .chain(order.iter().map(|c| {
-                let mut z = zr.clone();
-                z[c.dim] = c.z_extreme;
-                z
-            }))
-            .collect();
+            .map(Ok)
+            .chain(order.iter().map(|c| self.synthesis_code(&[(c.dim, 1.0)])))
+            .collect::<Result<_>>()?;
         let k = self.header.components;
         let network: Vec<Vec<f64>> = codes.iter().map(|z| z[..k].to_vec()).collect();
         let feats = self.header.scaling.invert(&self.model.decode(&network)?)?;
@@ -474,13 +500,21 @@ impl Model for AeArtifact {
     fn dials(&self, weights: &[f64]) -> Result<Vec<f64>> {
         crate::model::check_len("weights", weights.len(), self.n_dims())?;
         let zr = self.reference_code();
+        let k = self.header.components;
+        let network = match &self.header.dial_basis {
+            Some(b) => Some(SparseDials { directions: b.clone() }.dials_of(&zr[..k], &weights[..k])?),
+            None => None,
+        };
         Ok(self
             .header
             .analysis
             .iter()
-            .map(|s| {
-                let span = s.z_extreme - zr[s.dim];
-                if span != 0.0 { (weights[s.dim] - zr[s.dim]) / span } else { 0.0 }
+            .map(|s| match &network {
+                Some(d) if s.dim < k => d[s.dim],
+                _ => {
+                    let span = s.z_extreme - zr[s.dim];
+                    if span != 0.0 { (weights[s.dim] - zr[s.dim]) / span } else { 0.0 }
+                }
             })
             .collect())
     }
@@ -1017,6 +1051,7 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
             reference: 0,
             rest_code: None,
             analysis: Vec::new(),
+            dial_basis: None,
         },
         rest: prep.rest.clone(),
         representation,
@@ -1026,10 +1061,27 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
     let rest = art.rest_in_data_units();
     let rest_code = art.encode_frames(&single_frame(&rest, &rest.positions)?)?.remove(0);
     let k = ae_cfg.components;
-    let analysis = art.model.analyze_codes_around(&train_codes, &rest_code[..k])?;
+    let mut summaries: Vec<ComponentSummary> = if m.dial_sparsity > 0.0 {
+        // The dial basis: K directions in which the training codes are sparse (issue 53).
+        let network: Vec<Vec<f64>> = train_codes.iter().map(|z| z[..k].to_vec()).collect();
+        let dials = SparseDials::fit(&network, &rest_code[..k], m.dial_sparsity)?;
+        let training: Vec<Vec<f64>> =
+            network.iter().map(|z| dials.dials_of(&rest_code[..k], z)).collect::<Result<_>>()?;
+        let ranges: Vec<(f64, f64)> = (0..k)
+            .map(|d| {
+                training.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), t| (lo.min(t[d]), hi.max(t[d])))
+            })
+            .collect();
+        let summaries = art.model.analyze_directions(&rest_code[..k], &dials.directions, &ranges)?;
+        art.header.dial_basis = Some(dials.directions);
+        summaries
+    } else {
+        let analysis = art.model.analyze_codes_around(&train_codes, &rest_code[..k])?;
+        let mut s: Vec<ComponentSummary> = analysis.components.iter().map(|c| c.summary.clone()).collect();
+        s.sort_by_key(|c| c.dim);
+        s
+    };
     append_translations(&art.representation, &mut train_codes, &train_t);
-    let mut summaries: Vec<ComponentSummary> = analysis.components.iter().map(|c| c.summary.clone()).collect();
-    summaries.sort_by_key(|c| c.dim);
     summaries.extend(piece_summaries(&art.representation, ae_cfg.components, &train_t, &art_rest_t(&rest_code, k)));
     art.header.analysis = summaries;
     art.header.rest_code = Some(rest_code);
