@@ -3,12 +3,15 @@
 //! least-squares residual), and how the recovery scores change when each decoded component
 //! field loses a global rigid motion (Kabsch on all vertices, or on the half that moves least).
 //!
+//! Also: the varimax rotation of the latent space and the dial basis at several sparsities
+//! (`dial_sparsity`), read from the cell's training codes (`weights.csv`).
+//!
 //! `cargo run --release --example gt_readout_study -- MODEL_DIR TRUTH_DIR [STEP]`
 //! (STEP: the dial step of the readout, default 1 as `meshdeco eval` reads components).
-use faer::linalg::solvers::Solve;
 use meshdeco::eval::planted::Truth;
 use meshdeco::geometry::rigid_align::{kabsch, kabsch_weighted};
 use meshdeco::math::vec3::{norm, sub};
+use meshdeco::methods::sparse_dials::{SparseDials, varimax};
 use meshdeco::metrics::recovery::{best_matches, summarize};
 use meshdeco::pipeline::registry::load_model;
 type V = [f64; 3];
@@ -27,80 +30,6 @@ fn robust_align(shape: &[V], base: &[V]) -> Vec<V> {
         cur = kabsch_weighted(shape, base, &d).expect("weights are 0 or 1").apply_all(shape);
     }
     cur
-}
-
-/// Kaiser's raw varimax rotation of the columns of `y` (F × K): the orthogonal R maximising
-/// Σ_k var_f((Y·R)_fk²), so that each rotated column is large in few rows (frames).
-fn varimax(y: &faer::Mat<f64>) -> faer::Mat<f64> {
-    let (f, k) = (y.nrows(), y.ncols());
-    let mut r = faer::Mat::<f64>::identity(k, k);
-    let mut last = 0.0;
-    for _ in 0..500 {
-        let l = y * &r;
-        let mut target = faer::Mat::<f64>::zeros(f, k);
-        for c in 0..k {
-            let m2 = (0..f).map(|i| l[(i, c)] * l[(i, c)]).sum::<f64>() / f as f64;
-            for i in 0..f {
-                target[(i, c)] = l[(i, c)].powi(3) - l[(i, c)] * m2;
-            }
-        }
-        let g = y.transpose() * &target;
-        let svd = g.thin_svd().expect("SVD of a K × K matrix");
-        r = svd.U() * svd.V().transpose();
-        let obj: f64 = (0..k).map(|c| svd.S()[c]).sum();
-        if (obj - last).abs() <= 1e-10 * obj.abs() {
-            break;
-        }
-        last = obj;
-    }
-    r
-}
-
-/// Sparse non-negative dictionary of the codes: Y (F × K) ≈ W·A with W ≥ 0 (F × M), rows of A
-/// (M × K) of unit norm, minimising ½‖Y − W·A‖² + λ·Σ W (alternating: projected ISTA on W,
-/// least squares on A). Starts from `a0`. Returns A and W.
-fn sparse_dictionary(y: &faer::Mat<f64>, a0: faer::Mat<f64>, lambda: f64) -> (faer::Mat<f64>, faer::Mat<f64>) {
-    let mut a = a0;
-    let mut w = (y * a.transpose()).to_owned();
-    for v in w.col_iter_mut() {
-        for x in v.iter_mut() {
-            *x = x.max(0.0);
-        }
-    }
-    for _ in 0..200 {
-        let aat = &a * a.transpose();
-        let lip = aat.norm_l2().max(1e-12) * 1.01;
-        let ya = y * a.transpose();
-        for _ in 0..20 {
-            let grad = &w * &aat - &ya;
-            for j in 0..w.ncols() {
-                for i in 0..w.nrows() {
-                    w[(i, j)] = (w[(i, j)] - (grad[(i, j)] + lambda) / lip).max(0.0);
-                }
-            }
-        }
-        // Least squares for A, ridge-regularised (an atom no frame uses keeps its direction).
-        let mut wtw = w.transpose() * &w;
-        let tr = (0..wtw.nrows()).map(|i| wtw[(i, i)]).sum::<f64>().max(1e-30);
-        let eps = 1e-6 * tr / wtw.nrows() as f64;
-        for i in 0..wtw.nrows() {
-            wtw[(i, i)] += eps;
-        }
-        let wty = w.transpose() * y + &a * faer::Scale(eps);
-        a = wtw.llt(faer::Side::Lower).expect("WᵀW + εI is positive definite").solve(&wty);
-        for r in 0..a.nrows() {
-            let n = (0..a.ncols()).map(|c| a[(r, c)] * a[(r, c)]).sum::<f64>().sqrt();
-            if n > 1e-12 {
-                for c in 0..a.ncols() {
-                    a[(r, c)] /= n;
-                }
-                for i in 0..w.nrows() {
-                    w[(i, r)] *= n;
-                }
-            }
-        }
-    }
-    (a, w)
 }
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -136,19 +65,20 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let rb = robust_align(&shape, &base);
         robust.push(rb.iter().zip(&base).map(|(a, b)| sub(*a, *b)).collect::<Vec<V>>());
     }
-    // Readout 4: the latent space rotated (an orthogonal Q: C ← Q·C leaves the tied network's
-    // function unchanged) so that the training codes, around the rest code, are sparse
-    // (varimax); each rotated axis read at its training extreme.
+    // Readout 4: the latent space rotated by varimax (an orthogonal Q: C ← Q·C leaves the tied
+    // network's function unchanged), each rotated axis read at its training extreme; readout 5:
+    // the dial basis the trainer fits (`dial_sparsity`, src/methods/sparse_dials.rs) at several
+    // sparsities.
     let mut rotated = vec![];
     let wfile = std::path::Path::new(&a[1]).join("weights.csv");
     if let Ok(text) = std::fs::read_to_string(&wfile) {
         let codes: Vec<Vec<f64>> = text
             .lines()
             .skip(1)
-            .map(|l| l.split(',').skip(1).map(|x| x.parse::<f64>()).collect::<Result<Vec<_>, _>>())
+            .map(|l| l.split(',').skip(1).take(k).map(|x| x.parse::<f64>()).collect::<Result<Vec<_>, _>>())
             .collect::<Result<_, _>>()?;
         let y = faer::Mat::<f64>::from_fn(codes.len(), k, |i, c| codes[i][c] - w0[c]);
-        let r = varimax(&y);
+        let r = varimax(&y)?;
         let yr = &y * &r;
         let mut batch = vec![];
         for c in 0..k {
@@ -160,39 +90,26 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             meshdeco::metrics::recovery::remove_median_translation(&mut f);
             rotated.push(f);
         }
-        // Readout 5: a sparse non-negative dictionary of the codes, from the varimax axes
-        // (signed so that each axis's extreme is positive).
-        let ymax =
-            (0..y.nrows()).flat_map(|i| (0..k).map(move |c| (i, c))).map(|(i, c)| y[(i, c)].abs()).fold(0.0, f64::max);
         for share in [0.003, 0.01, 0.03, 0.1] {
-            let a0 = faer::Mat::<f64>::from_fn(k, k, |m, c| {
-                let ext = (0..yr.nrows()).map(|i| yr[(i, m)]).max_by(|a, b| a.abs().total_cmp(&b.abs())).unwrap_or(1.0);
-                r[(c, m)] * ext.signum()
-            });
-            let (dict, wts) = sparse_dictionary(&y, a0, share * ymax);
-            let mut batch = vec![];
-            for m in 0..k {
-                let ext = (0..wts.nrows()).map(|i| wts[(i, m)]).fold(0.0, f64::max).max(1e-9);
-                batch.push((0..k).map(|j| w0[j] + step * ext * dict[(m, j)]).collect::<Vec<f64>>());
-            }
+            let dials = SparseDials::fit(&codes, &w0[..k], share)?;
+            let batch: Vec<Vec<f64>> = (0..k)
+                .map(|m| {
+                    w0.iter()
+                        .enumerate()
+                        .map(|(j, z)| z + if j < k { step * dials.directions[m][j] } else { 0.0 })
+                        .collect()
+                })
+                .collect();
             let mut fields = vec![];
             for shape in model.decode(&batch)? {
                 let mut f: Vec<V> = shape.iter().zip(&base).map(|(a, b)| sub(*a, *b)).collect();
                 meshdeco::metrics::recovery::remove_median_translation(&mut f);
                 fields.push(f);
             }
-            let nz =
-                (0..wts.nrows()).flat_map(|i| (0..k).map(move |c| (i, c))).filter(|&(i, c)| wts[(i, c)] > 1e-9).count();
-            let resid = (&y - &wts * &dict).norm_l2() / y.norm_l2();
             let s = summarize(&best_matches(&truth.fields, &fields)?, &truth.counted());
             println!(
-                "  sparse dictionary λ {share} × max: found {}/{} median|cos| {:.3} iou {:.2}; codes nonzero per frame {:.1}, code residual {:.3}",
-                s.found,
-                s.counted,
-                s.median_abs_cos,
-                s.median_iou,
-                nz as f64 / wts.nrows() as f64,
-                resid
+                "  dial basis, dial_sparsity {share}: found {}/{} median|cos| {:.3} iou {:.2}",
+                s.found, s.counted, s.median_abs_cos, s.median_iou
             );
         }
     }
