@@ -241,10 +241,10 @@ fn the_autoencoders_dials_are_a_sparse_basis_of_its_training_codes() {
     assert!(o.status.success(), "{}", output_text(&o));
     let data = "path = \"set/frames.npy\"\ntemplate = \"set/template.obj\"\nrest = \"set/template.obj\"\ntrain = \"1-40\"\ntest = \"41-50\"";
     let method = "kind = \"autoencoder\"\ncomponents = 5\niterations = 300\nfit_test = false\nencoder_steps = 0";
-    let with = common::train_cli(&d, "ae", data, method);
+    let with = common::train_cli(&d, "ae", data, &format!("{method}\ndial_sparsity = 0.03"));
     let header: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(with.join("model.json")).unwrap()).unwrap();
-    let basis = header["dial_basis"].as_array().expect("a dial basis by default");
+    let basis = header["dial_basis"].as_array().expect("a dial basis with dial_sparsity > 0");
     assert_eq!(basis.len(), 5);
     let model = load_model(&with).unwrap();
     let k = model.n_components();
@@ -266,19 +266,20 @@ fn the_autoencoders_dials_are_a_sparse_basis_of_its_training_codes() {
     for (c, b) in basis[2].as_array().unwrap().iter().enumerate() {
         assert!((one[c] - rest[c] - b.as_f64().unwrap()).abs() < 1e-12);
     }
-    // The training frames' dials: each is 1 at its extreme (the largest in magnitude), and
-    // few are negative.
+    // The training frames' dials: each used one is 1 at its extreme (the largest in magnitude;
+    // a spare direction the codes hardly use, kept at 10⁻³ of the largest scale, stays below),
+    // at least one per planted deformation; and few are negative.
     let train: Vec<Vec<f64>> = model.train_weights().unwrap().iter().map(|w| model.dials(w).unwrap()).collect();
-    for m in 0..k {
-        let ext = train.iter().map(|t| t[m]).max_by(|a, b| a.abs().total_cmp(&b.abs())).unwrap();
-        assert!((ext - 1.0).abs() < 1e-6, "dial {m}'s training extreme is {ext}");
-    }
+    let extremes: Vec<f64> =
+        (0..k).map(|m| train.iter().map(|t| t[m]).max_by(|a, b| a.abs().total_cmp(&b.abs())).unwrap()).collect();
+    assert!(extremes.iter().all(|&e| e.abs() <= 1.0 + 1e-6), "{extremes:?}");
+    assert!(extremes.iter().filter(|&&e| (e - 1.0).abs() < 1e-6).count() >= 4, "{extremes:?}");
     let negative = train.iter().flatten().filter(|&&x| x < -0.2).count();
     assert!(negative * 10 <= train.len() * k, "{negative} of {} training dials below −0.2", train.len() * k);
-    // The paper's per-dimension dials.
-    let without = common::train_cli(&d, "ae0", data, &format!("{method}\ndial_sparsity = 0"));
+    // The default: the paper's per-dimension dials.
+    let without = common::train_cli(&d, "ae0", data, method);
     let header0 = std::fs::read_to_string(without.join("model.json")).unwrap();
-    assert!(!header0.contains("dial_basis"), "dial_sparsity = 0 wrote a basis");
+    assert!(!header0.contains("dial_basis"), "the default wrote a basis");
     // A damaged basis is refused, naming it.
     let mut v = header.clone();
     v["dial_basis"][1] = v["dial_basis"][0].clone();

@@ -149,10 +149,9 @@ pub struct CellResult {
 /// the default scaling range is the 0.1 % … 99.9 % quantiles widened by their width each side (`scaling_quantile`, `scaling_fence`) and the vertex
 /// steps (up to 5 by default) stop when a step's last chord step gains < 0.5 %, and a training run
 /// that stalls restarts with halved step sizes (`stall_restarts`), 6 since a set of more than 64
-/// training shapes trains on mini-batches of 32 by default (issue 57), 7 since its dials are a
-/// sparse basis of the training codes (`dial_sparsity`, issue 53); cells cached with another
-/// version are trained and measured again.
-pub const ENCODER_VERSION: u32 = 7;
+/// training shapes trains on mini-batches of 32 by default (issue 57); cells cached with
+/// another version are trained and measured again.
+pub const ENCODER_VERSION: u32 = 6;
 
 /// How a cell's components recover the true deformations of a planted dataset
 /// ([`crate::metrics::recovery`]; per deformation in the cell's `recovery.json`).

@@ -101,21 +101,15 @@ impl SparseDials {
             let ext = (0..f).map(|i| yr[(i, m)]).max_by(|p, q| p.abs().total_cmp(&q.abs())).unwrap_or(1.0);
             r[(c, m)] * if ext < 0.0 { -1.0 } else { 1.0 }
         });
-        sparse_nonnegative_dictionary(&y, &mut a, sparsity * ymax)?;
-        // Scale: each direction's training dials (exact, D = Y·A⁻¹) reach 1 at their extreme
-        // (the value of largest magnitude, so a direction the frames use negatively turns
-        // round), as the per-dimension dials reach 1 at their training extreme.
-        let d = a.transpose().partial_piv_lu().solve(y.transpose()).transpose().to_owned();
-        let directions = (0..k)
-            .map(|m| {
-                let ext = (0..f).map(|i| d[(i, m)]).max_by(|p, q| p.abs().total_cmp(&q.abs())).unwrap_or(0.0);
-                let s = if ext.abs() > 1e-12 && ext.is_finite() { ext } else { 1e-12 * ymax };
-                (0..k).map(|c| a[(m, c)] * s).collect()
-            })
-            .collect();
-        let dials = SparseDials { directions };
-        dials.check()?;
-        Ok(dials)
+        let start = a.clone();
+        // A dictionary that does not span (two atoms drawn together) gives way to the varimax
+        // axes, which always do.
+        if sparse_nonnegative_dictionary(&y, &mut a, sparsity * ymax).is_ok()
+            && let Ok(dials) = scaled(&y, &a)
+        {
+            return Ok(dials);
+        }
+        scaled(&y, &start)
     }
 
     /// Number of dials (= the latent dimension K).
@@ -182,6 +176,29 @@ impl SparseDials {
         let d = self.matrix().partial_piv_lu().solve(&rhs);
         Ok((0..k).map(|m| d[(m, 0)]).collect())
     }
+}
+
+/// The directions of unit rows `a` (K × K) scaled for the codes `y` (F × K): each by its
+/// training dial of largest magnitude (exact dials D = Y·A⁻¹), so that it is 1 there; a
+/// direction the codes hardly use (there are fewer codes than dimensions, or a spare atom)
+/// keeps at least 10⁻³ of the largest scale, so that the basis stays well conditioned.
+fn scaled(y: &Mat<f64>, a: &Mat<f64>) -> Result<SparseDials> {
+    let (f, k) = (y.nrows(), a.nrows());
+    let d = a.transpose().partial_piv_lu().solve(y.transpose()).transpose().to_owned();
+    let ext: Vec<f64> =
+        (0..k).map(|m| (0..f).map(|i| d[(i, m)]).max_by(|p, q| p.abs().total_cmp(&q.abs())).unwrap_or(0.0)).collect();
+    let largest = ext.iter().filter(|x| x.is_finite()).fold(0.0f64, |m, x| m.max(x.abs()));
+    let floor = 1e-3 * if largest > 0.0 { largest } else { 1.0 };
+    let directions = (0..k)
+        .map(|m| {
+            let e = ext[m];
+            let s = if e.is_finite() && e.abs() >= floor { e } else { floor };
+            (0..k).map(|c| a[(m, c)] * s).collect()
+        })
+        .collect();
+    let dials = SparseDials { directions };
+    dials.check()?;
+    Ok(dials)
 }
 
 /// Minimises ½‖Y − W·A‖² + λ·Σ W over W ≥ 0 and A with rows of unit length, from `a`
@@ -285,6 +302,25 @@ mod tests {
             assert!((hi - 1.0).abs() < 1e-9, "dial {m} peaks at {hi}");
             assert!(lo > -0.15, "dial {m} goes down to {lo}");
         }
+    }
+
+    #[test]
+    fn fewer_codes_than_dimensions_still_give_a_basis() {
+        // 36 SCAPE shapes and K 50: the codes span at most 3 of 6 dimensions here.
+        let (codes, reference, _) = planted(6, 3, 11);
+        let dials = SparseDials::fit(&codes, &reference, 0.03).unwrap();
+        dials.check().unwrap();
+        for z in &codes {
+            let back = dials.code_of(&reference, &dials.dials_of(&reference, z).unwrap());
+            assert!(back.iter().zip(z).all(|(a, b)| (a - b).abs() < 1e-8));
+        }
+        // A single code, and codes along one line.
+        let one = SparseDials::fit(&codes[..1], &reference, 0.03).unwrap();
+        one.check().unwrap();
+        let line: Vec<Vec<f64>> = (1..5)
+            .map(|t| reference.iter().enumerate().map(|(c, r)| r + t as f64 * (c as f64 - 2.0)).collect())
+            .collect();
+        SparseDials::fit(&line, &reference, 0.1).unwrap().check().unwrap();
     }
 
     #[test]

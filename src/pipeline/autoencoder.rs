@@ -1061,10 +1061,31 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
     let rest = art.rest_in_data_units();
     let rest_code = art.encode_frames(&single_frame(&rest, &rest.positions)?)?.remove(0);
     let k = ae_cfg.components;
-    let mut summaries: Vec<ComponentSummary> = if m.dial_sparsity > 0.0 {
-        // The dial basis: K directions in which the training codes are sparse (issue 53).
-        let network: Vec<Vec<f64>> = train_codes.iter().map(|z| z[..k].to_vec()).collect();
-        let dials = SparseDials::fit(&network, &rest_code[..k], m.dial_sparsity)?;
+    // The dial basis: K directions in which the training codes are sparse (issue 53). It needs
+    // at least DIAL_BASIS_SHAPES_PER_DIAL × K training shapes (with fewer, the sparsest basis
+    // gives each shape a dial of its own: whole poses, not localized components); a basis that
+    // cannot be fitted leaves the per-dimension dials, with a note.
+    let network: Vec<Vec<f64>> = train_codes.iter().map(|z| z[..k].to_vec()).collect();
+    let enough = network.len() >= DIAL_BASIS_SHAPES_PER_DIAL * k;
+    if m.dial_sparsity > 0.0 && !enough {
+        progress.note(&format!(
+            "the dials are the latent dimensions: a dial basis (method.dial_sparsity) needs at least {} training shapes for {k} components ({} here)",
+            DIAL_BASIS_SHAPES_PER_DIAL * k,
+            network.len()
+        ));
+    }
+    let basis = match m.dial_sparsity > 0.0 && enough {
+        true => match SparseDials::fit(&network, &rest_code[..k], m.dial_sparsity) {
+            Ok(d) => Some(d),
+            Err(e) => {
+                progress
+                    .note(&format!("no dial basis ({e}); the dials are the latent dimensions (method.dial_sparsity)"));
+                None
+            }
+        },
+        false => None,
+    };
+    let mut summaries: Vec<ComponentSummary> = if let Some(dials) = basis {
         let training: Vec<Vec<f64>> =
             network.iter().map(|z| dials.dials_of(&rest_code[..k], z)).collect::<Result<_>>()?;
         let ranges: Vec<(f64, f64)> = (0..k)
@@ -1141,6 +1162,12 @@ fn component_locality_of(art: &AeArtifact, distances: &GeodesicSupport, support:
 fn art_rest_t(code: &[f64], k: usize) -> Vec<f64> {
     code.get(k..).map(<[f64]>::to_vec).unwrap_or_default()
 }
+
+/// The dial basis (`dial_sparsity`) is fitted only with at least this many training shapes per
+/// component: with fewer, the sparsest basis of the codes gives each shape its own dial (on
+/// SCAPE, 36 shapes and K 50, every dial was a whole training pose). The ground-truth sets have
+/// 200 shapes for K 41.
+pub const DIAL_BASIS_SHAPES_PER_DIAL: usize = 2;
 
 /// A run trained when its encode–decode feature error on the training shapes gained at least
 /// this share of what the best K linear components gain over decoding every shape as the rest
