@@ -45,17 +45,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     };
     let rest = model.rest();
     let w0 = model.start_weights(Some(&rest.positions))?;
-    let d0 = model.dials(&w0)?;
     let base = model.decode(std::slice::from_ref(&w0))?.remove(0);
     let k = model.n_components();
     let mut plain = vec![];
     let mut rigid = vec![];
     let mut robust = vec![];
-    for i in 0..k {
-        let mut d = d0.clone();
-        d[i] += step;
-        let mut w = w0.clone();
-        w[i] = model.synthesis_weights(&d)?[i];
+    for w in meshdeco::model::component_weights(model.as_ref(), &w0, step)? {
         let shape = model.decode(&[w])?.remove(0);
         let mut f: Vec<V> = shape.iter().zip(&base).map(|(a, b)| sub(*a, *b)).collect();
         meshdeco::metrics::recovery::remove_median_translation(&mut f);

@@ -23,6 +23,14 @@ fn plant(dir: &Path, out: &str, extra: &[&str]) -> std::process::Output {
     meshdeco(&args, dir)
 }
 
+/// Plants 4 deformations on the tube in `d/set` (40 training, 10 test frames, no noise) and
+/// returns the `[data]` keys that train on it with its template as the rest shape.
+fn small_set(d: &Path) -> &'static str {
+    let o = plant(d, "set", &["--deformations", "4", "--train", "40", "--test", "10", "--noise", "0"]);
+    assert!(o.status.success(), "{}", output_text(&o));
+    "path = \"set/frames.npy\"\ntemplate = \"set/template.obj\"\nrest = \"set/template.obj\"\ntrain = \"1-40\"\ntest = \"41-50\""
+}
+
 fn csv_rows(path: &Path) -> Vec<std::collections::HashMap<String, String>> {
     let text = std::fs::read_to_string(path).unwrap();
     let mut lines = text.lines();
@@ -146,9 +154,7 @@ fn plant_refuses_bad_flags_and_a_damaged_truth() {
 #[test]
 fn the_autoencoders_dials_start_at_the_rest_shape_and_region_pca_names_its_regions() {
     let d = fresh_dir("planted", "origin");
-    let o = plant(&d, "set", &["--deformations", "4", "--train", "40", "--test", "10", "--noise", "0"]);
-    assert!(o.status.success(), "{}", output_text(&o));
-    let data = "path = \"set/frames.npy\"\ntemplate = \"set/template.obj\"\nrest = \"set/template.obj\"\ntrain = \"1-40\"\ntest = \"41-50\"";
+    let data = small_set(&d);
     let model = common::train_cli(
         &d,
         "ae",
@@ -237,9 +243,7 @@ fn a_run_stopped_too_early_says_it_did_not_train() {
 fn the_autoencoders_dials_are_a_sparse_basis_of_its_training_codes() {
     use meshdeco::pipeline::registry::load_model;
     let d = fresh_dir("planted", "dials");
-    let o = plant(&d, "set", &["--deformations", "4", "--train", "40", "--test", "10", "--noise", "0"]);
-    assert!(o.status.success(), "{}", output_text(&o));
-    let data = "path = \"set/frames.npy\"\ntemplate = \"set/template.obj\"\nrest = \"set/template.obj\"\ntrain = \"1-40\"\ntest = \"41-50\"";
+    let data = small_set(&d);
     let method = "kind = \"autoencoder\"\ncomponents = 5\niterations = 300\nfit_test = false\nencoder_steps = 0";
     let with = common::train_cli(&d, "ae", data, &format!("{method}\ndial_sparsity = 0.03"));
     let header: serde_json::Value =

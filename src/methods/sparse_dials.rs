@@ -60,8 +60,10 @@ pub fn varimax(y: &Mat<f64>) -> Result<Mat<f64>> {
     Ok(r)
 }
 
-/// The K dial directions of a latent space (see the module docs).
-#[derive(Debug, Clone, PartialEq)]
+/// The K dial directions of a latent space (see the module docs). Written as its list of
+/// directions (`serde(transparent)`).
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(transparent)]
 pub struct SparseDials {
     /// K directions, K numbers each (code units): dial m moves the code by `directions[m]`.
     pub directions: Vec<Vec<f64>>,
@@ -165,16 +167,27 @@ impl SparseDials {
 
     /// The dials of a code: the solution d of `Σ_m d_m·directions[m] = code − reference`.
     pub fn dials_of(&self, reference: &[f64], code: &[f64]) -> Result<Vec<f64>> {
+        Ok(self.dials_of_all(reference, std::slice::from_ref(&code.to_vec()))?.remove(0))
+    }
+
+    /// [`Self::dials_of`] for every code, with one factorisation of the directions.
+    pub fn dials_of_all(&self, reference: &[f64], codes: &[Vec<f64>]) -> Result<Vec<Vec<f64>>> {
         let k = self.directions.len();
-        if code.len() != k || reference.len() != k {
+        if reference.len() != k {
+            return Err(Error::Invalid(format!(
+                "a reference code of {} numbers: the latent dimension is {k}",
+                reference.len()
+            )));
+        }
+        if let Some(code) = codes.iter().find(|c| c.len() != k) {
             return Err(Error::Invalid(format!(
                 "dials of a code of {} numbers: the latent dimension is {k}",
                 code.len()
             )));
         }
-        let rhs = Mat::<f64>::from_fn(k, 1, |c, _| code[c] - reference[c]);
+        let rhs = Mat::<f64>::from_fn(k, codes.len(), |c, f| codes[f][c] - reference[c]);
         let d = self.matrix().partial_piv_lu().solve(&rhs);
-        Ok((0..k).map(|m| d[(m, 0)]).collect())
+        Ok((0..codes.len()).map(|f| (0..k).map(|m| d[(m, f)]).collect()).collect())
     }
 }
 

@@ -234,24 +234,13 @@ pub fn synthesize(model: &dyn Model, dials: &[f64]) -> Result<Vec<Vec3>> {
 pub fn component_fields(model: &dyn Model) -> Result<Vec<Vec<Vec3>>> {
     let rest = model.rest();
     let w0 = model.start_weights(Some(&rest.positions))?;
-    let d0 = model.dials(&w0)?;
     let k = model.n_components();
     let base = model.decode(std::slice::from_ref(&w0))?.remove(0);
     let mut fields = Vec::with_capacity(k);
+    let moved = component_weights(model, &w0, 1.0)?;
     // A few components at a time: the decoded shapes of all K are never held at once.
-    for start in (0..k).step_by(16) {
-        // Dial i moved by +1 from the start's dials: the weights move by what the dial adds
-        // (the dials map to weights affinely: dimension by dimension, or through a dial basis).
-        let s0 = model.synthesis_weights(&d0)?;
-        let codes = (start..(start + 16).min(k))
-            .map(|i| {
-                let mut d = d0.clone();
-                d[i] += 1.0;
-                let s1 = model.synthesis_weights(&d)?;
-                Ok(w0.iter().zip(s1.iter().zip(&s0)).map(|(w, (a, b))| w + (a - b)).collect())
-            })
-            .collect::<Result<Vec<_>>>()?;
-        for shape in model.decode(&codes)? {
+    for codes in moved.chunks(16) {
+        for shape in model.decode(codes)? {
             let mut f: Vec<Vec3> = shape.iter().zip(&base).map(|(a, b)| crate::math::vec3::sub(*a, *b)).collect();
             if model.alignment() == Alignment::Centroid {
                 crate::metrics::recovery::remove_median_translation(&mut f);
@@ -260,6 +249,22 @@ pub fn component_fields(model: &dyn Model) -> Result<Vec<Vec<Vec3>>> {
         }
     }
     Ok(fields)
+}
+
+/// Per component i (index order), the weights `w0` moved by dial i turned by `step` from the
+/// dials of `w0`: the weights move by what the dial adds (the dials map to weights affinely:
+/// dimension by dimension, or through the autoencoder's dial basis).
+pub fn component_weights(model: &dyn Model, w0: &[f64], step: f64) -> Result<Vec<Vec<f64>>> {
+    let d0 = model.dials(w0)?;
+    let s0 = model.synthesis_weights(&d0)?;
+    (0..model.n_components())
+        .map(|i| {
+            let mut d = d0.clone();
+            d[i] += step;
+            let s1 = model.synthesis_weights(&d)?;
+            Ok(w0.iter().zip(s1.iter().zip(&s0)).map(|(w, (a, b))| w + (a - b)).collect())
+        })
+        .collect()
 }
 
 /// `steps` shapes (≥ 2, both ends included) along the straight line between the weights of two

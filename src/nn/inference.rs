@@ -433,12 +433,6 @@ impl Autoencoder {
         }
         // Decoded a few codes at a time (codes[0] is the reference, then lo and hi of every
         // dimension): only the kept extremes' features are held, not all 2K + 1 decoded frames.
-        let change = |f: &[f64], r: &[f64]| -> Vec<f64> {
-            f.chunks_exact(WIDTH)
-                .zip(r.chunks_exact(WIDTH))
-                .map(|(a, b)| a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum::<f64>().sqrt())
-                .collect()
-        };
         let norm = |c: &[f64]| c.iter().map(|v| v * v).sum::<f64>().sqrt();
         let centers = self.centers();
         let mut reference_features = Vec::new();
@@ -449,7 +443,7 @@ impl Autoencoder {
                 reference_features = frame;
                 return;
             }
-            let c = change(&frame, &reference_features);
+            let c = vertex_change(&frame, &reference_features);
             if i % 2 == 1 {
                 lo_frame = Some((frame, c));
                 return;
@@ -460,8 +454,7 @@ impl Autoencoder {
             let (d_lo, d_hi) = (norm(&c_lo), norm(&c));
             let (z_extreme, distance, features, vertex_change) =
                 if d_hi >= d_lo { (hi, d_hi, frame, c) } else { (lo, d_lo, f_lo, c_lo) };
-            let peak = vertex_change.iter().copied().fold(0.0, f64::max);
-            let support_size = if peak > 0.0 { vertex_change.iter().filter(|&&v| v >= 0.1 * peak).count() } else { 0 };
+            let support_size = support_size(&vertex_change);
             debug_assert_eq!(vertex_change.len(), n);
             comps.push(ComponentExtreme {
                 summary: ComponentSummary {
@@ -516,11 +509,7 @@ impl Autoencoder {
                 return;
             }
             let m = i - 1;
-            let change: Vec<f64> = frame
-                .chunks_exact(WIDTH)
-                .zip(reference_features.chunks_exact(WIDTH))
-                .map(|(a, b)| a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum::<f64>().sqrt())
-                .collect();
+            let change = vertex_change(&frame, &reference_features);
             let distance = change.iter().map(|v| v * v).sum::<f64>().sqrt();
             let (mut center, mut peak) = (0, 0.0);
             for (v, &c) in change.iter().enumerate() {
@@ -528,7 +517,7 @@ impl Autoencoder {
                     (center, peak) = (v, c);
                 }
             }
-            let support_size = if peak > 0.0 { change.iter().filter(|&&v| v >= 0.1 * peak).count() } else { 0 };
+            let support_size = support_size(&change);
             comps.push(ComponentSummary {
                 dim: m,
                 rank: 0,
@@ -721,4 +710,20 @@ impl Autoencoder {
         }
         Self::new(config, module, neighbors)
     }
+}
+
+/// Per vertex, the Euclidean length of the change of its 9 features from `reference` to
+/// `frame` (both `N × 9`).
+fn vertex_change(frame: &[f64], reference: &[f64]) -> Vec<f64> {
+    frame
+        .chunks_exact(WIDTH)
+        .zip(reference.chunks_exact(WIDTH))
+        .map(|(a, b)| a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum::<f64>().sqrt())
+        .collect()
+}
+
+/// Vertices whose change is at least 10 % of the largest (0 when nothing changes).
+fn support_size(change: &[f64]) -> usize {
+    let peak = change.iter().copied().fold(0.0, f64::max);
+    if peak > 0.0 { change.iter().filter(|&&v| v >= 0.1 * peak).count() } else { 0 }
 }

@@ -92,7 +92,7 @@ pub struct AeHeader {
     /// the rest code. Absent: one latent dimension per dial (the paper; models trained before
     /// it).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub dial_basis: Option<Vec<Vec<f64>>>,
+    pub dial_basis: Option<SparseDials>,
 }
 
 /// Heat-geodesic distances normalised by the largest geodesic distance (the trainer's
@@ -212,8 +212,7 @@ impl AeArtifact {
                 format!("`rest_code` has {} numbers (the model {k} dimensions) or a non-finite one", z.len()),
             ));
         }
-        if let Some(b) = &header.dial_basis {
-            let dials = SparseDials { directions: b.clone() };
+        if let Some(dials) = &header.dial_basis {
             if dials.len() != header.components {
                 return Err(Error::parse(
                     dir.join("model.json"),
@@ -326,7 +325,7 @@ impl AeArtifact {
             })?;
             match &self.header.dial_basis {
                 Some(b) if i < k => {
-                    for (zc, bc) in z[..k].iter_mut().zip(&b[i]) {
+                    for (zc, bc) in z[..k].iter_mut().zip(&b.directions[i]) {
                         *zc += w * bc;
                     }
                 }
@@ -502,7 +501,7 @@ impl Model for AeArtifact {
         let zr = self.reference_code();
         let k = self.header.components;
         let network = match &self.header.dial_basis {
-            Some(b) => Some(SparseDials { directions: b.clone() }.dials_of(&zr[..k], &weights[..k])?),
+            Some(b) => Some(b.dials_of(&zr[..k], &weights[..k])?),
             None => None,
         };
         Ok(self
@@ -1086,15 +1085,14 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
         false => None,
     };
     let mut summaries: Vec<ComponentSummary> = if let Some(dials) = basis {
-        let training: Vec<Vec<f64>> =
-            network.iter().map(|z| dials.dials_of(&rest_code[..k], z)).collect::<Result<_>>()?;
+        let training: Vec<Vec<f64>> = dials.dials_of_all(&rest_code[..k], &network)?;
         let ranges: Vec<(f64, f64)> = (0..k)
             .map(|d| {
                 training.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), t| (lo.min(t[d]), hi.max(t[d])))
             })
             .collect();
         let summaries = art.model.analyze_directions(&rest_code[..k], &dials.directions, &ranges)?;
-        art.header.dial_basis = Some(dials.directions);
+        art.header.dial_basis = Some(dials);
         summaries
     } else {
         let analysis = art.model.analyze_codes_around(&train_codes, &rest_code[..k])?;
