@@ -102,9 +102,16 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 fields.push(f);
             }
             let s = summarize(&best_matches(&truth.fields, &fields)?, &truth.counted());
+            let mut ss: Vec<f64> =
+                fields.iter().map(|f| meshdeco::metrics::recovery::support_size(f) as f64 / f.len() as f64).collect();
+            ss.sort_by(|a, b| a.total_cmp(b));
             println!(
-                "  dial basis, dial_sparsity {share}: found {}/{} median|cos| {:.3} iou {:.2}",
-                s.found, s.counted, s.median_abs_cos, s.median_iou
+                "  dial basis, dial_sparsity {share}: found {}/{} median|cos| {:.3} iou {:.2} support {:.1} %",
+                s.found,
+                s.counted,
+                s.median_abs_cos,
+                s.median_iou,
+                100.0 * ss[ss.len() / 2]
             );
         }
     }

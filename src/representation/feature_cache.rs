@@ -792,4 +792,61 @@ mod tests {
         assert!(matches!(used, CacheUse::Unavailable(_)), "{used:?}");
         assert_eq!(f, rep.encode_selected(&seq, &[0, 1]).unwrap());
     }
+
+    /// The first checks of `open`, on files made byte by byte: too short for the magic line and
+    /// the header's offset (by one byte, and far), and a header offset outside the file or
+    /// a header past 64 MiB — each refused by name, never read.
+    #[test]
+    fn short_files_and_stray_header_offsets_are_refused() {
+        let dir = std::env::temp_dir().join(format!("meshdeco-cache-short-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("x.features");
+        let open = || FeatureFile::open(&path, "k", (1, 1, 9)).map(|_| ());
+        let magic = format!("{MAGIC}\n").into_bytes();
+        let d = magic.len() as u64;
+        let with_tail = |body_len: u64, header_at: u64| {
+            let mut b = magic.clone();
+            b.resize(body_len as usize, 0);
+            b.extend(header_at.to_le_bytes());
+            b
+        };
+        for bytes in [b"MES".to_vec(), magic.clone(), with_tail(d, d)[..(d + 7) as usize].to_vec()] {
+            std::fs::write(&path, &bytes).unwrap();
+            let e = open().unwrap_err().to_string();
+            assert!(
+                e.contains("too short for a feature cache") && e.contains("x.features"),
+                "{} bytes: {e}",
+                bytes.len()
+            );
+        }
+        // Long enough, but the offset must point into [magic end, tail start).
+        for (body, at) in [(d, d), (d + 4, d + 4), (d + 4, d - 1), (d + 4, 0), (d + 4, u64::MAX)] {
+            let bytes = with_tail(body, at);
+            std::fs::write(&path, &bytes).unwrap();
+            let e = open().unwrap_err().to_string();
+            assert!(
+                e.contains(&format!("header offset {at} is outside the file")),
+                "{body} + 8 bytes, offset {at}: {e}"
+            );
+        }
+        // A header of more than 64 MiB (a sparse file: nothing is written or read).
+        let sparse = |len: u64| {
+            use std::io::{Seek, SeekFrom, Write};
+            let mut f = std::fs::File::create(&path).unwrap();
+            f.set_len(len).unwrap();
+            f.write_all(&magic).unwrap();
+            f.seek(SeekFrom::Start(len - 8)).unwrap();
+            f.write_all(&d.to_le_bytes()).unwrap();
+        };
+        let len = d + (64 << 20) + 9;
+        sparse(len);
+        let e = open().unwrap_err().to_string();
+        assert!(e.contains(&format!("header offset {d} is outside the file ({len} bytes)")), "{e}");
+        // The largest header allowed is read (and then refused for what it says).
+        sparse(d + (64 << 20) + 8);
+        let e = open().unwrap_err().to_string();
+        assert!(e.contains("header: "), "{e}");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 }
