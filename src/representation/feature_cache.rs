@@ -849,4 +849,37 @@ mod tests {
         assert!(e.contains("header: "), "{e}");
         let _ = std::fs::remove_dir_all(&dir);
     }
+
+    /// A header whose checksum holds but whose per-frame checksums or ranges have another
+    /// length than its shape says: refused when opened, each on its own.
+    #[test]
+    fn a_header_of_the_wrong_lengths_is_refused() {
+        let (rep, seq) = setup();
+        let dir = std::env::temp_dir().join(format!("meshdeco-cache-lengths-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let frames = [1, 2];
+        let (a, used) = encode_cached(&rep, &seq, &frames, &CachePolicy::Dir(dir.clone())).unwrap();
+        let CacheUse::Written(path) = used else { panic!("{used:?}") };
+        let k = key(&rep, &seq, &frames).unwrap();
+        let expect = (2, a.n_elements, a.width);
+        let clean = std::fs::read(&path).unwrap();
+        for which in 0..4 {
+            std::fs::write(&path, &clean).unwrap();
+            edit_header(&path, true, |h| match which {
+                0 => {
+                    h.frame_crc32.pop();
+                }
+                1 => h.frame_crc32.push(0),
+                2 => {
+                    h.min_bits.pop();
+                }
+                _ => h.max_bits.push(0),
+            });
+            let e = FeatureFile::open(&path, &k, expect).map(|_| ()).unwrap_err().to_string();
+            assert!(e.contains("frame checksums, expected"), "edit {which}: {e}");
+        }
+        std::fs::write(&path, &clean).unwrap();
+        assert!(FeatureFile::open(&path, &k, expect).is_ok());
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 }
