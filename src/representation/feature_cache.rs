@@ -879,7 +879,9 @@ mod tests {
             assert!(e.contains("frame checksums, expected"), "edit {which}: {e}");
         }
         std::fs::write(&path, &clean).unwrap();
-        assert!(FeatureFile::open(&path, &k, expect).is_ok());
+        // Intact, it opens, with the frames it holds (the histogram pass of a fenced scaling
+        // reads `n_frames` of them).
+        assert_eq!(FeatureFile::open(&path, &k, expect).unwrap().n_frames(), 2);
         let _ = std::fs::remove_dir_all(&dir);
     }
 }
