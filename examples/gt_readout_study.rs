@@ -16,6 +16,14 @@ use meshdeco::metrics::recovery::{best_matches, summarize};
 use meshdeco::pipeline::registry::load_model;
 type V = [f64; 3];
 
+/// Median over the fields of the share of vertices a field moves by more than 5 % of its peak.
+fn median_support(fields: &[Vec<V>]) -> f64 {
+    let mut ss: Vec<f64> =
+        fields.iter().map(|f| meshdeco::metrics::recovery::support_size(f) as f64 / f.len() as f64).collect();
+    ss.sort_by(|a, b| a.total_cmp(b));
+    ss[ss.len() / 2]
+}
+
 fn robust_align(shape: &[V], base: &[V]) -> Vec<V> {
     // Rigid motion fitted on the vertices that move least (the field's complement), iterated.
     let mut cur = kabsch(shape, base).apply_all(shape);
@@ -102,16 +110,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 fields.push(f);
             }
             let s = summarize(&best_matches(&truth.fields, &fields)?, &truth.counted());
-            let mut ss: Vec<f64> =
-                fields.iter().map(|f| meshdeco::metrics::recovery::support_size(f) as f64 / f.len() as f64).collect();
-            ss.sort_by(|a, b| a.total_cmp(b));
             println!(
                 "  dial basis, dial_sparsity {share}: found {}/{} median|cos| {:.3} iou {:.2} support {:.1} %",
                 s.found,
                 s.counted,
                 s.median_abs_cos,
                 s.median_iou,
-                100.0 * ss[ss.len() / 2]
+                100.0 * median_support(&fields)
             );
         }
     }
@@ -146,16 +151,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         }
         let m = best_matches(&truth.fields, fields)?;
         let s = summarize(&m, &counted);
-        let mut ss: Vec<f64> =
-            fields.iter().map(|f| meshdeco::metrics::recovery::support_size(f) as f64 / f.len() as f64).collect();
-        ss.sort_by(|a, b| a.total_cmp(b));
         println!(
             "{name:>20}: found {}/{} median|cos| {:.3} iou {:.2} support {:.1} %",
             s.found,
             s.counted,
             s.median_abs_cos,
             s.median_iou,
-            100.0 * ss[ss.len() / 2]
+            100.0 * median_support(fields)
         );
     }
     Ok(())

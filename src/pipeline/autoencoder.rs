@@ -1065,24 +1065,24 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
     // gives each shape a dial of its own: whole poses, not localized components); a basis that
     // cannot be fitted leaves the per-dimension dials, with a note.
     let network: Vec<Vec<f64>> = train_codes.iter().map(|z| z[..k].to_vec()).collect();
-    let enough = network.len() >= DIAL_BASIS_SHAPES_PER_DIAL * k;
-    if m.dial_sparsity > 0.0 && !enough {
+    let basis = if m.dial_sparsity == 0.0 {
+        None
+    } else if network.len() < DIAL_BASIS_SHAPES_PER_DIAL * k {
         progress.note(&format!(
             "the dials are the latent dimensions: a dial basis (method.dial_sparsity) needs at least {} training shapes for {k} components ({} here)",
             DIAL_BASIS_SHAPES_PER_DIAL * k,
             network.len()
         ));
-    }
-    let basis = match m.dial_sparsity > 0.0 && enough {
-        true => match SparseDials::fit(&network, &rest_code[..k], m.dial_sparsity) {
+        None
+    } else {
+        match SparseDials::fit(&network, &rest_code[..k], m.dial_sparsity) {
             Ok(d) => Some(d),
             Err(e) => {
                 progress
                     .note(&format!("no dial basis ({e}); the dials are the latent dimensions (method.dial_sparsity)"));
                 None
             }
-        },
-        false => None,
+        }
     };
     let mut summaries: Vec<ComponentSummary> = if let Some(dials) = basis {
         let training: Vec<Vec<f64>> = dials.dials_of_all(&rest_code[..k], &network)?;
