@@ -407,6 +407,12 @@ pub fn open_or_build(
     open_or_build_checked(rep, seq, frames, policy, on_frames, true)
 }
 
+/// Bytes of the `f64` features of `frames` frames of `elements` elements × `width` numbers: what
+/// [`CachePolicy::folder`] weighs against [`AUTO_MIN_BYTES`].
+fn feature_bytes(frames: usize, elements: usize, width: usize) -> usize {
+    frames * elements * width * 8
+}
+
 /// [`open_or_build`]; a file found in the cache is verified only when `verify` (a caller that
 /// reads it whole with [`FeatureFile::read_all`] checks it there).
 fn open_or_build_checked(
@@ -417,8 +423,9 @@ fn open_or_build_checked(
     on_frames: &mut dyn FnMut(usize),
     verify: bool,
 ) -> Result<Opened> {
-    let bytes = frames.len() * rep.n_elements() * rep.width() * 8;
-    let Some(folder) = policy.folder(bytes) else { return Ok(Opened::NotCached) };
+    let Some(folder) = policy.folder(feature_bytes(frames.len(), rep.n_elements(), rep.width())) else {
+        return Ok(Opened::NotCached);
+    };
     if let Some(&f) = frames.iter().find(|&&f| f >= seq.n_frames()) {
         return Err(Error::Invalid(format!("frame index {f} is out of range ({} frames)", seq.n_frames())));
     }
@@ -852,6 +859,61 @@ mod tests {
 
     /// A header whose checksum holds but whose per-frame checksums or ranges have another
     /// length than its shape says: refused when opened, each on its own.
+    #[test]
+    fn a_frames_hash_is_the_files_format() {
+        // The cache key holds every frame's hash: a changed hash orphans every cache file, and a
+        // weaker one lets two frames share a key. Pinned values, and frames that differ in one
+        // coordinate's last bit, in their length, or only by a shift of a value between
+        // coordinates all hash apart.
+        let frame = [[1.0, -2.5, 3.25], [0.0, 1e-300, -0.0]];
+        let (fnv, crc) = frame_hash(&frame);
+        assert_eq!((fnv, crc), (0x24f2_22c2_5109_7265, 0x47a4_2ef5));
+        let mut bit = frame;
+        bit[1][1] = f64::from_bits(bit[1][1].to_bits() ^ 1);
+        let mut swapped = frame;
+        swapped[0].swap(0, 1);
+        let hashes =
+            [frame_hash(&frame), frame_hash(&bit), frame_hash(&swapped), frame_hash(&frame[..1]), frame_hash(&[])];
+        for i in 0..hashes.len() {
+            for j in 0..i {
+                assert!(hashes[i].0 != hashes[j].0 && hashes[i].1 != hashes[j].1, "{i} and {j}: {hashes:?}");
+            }
+        }
+        // Zero frames of different lengths: the CRC of no bytes is 0 for the empty one only; the
+        // FNV part is seeded with the length.
+        assert_ne!(frame_hash(&[[0.0; 3]]).0, frame_hash(&[[0.0; 3]; 2]).0);
+        // The key's hasher (the key names the file): pinned, and order, value and length count.
+        let key = |words: &[u64], bytes: &[u8]| {
+            let mut h = Hasher::new();
+            words.iter().for_each(|&w| h.word(w));
+            h.bytes(bytes);
+            h.finish()
+        };
+        let pinned = key(&[1, u64::MAX, 0x8000_0000_0000_0000], b"ab");
+        assert_eq!(pinned, "fb7d783792271cbf3d959641");
+        let keys = [key(&[1, 2], b""), key(&[2, 1], b""), key(&[3], b""), key(&[1, 2], b"\0"), key(&[], b"")];
+        for i in 0..keys.len() {
+            for j in 0..i {
+                assert_ne!(keys[i][..16], keys[j][..16], "{i} and {j}: {keys:?}");
+                assert_ne!(keys[i][16..], keys[j][16..], "{i} and {j}: {keys:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn auto_caches_from_64_mib_of_features() {
+        // 8 bytes per number, every factor counted: 3 × 5 × 9 numbers.
+        assert_eq!(feature_bytes(3, 5, 9), 1080);
+        assert_eq!(feature_bytes(0, 5, 9), 0);
+        // The face poses' 9-wide ACAP features of 29 299 vertices: 64 MiB at 32 frames, not 31.
+        let face = |frames| feature_bytes(frames, 29_299, 9);
+        assert!(face(31) < AUTO_MIN_BYTES && face(32) >= AUTO_MIN_BYTES);
+        assert_eq!(CachePolicy::Auto.folder(face(31)), None);
+        assert_eq!(CachePolicy::Auto.folder(face(32)), default_folder());
+        assert_eq!(CachePolicy::Off.folder(face(32)), None);
+        assert_eq!(CachePolicy::Dir("d".into()).folder(0), Some(PathBuf::from("d")));
+    }
+
     #[test]
     fn a_header_of_the_wrong_lengths_is_refused() {
         let (rep, seq) = setup();
