@@ -3,15 +3,17 @@
 //! least-squares residual), and how the recovery scores change when each decoded component
 //! field loses a global rigid motion (Kabsch on all vertices, or on the half that moves least).
 //!
-//! Also: the varimax rotation of the latent space and the dial basis at several sparsities
-//! (`dial_sparsity`), read from the cell's training codes (`weights.csv`).
+//! Also: the varimax rotation of the latent space (read from the cell's training codes,
+//! `weights.csv`), and every readout of the dials that `dial_sparsity = "auto"` tries, read as
+//! the trainer reads them (`AeArtifact::read_dials`), each with the median vertex support it
+//! chooses by.
 //!
 //! `cargo run --release --example gt_readout_study -- MODEL_DIR TRUTH_DIR [STEP]`
 //! (STEP: the dial step of the readout, default 1 as `meshdeco eval` reads components).
 use meshdeco::eval::planted::Truth;
 use meshdeco::geometry::rigid_align::{kabsch, kabsch_weighted};
 use meshdeco::math::vec3::{norm, sub};
-use meshdeco::methods::sparse_dials::{SparseDials, varimax};
+use meshdeco::methods::sparse_dials::varimax;
 use meshdeco::metrics::recovery::{best_matches, summarize};
 use meshdeco::pipeline::registry::load_model;
 type V = [f64; 3];
@@ -69,9 +71,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         robust.push(rb.iter().zip(&base).map(|(a, b)| sub(*a, *b)).collect::<Vec<V>>());
     }
     // Readout 4: the latent space rotated by varimax (an orthogonal Q: C ← Q·C leaves the tied
-    // network's function unchanged), each rotated axis read at its training extreme; readout 5:
-    // the dial basis the trainer fits (`dial_sparsity`, src/methods/sparse_dials.rs) at several
-    // sparsities.
+    // network's function unchanged), each rotated axis read at its training extreme.
     let mut rotated = vec![];
     let wfile = std::path::Path::new(&a[1]).join("weights.csv");
     if let Ok(text) = std::fs::read_to_string(&wfile) {
@@ -93,25 +93,22 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             meshdeco::metrics::recovery::remove_median_translation(&mut f);
             rotated.push(f);
         }
-        for share in [0.003, 0.01, 0.03, 0.1] {
-            let dials = SparseDials::fit(&codes, &w0[..k], share)?;
-            let batch: Vec<Vec<f64>> = (0..k)
-                .map(|m| {
-                    w0.iter()
-                        .enumerate()
-                        .map(|(j, z)| z + if j < k { step * dials.directions[m][j] } else { 0.0 })
-                        .collect()
-                })
-                .collect();
-            let mut fields = vec![];
-            for shape in model.decode(&batch)? {
-                let mut f: Vec<V> = shape.iter().zip(&base).map(|(a, b)| sub(*a, *b)).collect();
-                meshdeco::metrics::recovery::remove_median_translation(&mut f);
-                fields.push(f);
+    }
+    // Readout 5: every readout `dial_sparsity = "auto"` tries, exactly as the trainer reads it
+    // (`AeArtifact::read_dials` on the stored training codes around the rest code), with the
+    // score it chooses by (median vertex support) beside the recovery it cannot see.
+    if let Ok(mut art) = meshdeco::pipeline::autoencoder::AeArtifact::load(std::path::Path::new(&a[1])) {
+        let network = art.header.components;
+        for share in meshdeco::config::DialSparsity::CANDIDATES {
+            if let Err(e) = art.read_dials(share) {
+                println!("  dial_sparsity {share}: no readout ({e})");
+                continue;
             }
+            let mut fields = meshdeco::model::component_fields(&art)?;
+            fields.truncate(network);
             let s = summarize(&best_matches(&truth.fields, &fields)?, &truth.counted());
             println!(
-                "  dial basis, dial_sparsity {share}: found {}/{} median|cos| {:.3} iou {:.2} support {:.1} %",
+                "  dial_sparsity {share}: found {}/{} median|cos| {:.3} iou {:.2} support {:.1} %",
                 s.found,
                 s.counted,
                 s.median_abs_cos,

@@ -54,6 +54,7 @@
 //! | `checkpoint_every` | autoencoder | 200 | iterations between checkpoints |
 //! | `scaling` | autoencoder | `global` (paper `per-dimension`) | feature scaling to [−0.95, 0.95]: `per-dimension` (the paper) \| `grouped` (the reference code: one range for the 3 rotation dims, one for the 6 stretch dims) \| `global` (one range for all 9, so rotation and stretch errors weigh alike) |
 //! | `scaling_quantile`, `scaling_fence` | autoencoder | 0.001, 1 (paper: 0, min/max) | outlier fence of the feature scaling: the q … 1 − q quantiles [a, b] of the training features (each group of `scaling`), widened by fence × (b − a) on each side, are the range mapped to [−0.95, 0.95] where they lie inside the minimum and maximum, values beyond clamped; q = 0: minimum and maximum. A few extreme features (slivers of a face stretched 70×) otherwise squeeze all others; q in [0, 0.05], fence ≥ 0 |
+//! | `dial_sparsity` | autoencoder | `"auto"` (paper: 0) | how the K dials are read from the latent space after training: 0, one latent dimension per dial; λ in (0, 1), a dial basis of the training codes at that sparsity; `"auto"`, the most concentrated of the bases at 0.003, 0.01, 0.03, 0.1 (the latent dimensions with fewer than 2K training shapes or on a mesh of several pieces); [`DialSparsity`] |
 //! | `engine` | autoencoder | `hand` | `hand` (hand-written CPU step, fast) \| `graph` (Burn autodiff graph on `device`) |
 //! | `device` | autoencoder | `cpu` | `cpu` \| `wgpu` (needs `engine = "graph"` and a build with `--features wgpu`) |
 //! | `consistency` | autoencoder, pca, splocs | `global` | ACAP rotation consistency: `bfs` \| `global` |
@@ -69,8 +70,8 @@ pub use crate::representation::feature_cache::CachePolicy;
 
 mod method;
 pub use method::{
-    AE_GEODESIC_M, AutoencoderMethod, ConsistencyName, FixedCenter, MethodConfig, MethodKind, MethodSettings,
-    PcaMethod, RegionPcaMethod, SPLOCS_GEODESIC_M, ScalingName, SplocsMethod, method_key,
+    AE_GEODESIC_M, AutoencoderMethod, ConsistencyName, DialSparsity, FixedCenter, MethodConfig, MethodKind,
+    MethodSettings, PcaMethod, RegionPcaMethod, SPLOCS_GEODESIC_M, ScalingName, SplocsMethod, method_key,
 };
 
 /// Which frames belong to a split, as 0-based indices (after natural sort).
@@ -551,6 +552,39 @@ admm = { rho = 10, iterations = 10 }
         assert_eq!((m.beta2, m.scaling, m.scaling_quantile, m.scaling_fence), (0.99, ScalingName::Global, 1e-3, 1.0));
         let pca = "[data]\npath = \"synthetic:tube\"\n[method]\nkind = \"pca\"\nengine = \"graph\"\n";
         assert!(Config::from_toml(pca).unwrap_err().to_string().contains("engine"));
+    }
+
+    #[test]
+    fn dial_sparsity_is_auto_or_a_number() {
+        let base = "[data]\npath = \"synthetic:tube\"\n[method]\nkind = \"autoencoder\"\n";
+        let read = |line: &str| {
+            let c = Config::from_toml(&format!("{base}{line}\n"))?;
+            let MethodConfig::Autoencoder(m) = c.method else { panic!("kind") };
+            Ok::<_, Error>(m.dial_sparsity)
+        };
+        assert_eq!(read("").unwrap(), DialSparsity::Auto);
+        assert_eq!(read("dial_sparsity = \"auto\"").unwrap(), DialSparsity::Auto);
+        assert_eq!(read("dial_sparsity = 0").unwrap(), DialSparsity::Fixed(0.0));
+        assert_eq!(read("dial_sparsity = 0.03").unwrap(), DialSparsity::Fixed(0.03));
+        assert_eq!(DialSparsity::Auto.candidates(), DialSparsity::CANDIDATES.to_vec());
+        assert_eq!(DialSparsity::Fixed(0.1).candidates(), vec![0.1]);
+        for (line, value) in [
+            ("dial_sparsity = 1.0", "1 must be \"auto\""),
+            ("dial_sparsity = -0.5", "-0.5"),
+            ("dial_sparsity = \"often\"", "`often`"),
+        ] {
+            let e = read(line).unwrap_err().to_string();
+            assert!(e.contains("dial_sparsity") && e.contains(value), "{line}: {e}");
+        }
+        // Written back as it was given (the string or the number), and read again the same.
+        for v in [DialSparsity::Auto, DialSparsity::Fixed(0.0), DialSparsity::Fixed(0.01)] {
+            let m = AutoencoderMethod { dial_sparsity: v, ..Default::default() };
+            let table = MethodConfig::Autoencoder(m).to_table().unwrap();
+            let text = toml::to_string(&table).unwrap();
+            let back = Config::from_toml(&format!("[data]\npath = \"synthetic:tube\"\n[method]\n{text}")).unwrap();
+            let MethodConfig::Autoencoder(m) = back.method else { panic!("kind") };
+            assert_eq!(m.dial_sparsity, v, "{text}");
+        }
     }
 
     #[test]

@@ -238,7 +238,8 @@ fn a_run_stopped_too_early_says_it_did_not_train() {
 /// (`dial_sparsity`, issue 53): dials and codes map into each other exactly, dials 0 are the
 /// rest code, each dial reaches about 1 on the training frames and the training dials are
 /// nearly non-negative; with `dial_sparsity = 0` the dials are the latent dimensions (the
-/// paper). A damaged basis in `model.json` (its checksum re-recorded) is refused by name.
+/// paper); the default `"auto"` keeps the most concentrated of its candidate bases. A damaged
+/// basis in `model.json` (its checksum re-recorded) is refused by name.
 #[test]
 fn the_autoencoders_dials_are_a_sparse_basis_of_its_training_codes() {
     use meshdeco::pipeline::registry::load_model;
@@ -280,10 +281,34 @@ fn the_autoencoders_dials_are_a_sparse_basis_of_its_training_codes() {
     assert!(extremes.iter().filter(|&&e| (e - 1.0).abs() < 1e-6).count() >= 4, "{extremes:?}");
     let negative = train.iter().flatten().filter(|&&x| x < -0.2).count();
     assert!(negative * 10 <= train.len() * k, "{negative} of {} training dials below −0.2", train.len() * k);
-    // The default: the paper's per-dimension dials.
-    let without = common::train_cli(&d, "ae0", data, method);
+    // `dial_sparsity = 0`: the paper's per-dimension dials.
+    let without = common::train_cli(&d, "ae0", data, &format!("{method}\ndial_sparsity = 0"));
     let header0 = std::fs::read_to_string(without.join("model.json")).unwrap();
-    assert!(!header0.contains("dial_basis"), "the default wrote a basis");
+    assert!(!header0.contains("dial_basis"), "dial_sparsity = 0 wrote a basis");
+    // The default, "auto": the basis at each candidate sparsity, the most concentrated kept
+    // (metrics.json's dial_readouts); the stored model's components read that score again.
+    let auto = common::train_cli(&d, "auto", data, method);
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(auto.join("metrics.json")).unwrap()).unwrap();
+    let readouts = m["dial_readouts"].as_array().expect("dial_readouts in metrics.json");
+    let tried: Vec<f64> = readouts.iter().map(|r| r["dial_sparsity"].as_f64().unwrap()).collect();
+    assert_eq!(tried, meshdeco::config::DialSparsity::CANDIDATES.to_vec(), "{m}");
+    let score = |r: &serde_json::Value| r["median_concentration"].as_f64().unwrap();
+    let chosen: Vec<&serde_json::Value> = readouts.iter().filter(|r| r["chosen"] == true).collect();
+    assert_eq!(chosen.len(), 1, "{m}");
+    assert!(readouts.iter().all(|r| score(r) <= score(chosen[0])), "{m}");
+    assert!(readouts.iter().all(|r| (0.1 - 1e-9..=1.0 + 1e-9).contains(&score(r))), "{m}");
+    let model = load_model(&auto).unwrap();
+    assert!(std::fs::read_to_string(auto.join("model.json")).unwrap().contains("dial_basis"));
+    let fields = meshdeco::model::component_fields(model.as_ref()).unwrap();
+    let mut c: Vec<f64> = fields[..5].iter().map(|f| meshdeco::metrics::recovery::energy_concentration(f)).collect();
+    c.sort_by(|a, b| a.total_cmp(b));
+    assert!(
+        (c[2] - score(chosen[0])).abs() < 1e-9,
+        "stored components' median {} vs the chosen {}",
+        c[2],
+        score(chosen[0])
+    );
     // A damaged basis is refused, naming it.
     let mut v = header.clone();
     v["dial_basis"][1] = v["dial_basis"][0].clone();

@@ -382,12 +382,9 @@ pub struct AutoencoderMethod {
     pub device: ComputeDevice,
     /// Also report `test_erms_fitted`.
     pub fit_test: bool,
-    /// Sparsity λ (share of the largest training code's distance from the rest code) of the
-    /// dial basis fitted after training ([`crate::methods::sparse_dials`]): the dials are K
-    /// directions of the latent space in which the training codes are sparse non-negative
-    /// combinations (only with at least 2K training shapes); 0: one latent dimension per dial
-    /// (the paper).
-    pub dial_sparsity: f64,
+    /// How the dials are read from the latent space after training: `"auto"` (the default) or
+    /// a sparsity λ in [0, 1) ([`DialSparsity`]).
+    pub dial_sparsity: DialSparsity,
     /// Synthetic shapes per training step (augmentation in feature space; 0: none).
     pub augment: usize,
     /// `local` | `blend` | `mixed` (default `local`).
@@ -562,17 +559,90 @@ struct AutoencoderOwnKeys {
     scaling_fence: f64,
     consistency: ConsistencyName,
     fit_test: bool,
-    dial_sparsity: f64,
+    dial_sparsity: DialSparsity,
 }
 
 /// Default `scaling_quantile` of a config file (the paper's is 0: minimum and maximum).
 pub const AE_SCALING_QUANTILE: f64 = 1e-3;
 
-/// Default `dial_sparsity` of a config file: 0, the paper's one latent dimension per dial. The
-/// value chosen for recovery on the ground-truth validation sets is 0.03 (docs/ground-truth.md);
-/// it is not the default because on a mesh of two pieces one of its directions spread over
-/// both (`tests/artefact_integrity.rs`), where the per-dimension dials stay on one.
-pub const AE_DIAL_SPARSITY: f64 = 0.0;
+/// Default `dial_sparsity` of a config file: `"auto"`, chosen on the ground-truth validation
+/// sets (docs/ground-truth.md). The paper's readout, one latent dimension per dial, is
+/// `dial_sparsity = 0`.
+pub const AE_DIAL_SPARSITY: DialSparsity = DialSparsity::Auto;
+
+/// The autoencoder's `dial_sparsity`: how its K dials are read from the latent space after
+/// training (decoding never changes: every readout is an invertible linear map of the code).
+///
+/// A number λ in (0, 1) fits the dial basis of [`crate::methods::sparse_dials`] at that
+/// sparsity (λ as a share of the largest training code's distance from the rest code): K
+/// directions in which the training codes are sparse non-negative combinations, fitted only
+/// with at least 2K training shapes. 0: one latent dimension per dial (the paper). `"auto"`:
+/// the dial basis at each sparsity of [`DialSparsity::CANDIDATES`] is fitted and the one whose
+/// components are the most concentrated is kept: the largest median over the K components of
+/// the share of each component's squared displacement that its tenth of vertices moving most
+/// carry ([`crate::metrics::recovery::energy_concentration`]), read around the rest shape as
+/// `meshdeco eval` reads them. It needs no ground truth; with fewer than 2K training shapes the
+/// dials are the latent dimensions. Written as the number or the string `"auto"`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum DialSparsity {
+    /// Fit the basis at each of [`DialSparsity::CANDIDATES`] and keep the most concentrated.
+    Auto,
+    /// This λ (0: one latent dimension per dial).
+    Fixed(f64),
+}
+
+impl DialSparsity {
+    /// The sparsities `"auto"` tries, in order (a tie keeps the earlier): four, a factor of about
+    /// 3 apart. (The latent dimensions are not among them: on the validation body their
+    /// components are more concentrated than any basis' and find 4 of 30 against the chosen
+    /// basis' 11; docs/ground-truth.md.)
+    pub const CANDIDATES: [f64; 4] = [0.003, 0.01, 0.03, 0.1];
+
+    /// The sparsities to try: the candidates for `"auto"`, else the one value.
+    pub fn candidates(self) -> Vec<f64> {
+        match self {
+            DialSparsity::Auto => Self::CANDIDATES.to_vec(),
+            DialSparsity::Fixed(s) => vec![s],
+        }
+    }
+}
+
+impl Serialize for DialSparsity {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> std::result::Result<S::Ok, S::Error> {
+        match self {
+            DialSparsity::Auto => s.serialize_str("auto"),
+            DialSparsity::Fixed(x) => s.serialize_f64(*x),
+        }
+    }
+}
+
+impl<'de> Deserialize<'de> for DialSparsity {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> std::result::Result<Self, D::Error> {
+        struct Visitor;
+        impl serde::de::Visitor<'_> for Visitor {
+            type Value = DialSparsity;
+            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                f.write_str("\"auto\" or a number in [0, 1)")
+            }
+            fn visit_str<E: serde::de::Error>(self, v: &str) -> std::result::Result<DialSparsity, E> {
+                match v {
+                    "auto" => Ok(DialSparsity::Auto),
+                    _ => Err(E::custom(format!("`{v}` is not \"auto\" or a number in [0, 1)"))),
+                }
+            }
+            fn visit_f64<E: serde::de::Error>(self, v: f64) -> std::result::Result<DialSparsity, E> {
+                Ok(DialSparsity::Fixed(v))
+            }
+            fn visit_i64<E: serde::de::Error>(self, v: i64) -> std::result::Result<DialSparsity, E> {
+                Ok(DialSparsity::Fixed(v as f64))
+            }
+            fn visit_u64<E: serde::de::Error>(self, v: u64) -> std::result::Result<DialSparsity, E> {
+                Ok(DialSparsity::Fixed(v as f64))
+            }
+        }
+        d.deserialize_any(Visitor)
+    }
+}
 
 /// Default `scaling_fence` of a config file.
 pub const AE_SCALING_FENCE: f64 = 1.0;
@@ -769,10 +839,12 @@ impl MethodSettings for AutoencoderMethod {
                 format!("{} must be a finite number ≥ 0", self.scaling_fence),
             ));
         }
-        if !(0.0..1.0).contains(&self.dial_sparsity) {
+        if let DialSparsity::Fixed(s) = self.dial_sparsity
+            && !(0.0..1.0).contains(&s)
+        {
             return Err(Error::config(
                 "method.dial_sparsity",
-                format!("{} must be in [0, 1) (0: one latent dimension per dial)", self.dial_sparsity),
+                format!("{s} must be \"auto\" or in [0, 1) (0: one latent dimension per dial)"),
             ));
         }
         positive("method.geodesic_m", self.geodesic_m)

@@ -32,10 +32,11 @@ use super::ae_vertex_loss::AcapVertexLoss;
 use super::ae_vertex_steps::{VertexSteps, vertex_steps_apply};
 use super::geodesic_support::GeodesicSupport;
 use super::linear::{rest_from_arrays, rest_to_arrays};
+use super::metrics_file::DialReadout;
 use super::pose::single_frame;
 use super::registry::{FitContext, FitStats, Fitted};
 use crate::artifact::{self, ArrayStore};
-use crate::config::{AutoencoderMethod, MethodConfig, MethodKind};
+use crate::config::{AutoencoderMethod, DialSparsity, MethodConfig, MethodKind};
 use crate::error::{Error, Result};
 use crate::mesh::{self, MeshSequence, TriMesh, Vec3};
 use crate::methods::sparse_dials::SparseDials;
@@ -333,6 +334,38 @@ impl AeArtifact {
             }
         }
         Ok(z)
+    }
+
+    /// Reads the network's K dials at `sparsity` (`dial_sparsity`, [`crate::config::DialSparsity`]):
+    /// 0, one latent dimension per dial; otherwise the dial basis of the training codes around
+    /// the reference code at that sparsity ([`SparseDials::fit`]). Sets `header.dial_basis` and
+    /// the network's summaries in `header.analysis` (the piece translations' summaries after
+    /// them are kept). Decoding is unchanged. Errors when the basis cannot be fitted (the model
+    /// is left as it was).
+    pub fn read_dials(&mut self, sparsity: f64) -> Result<()> {
+        let k = self.header.components;
+        let zr = self.reference_code()[..k].to_vec();
+        let network: Vec<Vec<f64>> = self.train_codes.iter().map(|z| z[..k].to_vec()).collect();
+        let (basis, mut summaries) = if sparsity == 0.0 {
+            let analysis = self.model.analyze_codes_around(&network, &zr)?;
+            let mut s: Vec<ComponentSummary> = analysis.components.iter().map(|c| c.summary.clone()).collect();
+            s.sort_by_key(|c| c.dim);
+            (None, s)
+        } else {
+            let dials = SparseDials::fit(&network, &zr, sparsity)?;
+            let training: Vec<Vec<f64>> = dials.dials_of_all(&zr, &network)?;
+            let ranges: Vec<(f64, f64)> = (0..k)
+                .map(|d| {
+                    training.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), t| (lo.min(t[d]), hi.max(t[d])))
+                })
+                .collect();
+            let summaries = self.model.analyze_directions(&zr, &dials.directions, &ranges)?;
+            (Some(dials), summaries)
+        };
+        summaries.extend(self.header.analysis.iter().filter(|s| s.dim >= k).cloned());
+        self.header.dial_basis = basis;
+        self.header.analysis = summaries;
+        Ok(())
     }
 
     /// Rest mesh in data units.
@@ -1060,51 +1093,36 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
     let rest = art.rest_in_data_units();
     let rest_code = art.encode_frames(&single_frame(&rest, &rest.positions)?)?.remove(0);
     let k = ae_cfg.components;
-    // The dial basis: K directions in which the training codes are sparse (issue 53). It needs
-    // at least DIAL_BASIS_SHAPES_PER_DIAL × K training shapes (with fewer, the sparsest basis
-    // gives each shape a dial of its own: whole poses, not localized components); a basis that
-    // cannot be fitted leaves the per-dimension dials, with a note.
-    let network: Vec<Vec<f64>> = train_codes.iter().map(|z| z[..k].to_vec()).collect();
-    let basis = if m.dial_sparsity == 0.0 {
-        None
-    } else if network.len() < DIAL_BASIS_SHAPES_PER_DIAL * k {
+    // The dials (`dial_sparsity`, issue 53): the latent dimensions, or a dial basis (K
+    // directions in which the training codes are sparse), or for "auto" the most localized of
+    // both kinds (`choose_dials`). A basis needs at least DIAL_BASIS_SHAPES_PER_DIAL × K
+    // training shapes (with fewer, the sparsest basis gives each shape a dial of its own: whole
+    // poses, not localized components); a basis that cannot be fitted is left out, with a note.
+    let mut sparsities = m.dial_sparsity.candidates();
+    if m.dial_sparsity == DialSparsity::Auto && art.representation.pieces().is_some() {
+        // On a mesh of several pieces a basis direction can move two pieces at once (each
+        // latent dimension of the synthetic two tubes stays on one; a basis fitted there did
+        // not): "auto" keeps the latent dimensions; a number still fits a basis.
+        progress.note(
+            "the dials are the latent dimensions: the mesh has several pieces, and a dial basis can move two at once (method.dial_sparsity = a number fits one)",
+        );
+        sparsities = vec![0.0];
+    } else if sparsities.iter().any(|&s| s > 0.0) && train_codes.len() < DIAL_BASIS_SHAPES_PER_DIAL * k {
         progress.note(&format!(
             "the dials are the latent dimensions: a dial basis (method.dial_sparsity) needs at least {} training shapes for {k} components ({} here)",
             DIAL_BASIS_SHAPES_PER_DIAL * k,
-            network.len()
+            train_codes.len()
         ));
-        None
-    } else {
-        match SparseDials::fit(&network, &rest_code[..k], m.dial_sparsity) {
-            Ok(d) => Some(d),
-            Err(e) => {
-                progress
-                    .note(&format!("no dial basis ({e}); the dials are the latent dimensions (method.dial_sparsity)"));
-                None
-            }
-        }
-    };
-    let mut summaries: Vec<ComponentSummary> = if let Some(dials) = basis {
-        let training: Vec<Vec<f64>> = dials.dials_of_all(&rest_code[..k], &network)?;
-        let ranges: Vec<(f64, f64)> = (0..k)
-            .map(|d| {
-                training.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), t| (lo.min(t[d]), hi.max(t[d])))
-            })
-            .collect();
-        let summaries = art.model.analyze_directions(&rest_code[..k], &dials.directions, &ranges)?;
-        art.header.dial_basis = Some(dials);
-        summaries
-    } else {
-        let analysis = art.model.analyze_codes_around(&train_codes, &rest_code[..k])?;
-        let mut s: Vec<ComponentSummary> = analysis.components.iter().map(|c| c.summary.clone()).collect();
-        s.sort_by_key(|c| c.dim);
-        s
-    };
+        sparsities = vec![0.0];
+    }
     append_translations(&art.representation, &mut train_codes, &train_t);
-    summaries.extend(piece_summaries(&art.representation, ae_cfg.components, &train_t, &art_rest_t(&rest_code, k)));
-    art.header.analysis = summaries;
+    art.header.analysis = piece_summaries(&art.representation, ae_cfg.components, &train_t, &art_rest_t(&rest_code, k));
     art.header.rest_code = Some(rest_code);
     art.train_codes = train_codes;
+    let dial_readouts = choose_dials(&mut art, &sparsities, progress)?;
+    if dial_readouts.len() > 1 {
+        progress.note(&describe_dial_choice(&dial_readouts));
+    }
     let locality = component_locality_of(&art, &distances, [ae_cfg.d_min, ae_cfg.d_max]);
     Ok(Fitted {
         model: Box::new(art),
@@ -1119,9 +1137,88 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
             feature_norm: Some((feature_norm, scale)),
             warning,
             training_gain,
+            dial_readouts,
         },
         method: MethodConfig::Autoencoder(written_method(m, batch, data.n_shapes())),
     })
+}
+
+/// Sets `art`'s dials to the readout among `sparsities` (not empty; 0: the latent dimensions,
+/// else the dial basis at that sparsity, [`AeArtifact::read_dials`]) whose K network components
+/// are the most concentrated: the largest median over them of the share of each one's squared
+/// displacement that its tenth of vertices moving most carry
+/// ([`crate::metrics::recovery::energy_concentration`]), read around the rest shape as
+/// `meshdeco eval` and `metrics.json` read components ([`crate::model::component_fields`]). A
+/// tie keeps the earlier; a basis that cannot be fitted is left out with a note (the latent
+/// dimensions, always readable, are the last resort). Returns every readout's score, the kept
+/// one marked; nothing is scored for a single readout (an empty list).
+fn choose_dials(
+    art: &mut AeArtifact,
+    sparsities: &[f64],
+    progress: &mut dyn super::Progress,
+) -> Result<Vec<DialReadout>> {
+    let k = art.header.components;
+    let mut scores: Vec<DialReadout> = Vec::with_capacity(sparsities.len());
+    let mut best: Option<(usize, Option<SparseDials>, Vec<ComponentSummary>)> = None;
+    for &sparsity in sparsities {
+        if let Err(e) = art.read_dials(sparsity) {
+            progress.note(&format!("no dial basis at dial_sparsity {sparsity} ({e}) (method.dial_sparsity)"));
+            continue;
+        }
+        if sparsities.len() == 1 {
+            return Ok(Vec::new());
+        }
+        let fields = crate::model::component_fields(art)?;
+        let median_of = |score: &dyn Fn(&[Vec3]) -> f64| {
+            let v: Vec<f64> = fields[..k].iter().map(|f| score(f)).collect();
+            super::metrics_file::median(&v).unwrap_or(0.0)
+        };
+        let concentration = median_of(&crate::metrics::recovery::energy_concentration);
+        let support = median_of(&|f| crate::metrics::recovery::support_size(f) as f64 / f.len().max(1) as f64);
+        if best.as_ref().is_none_or(|(i, _, _)| concentration > scores[*i].median_concentration) {
+            best = Some((scores.len(), art.header.dial_basis.clone(), art.header.analysis.clone()));
+        }
+        scores.push(DialReadout {
+            dial_sparsity: sparsity,
+            median_concentration: concentration,
+            median_vertex_support: support,
+            chosen: false,
+        });
+    }
+    match best {
+        Some((i, basis, analysis)) => {
+            art.header.dial_basis = basis;
+            art.header.analysis = analysis;
+            scores[i].chosen = true;
+            Ok(scores)
+        }
+        None => {
+            progress.note("the dials are the latent dimensions (method.dial_sparsity)");
+            art.read_dials(0.0)?;
+            Ok(Vec::new())
+        }
+    }
+}
+
+/// The line `train` prints about the dials `"auto"` chose.
+fn describe_dial_choice(scores: &[DialReadout]) -> String {
+    let one = |r: &DialReadout| {
+        format!(
+            "{} {:.1} % (moving {:.0} % of the vertices)",
+            r.dial_sparsity,
+            100.0 * r.median_concentration,
+            100.0 * r.median_vertex_support
+        )
+    };
+    let tried: Vec<String> = scores.iter().map(|r| if r.chosen { format!("**{}**", one(r)) } else { one(r) }).collect();
+    match scores.iter().find(|r| r.chosen) {
+        Some(c) => format!(
+            "dials: the dial basis at dial_sparsity {} (method.dial_sparsity = \"auto\": the most concentrated components; median share of a component's squared displacement on its tenth of vertices moving most, per sparsity tried: {})",
+            c.dial_sparsity,
+            tried.join(", ")
+        ),
+        None => String::new(),
+    }
 }
 
 /// The method config the artefact's `config.toml` records: `m`, with the mini-batch the default

@@ -450,6 +450,7 @@ pub fn fit_splocs(m: &SplocsMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -
             feature_norm: None,
             warning: None,
             training_gain: None,
+            dial_readouts: Vec::new(),
         },
         method: MethodConfig::Splocs(m.clone()),
     })

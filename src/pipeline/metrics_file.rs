@@ -85,6 +85,26 @@ pub struct Metrics {
     /// default run 0.993, the noisy ground-truth test face 0.81; below 0.2 the run did not train).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub training_gain: Option<f64>,
+    /// Autoencoder with `dial_sparsity = "auto"` only: every readout of the dials it tried, the
+    /// one kept marked `chosen` ([`DialReadout`]). Absent otherwise.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub dial_readouts: Vec<DialReadout>,
+}
+
+/// One readout of the autoencoder's dials that `dial_sparsity = "auto"` tried.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DialReadout {
+    /// The readout: 0 the latent dimensions, else the dial basis at this sparsity.
+    pub dial_sparsity: f64,
+    /// What the choice reads: the median over the network's K components of the share of each
+    /// one's squared displacement that its tenth of vertices moving most carry, read around the
+    /// rest shape ([`crate::metrics::recovery::energy_concentration`]; 0.1–1).
+    pub median_concentration: f64,
+    /// The median over them of the share of vertices each moves by more than 5 % of its peak
+    /// (0–1; shown beside it, not chosen by).
+    pub median_vertex_support: f64,
+    /// The readout kept: the largest median concentration (a tie keeps the earlier).
+    pub chosen: bool,
 }
 
 /// Median of a slice (mean of the two middle values for even lengths); `None` when empty.

@@ -55,6 +55,9 @@ pub struct FitStats {
     /// training shape as the rest shape that its decoding makes (`metrics.json`'s
     /// `training_gain`; 1: as good as the linear components).
     pub training_gain: Option<f64>,
+    /// Autoencoder with `dial_sparsity = "auto"`: the readouts of the dials it tried
+    /// (`metrics.json`'s `dial_readouts`; empty otherwise).
+    pub dial_readouts: Vec<super::metrics_file::DialReadout>,
 }
 
 /// A fitted model with its statistics and the resolved method config (every default written

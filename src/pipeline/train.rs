@@ -210,6 +210,7 @@ fn fit_measure_write(
         learning_rate_scale: stats.feature_norm.map(|(_, s)| s),
         training_warning: stats.warning.clone(),
         training_gain: stats.training_gain,
+        dial_readouts: stats.dial_readouts.clone(),
     };
 
     crate::timing::record("measure", t.elapsed().as_secs_f64());
