@@ -868,6 +868,9 @@ mod tests {
         let frame = [[1.0, -2.5, 3.25], [0.0, 1e-300, -0.0]];
         let (fnv, crc) = frame_hash(&frame);
         assert_eq!((fnv, crc), (0x24f2_22c2_5109_7265, 0x47a4_2ef5));
+        // One vertex: the length seed's low bit is one the FNV offset also has (so `^` and `|`
+        // differ there).
+        assert_eq!(frame_hash(&frame[..1]), (0x6ef9_971b_10eb_89cf, 0x06ad_2a93));
         let mut bit = frame;
         bit[1][1] = f64::from_bits(bit[1][1].to_bits() ^ 1);
         let mut swapped = frame;
