@@ -3,33 +3,24 @@
 //!
 //! `cargo run --release --example dial_rule_study -- TRUTH_DIR MODEL_DIR…` (TRUTH_DIR `-`: no
 //! truth, the scores only)
-//! prints one line per model and readout (0: the latent dimensions; else the dial basis).
+//! prints one line per model and readout (the dial basis at each sparsity `"auto"` tries), read as
+//! the trainer reads them (`AeArtifact::read_dials`); `top10` is the score it keeps by
+//! (`energy_concentration`).
 use meshdeco::config::DialSparsity;
 use meshdeco::eval::planted::Truth;
-use meshdeco::metrics::recovery::{best_matches, summarize, support_size};
+use meshdeco::metrics::recovery::{best_matches, energy_concentration, summarize, support, support_size};
 use meshdeco::model::Model;
 use meshdeco::pipeline::autoencoder::AeArtifact;
 type V = [f64; 3];
 
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(|a, b| a.total_cmp(b));
-    if v.is_empty() { f64::NAN } else { v[v.len() / 2] }
+/// The median the trainer takes (mean of the two middle values for an even count).
+fn median(v: Vec<f64>) -> f64 {
+    meshdeco::pipeline::metrics_file::median(&v).unwrap_or(f64::NAN)
 }
 
 /// Share of vertices above `frac` of the field's peak.
 fn support_at(f: &[V], frac: f64) -> f64 {
-    let m: Vec<f64> = f.iter().map(|d| (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt()).collect();
-    let peak = m.iter().copied().fold(0.0, f64::max);
-    m.iter().filter(|&&x| x > frac * peak).count() as f64 / m.len().max(1) as f64
-}
-
-/// Share of the field's squared norm in its 10 % largest vertices.
-fn top_energy(f: &[V]) -> f64 {
-    let mut m: Vec<f64> = f.iter().map(|d| d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).collect();
-    m.sort_by(|a, b| b.total_cmp(a));
-    let total: f64 = m.iter().sum();
-    let top: f64 = m[..(m.len() / 10).max(1)].iter().sum();
-    if total > 0.0 { top / total } else { 0.0 }
+    support(f, frac).into_iter().filter(|&b| b).count() as f64 / f.len().max(1) as f64
 }
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -64,7 +55,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             };
             let s5 = median(fields.iter().map(|f| support_size(f) as f64 / f.len() as f64).collect());
             let s20 = median(fields.iter().map(|f| support_at(f, 0.2)).collect());
-            let te = median(fields.iter().map(|f| top_energy(f)).collect());
+            let te = median(fields.iter().map(|f| energy_concentration(f)).collect());
             // Training dials: how many per shape are active (> 0.1 of the dial's extreme), and
             // the share of their magnitude that is negative.
             let (mut active, mut neg, mut tot) = (0.0, 0.0, 0.0);

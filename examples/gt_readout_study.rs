@@ -4,9 +4,8 @@
 //! field loses a global rigid motion (Kabsch on all vertices, or on the half that moves least).
 //!
 //! Also: the varimax rotation of the latent space (read from the cell's training codes,
-//! `weights.csv`), and every readout of the dials that `dial_sparsity = "auto"` tries, read as
-//! the trainer reads them (`AeArtifact::read_dials`), each with the median vertex support it
-//! chooses by.
+//! `weights.csv`). The dial bases `dial_sparsity = "auto"` tries, and its score, are read by
+//! `examples/dial_rule_study.rs` (until issue 53's rule, this example refitted them itself).
 //!
 //! `cargo run --release --example gt_readout_study -- MODEL_DIR TRUTH_DIR [STEP]`
 //! (STEP: the dial step of the readout, default 1 as `meshdeco eval` reads components).
@@ -92,29 +91,6 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             let mut f: Vec<V> = shape.iter().zip(&base).map(|(a, b)| sub(*a, *b)).collect();
             meshdeco::metrics::recovery::remove_median_translation(&mut f);
             rotated.push(f);
-        }
-    }
-    // Readout 5: every readout `dial_sparsity = "auto"` tries, exactly as the trainer reads it
-    // (`AeArtifact::read_dials` on the stored training codes around the rest code), with the
-    // score it chooses by (median vertex support) beside the recovery it cannot see.
-    if let Ok(mut art) = meshdeco::pipeline::autoencoder::AeArtifact::load(std::path::Path::new(&a[1])) {
-        let network = art.header.components;
-        for share in meshdeco::config::DialSparsity::CANDIDATES {
-            if let Err(e) = art.read_dials(share) {
-                println!("  dial_sparsity {share}: no readout ({e})");
-                continue;
-            }
-            let mut fields = meshdeco::model::component_fields(&art)?;
-            fields.truncate(network);
-            let s = summarize(&best_matches(&truth.fields, &fields)?, &truth.counted());
-            println!(
-                "  dial_sparsity {share}: found {}/{} median|cos| {:.3} iou {:.2} support {:.1} %",
-                s.found,
-                s.counted,
-                s.median_abs_cos,
-                s.median_iou,
-                100.0 * median_support(&fields)
-            );
         }
     }
     let counted = truth.counted();

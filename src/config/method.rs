@@ -581,8 +581,9 @@ pub const AE_DIAL_SPARSITY: DialSparsity = DialSparsity::Auto;
 /// components are the most concentrated is kept: the largest median over the K components of
 /// the share of each component's squared displacement that its tenth of vertices moving most
 /// carry ([`crate::metrics::recovery::energy_concentration`]), read around the rest shape as
-/// `meshdeco eval` reads them. It needs no ground truth; with fewer than 2K training shapes the
-/// dials are the latent dimensions. Written as the number or the string `"auto"`.
+/// `meshdeco eval` reads them. It needs no ground truth; with fewer than 2K training shapes, or
+/// on a mesh of several pieces (a direction can move two pieces), the dials are the latent
+/// dimensions. Written as the number or the string `"auto"`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum DialSparsity {
     /// Fit the basis at each of [`DialSparsity::CANDIDATES`] and keep the most concentrated.

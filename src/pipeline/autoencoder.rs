@@ -1095,9 +1095,10 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
     let k = ae_cfg.components;
     // The dials (`dial_sparsity`, issue 53): the latent dimensions, or a dial basis (K
     // directions in which the training codes are sparse), or for "auto" the most concentrated
-    // of the bases at `DialSparsity::CANDIDATES` (`choose_dials`). A basis needs at least DIAL_BASIS_SHAPES_PER_DIAL × K
-    // training shapes (with fewer, the sparsest basis gives each shape a dial of its own: whole
-    // poses, not localized components); a basis that cannot be fitted is left out, with a note.
+    // of the bases at `DialSparsity::CANDIDATES` (`choose_dials`). A basis needs at least
+    // DIAL_BASIS_SHAPES_PER_DIAL × K training shapes (with fewer, the sparsest basis gives each
+    // shape a dial of its own: whole poses, not localized components); a basis that cannot be
+    // fitted is left out, with a note.
     let mut sparsities = m.dial_sparsity.candidates();
     if m.dial_sparsity == DialSparsity::Auto && art.representation.pieces().is_some() {
         // On a mesh of several pieces a basis direction can move two pieces at once (each

@@ -857,8 +857,6 @@ mod tests {
         let _ = std::fs::remove_dir_all(&dir);
     }
 
-    /// A header whose checksum holds but whose per-frame checksums or ranges have another
-    /// length than its shape says: refused when opened, each on its own.
     #[test]
     fn a_frames_hash_is_the_files_format() {
         // The cache key holds every frame's hash: a changed hash orphans every cache file, and a
@@ -917,6 +915,8 @@ mod tests {
         assert_eq!(CachePolicy::Dir("d".into()).folder(0), Some(PathBuf::from("d")));
     }
 
+    /// A header whose checksum holds but whose per-frame checksums or ranges have another
+    /// length than its shape says: refused when opened, each on its own.
     #[test]
     fn a_header_of_the_wrong_lengths_is_refused() {
         let (rep, seq) = setup();
