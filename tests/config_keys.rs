@@ -38,6 +38,7 @@ fn every_autoencoder_network_field_is_a_method_key() {
         ("components", "components = 7", json!(7)),
         ("layers", "layers = 2", json!(2)),
         ("init_std", "init_std = 0.05", json!(0.05)),
+        ("init_bias", "init_bias = \"mean\"", json!("mean")),
         ("learning_rate", "learning_rate = 0.01", json!(0.01)),
         ("learning_rate_final", "learning_rate_final = 0.0001", json!(0.0001)),
         ("learning_rate_norm", "learning_rate_norm = 40.0", json!(40.0)),
@@ -80,11 +81,17 @@ fn every_autoencoder_network_field_is_a_method_key() {
         serde_json::to_value(m.network_config()).unwrap()
     });
     // And through the validated path, the keys a default build accepts.
-    let t: toml::Table =
-        toml::from_str("kind = \"autoencoder\"\ninit_std = 0.05\nepsilon = 1e-6\naugment_mix = \"mixed\"").unwrap();
+    let t: toml::Table = toml::from_str(
+        "kind = \"autoencoder\"\ninit_std = 0.05\nepsilon = 1e-6\naugment_mix = \"mixed\"\ninit_bias = \"mean\"",
+    )
+    .unwrap();
     let MethodConfig::Autoencoder(m) = MethodConfig::from_table(&t).unwrap() else { panic!("kind") };
     let n = m.network_config();
-    assert_eq!((n.init_std, n.epsilon), (0.05, 1e-6));
+    assert_eq!((n.init_std, n.epsilon, n.init_bias), (0.05, 1e-6, meshdeco::nn::config::InitBias::Mean));
+    // A value that is neither names the key and the choices.
+    let bad: toml::Table = toml::from_str("kind = \"autoencoder\"\ninit_bias = \"median\"").unwrap();
+    let e = MethodConfig::from_table(&bad).unwrap_err().to_string();
+    assert!(e.contains("init_bias") && e.contains("zero") && e.contains("mean"), "{e}");
     // The resolved table (an artefact's config.toml) parses back to the same config.
     let back = MethodConfig::from_table(&MethodConfig::Autoencoder(m.clone()).to_table().unwrap()).unwrap();
     assert_eq!(back, MethodConfig::Autoencoder(m));

@@ -21,7 +21,7 @@ use crate::methods::region_pca::RegionPcaConfig;
 use crate::methods::segmentation::SegmentationConfig;
 use crate::methods::splocs::{AdmmConfig, SplocsConfig};
 use crate::nn::augment::AugmentMix;
-use crate::nn::config::{AutoencoderConfig, ComputeDevice, EncoderKind, Engine};
+use crate::nn::config::{AutoencoderConfig, ComputeDevice, EncoderKind, Engine, InitBias};
 use crate::representation::RepresentationKind;
 use crate::representation::acap::Consistency;
 use crate::representation::scaling::ScalingMode;
@@ -359,6 +359,9 @@ pub struct AutoencoderMethod {
     /// Standard deviation of the normal initialisation (default 0.02).
     #[serde(skip_serializing_if = "network_default::init_std")]
     pub init_std: f64,
+    /// `zero` (the paper) | `mean`: the first layer's initial biases ([`InitBias`]).
+    #[serde(skip_serializing_if = "network_default::init_bias")]
+    pub init_bias: InitBias,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub batch_size: Option<usize>,
     pub layers: usize,
@@ -448,6 +451,7 @@ mod network_default {
     is_default!(
         epsilon: f64,
         init_std: f64,
+        init_bias: crate::nn::config::InitBias,
         augment_mix: crate::nn::augment::AugmentMix,
         augment_radius: [f64; 2],
         input_noise: f64,
@@ -518,6 +522,7 @@ network_keys!(
     components,
     layers,
     init_std,
+    init_bias,
     learning_rate,
     learning_rate_final,
     learning_rate_norm,

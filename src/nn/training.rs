@@ -25,7 +25,9 @@ use serde::Serialize;
 use super::adam::ComponentAdam;
 use super::augment::Augmenter;
 use super::checkpoint::{self, Checkpoint, CheckpointHeader, CheckpointParts};
-use super::config::{AutoencoderConfig, ComputeDevice, DEFAULT_MINI_BATCH, EncoderKind, Engine, FULL_BATCH_UP_TO};
+use super::config::{
+    AutoencoderConfig, ComputeDevice, DEFAULT_MINI_BATCH, EncoderKind, Engine, FULL_BATCH_UP_TO, InitBias,
+};
 use super::data::TrainingData;
 use super::engine::{self, Grads, Weights, Workspace, layer_weights, tensor_to_vec};
 use super::inference::Autoencoder;
@@ -301,6 +303,39 @@ pub fn epoch_batch(
     p[slot * b..(slot * b + b).min(p.len())].to_vec()
 }
 
+/// Mean of every feature channel over the vertices of the training shapes (at most 1 000 evenly
+/// spaced ones), in the scaled units the network sees.
+pub fn channel_means(data: &TrainingData) -> Result<[f64; 9]> {
+    let s = data.n_shapes();
+    let m = s.min(1000);
+    let mut sum = [0.0f64; 9];
+    let mut count = 0usize;
+    for q in 0..m {
+        let x = data.shape(q * s / m)?;
+        for v in x.chunks_exact(9) {
+            for (a, &b) in sum.iter_mut().zip(v) {
+                *a += f64::from(b);
+            }
+            count += 1;
+        }
+    }
+    Ok(sum.map(|a| if count > 0 { a / count as f64 } else { 0.0 }))
+}
+
+/// The biases of the first layer for [`InitBias::Mean`]: the encoder bias `b = −(W_point + W_nb)·μ`
+/// (a field equal to the channel means `μ` everywhere convolves to 0 at every vertex with
+/// neighbours) and the decoder bias `b_dec = atanh(μ)` (clamped to ±0.999), so that a code of 0
+/// decodes to `μ`: the network starts at the training shapes' mean features instead of at 0.
+pub fn mean_biases(wp: &[f32], wn: &[f32], mu: &[f64; 9]) -> ([f32; 9], [f32; 9]) {
+    let mut b = [0.0f32; 9];
+    let mut bd = [0.0f32; 9];
+    for o in 0..9 {
+        b[o] = -(0..9).map(|i| f64::from(wp[o * 9 + i] + wn[o * 9 + i]) * mu[i]).sum::<f64>() as f32;
+        bd[o] = mu[o].clamp(-0.999, 0.999).atanh() as f32;
+    }
+    (b, bd)
+}
+
 /// A Burn module of the layers only (no component blocks): what checkpoints record of them.
 fn layers_module(layers: Vec<MeshConv>) -> AutoencoderModule {
     AutoencoderModule { layers, components: Vec::new() }
@@ -318,8 +353,22 @@ impl<'a> Trainer<'a> {
         Self::check_sizes(&config, data, neighbors)?;
         let device = training_device(config.device)?;
         let (layers, c) = config.init_arrays(data.n_vertices());
-        let layers =
-            layers.iter().map(|[wp, wn]| MeshConv::from_arrays(wp, wn, &[0.0; 9], &[0.0; 9], &device)).collect();
+        let mu = match config.init_bias {
+            InitBias::Zero => None,
+            InitBias::Mean => Some(channel_means(data)?),
+        };
+        let layers = layers
+            .iter()
+            .enumerate()
+            .map(|(l, [wp, wn])| {
+                // Layer 0 is the encoder's first and the decoder's last.
+                let (b, bd) = match &mu {
+                    Some(mu) if l == 0 => mean_biases(wp, wn, mu),
+                    _ => ([0.0; 9], [0.0; 9]),
+                };
+                MeshConv::from_arrays(wp, wn, &b, &bd, &device)
+            })
+            .collect();
         Self::with_parameters(config, data, neighbors, distances, device, layers, c)
     }
 
@@ -1204,6 +1253,45 @@ mod tests {
             assert!(fused.grads.c.is_empty(), "the fused path stored the gradient of C");
         }
     }
+    /// `init_bias = "mean"`: the channel means are the training features' own; a field equal to
+    /// them everywhere convolves to 0 through the first layer (the encoder sees deviations) and
+    /// a code of 0 decodes to them; on features far from 0 the first step's reconstruction error
+    /// is that of the deviations, not of the whole features as with the paper's zero biases.
+    #[test]
+    fn mean_biases_start_the_network_at_the_mean_features() {
+        let (n, faces) = grid(13, 11);
+        let nb = NeighborIndex::from_faces(n, &faces).unwrap();
+        let dist = HopDistances::new(&nb);
+        let offsets = [0.7, -0.5, 0.1, 0.6, -0.2, 0.0, 0.65, 0.3, -0.8];
+        let mut rng = Rng::new(3);
+        let mut feats = Features::zeros(6, n, 9);
+        for (i, v) in feats.data.iter_mut().enumerate() {
+            *v = offsets[i % 9] + rng.uniform() * 0.04 - 0.02;
+        }
+        let data = TrainingData::from_features(&feats).unwrap();
+        let mu = channel_means(&data).unwrap();
+        for (c, m) in mu.iter().enumerate() {
+            let exact = feats.data.iter().skip(c).step_by(9).sum::<f64>() / (6 * n) as f64;
+            assert!((m - exact).abs() < 1e-6, "channel {c}: {m} vs {exact}");
+        }
+        let (wp, wn) = (rng.normal_vec(81, 0.3), rng.normal_vec(81, 0.3));
+        let (b, bd) = mean_biases(&wp, &wn, &mu);
+        for o in 0..9 {
+            let pre: f64 =
+                (0..9).map(|i| f64::from(wp[o * 9 + i] + wn[o * 9 + i]) * mu[i]).sum::<f64>() + f64::from(b[o]);
+            assert!(pre.abs() < 1e-5, "output {o}: the mean field convolves to {pre}");
+            assert!((f64::from(bd[o]).tanh() - mu[o]).abs() < 1e-5, "output {o}: code 0 decodes to {}", bd[o]);
+        }
+        let first = |init_bias| {
+            let cfg = AutoencoderConfig { components: 4, iterations: 5, init_bias, seed: 2, ..Default::default() };
+            Trainer::new(cfg, &data, &nb, &dist).unwrap().step().unwrap().reconstruction
+        };
+        let (zero, mean) = (first(InitBias::Zero), first(InitBias::Mean));
+        let whole: f64 = offsets.iter().map(|o| o * o).sum::<f64>() * n as f64;
+        assert!(zero > 0.5 * whole, "zero biases start near features of 0: {zero} vs {whole}");
+        assert!(mean < 0.02 * whole, "mean biases start near the mean: {mean} vs {whole}");
+    }
+
     /// A checkpoint resumes only on the batch it was trained with: one of a full-batch run of
     /// 70 shapes (as every run of more than 64 shapes was before issue 57) is refused under the
     /// default, which would take 32, naming `batch_size`; with `batch_size = 70` it resumes.
