@@ -191,9 +191,9 @@ pub enum InitBias {
     Zero,
     /// Set from the mean `μ` of every feature channel over the training shapes' vertices:
     /// encoder `b = −(W_point + W_nb)·μ`, decoder `b_dec = atanh(μ)`: the encoder sees the
-    /// deviations from the mean and a code of 0 decodes to the mean (chosen on the planted
-    /// validation body, docs/ground-truth.md: it leaves the rest-shape plateau of small
-    /// deformations at once).
+    /// deviations from the mean and a code of 0 decodes to the mean. On the planted body it
+    /// leaves the rest-shape plateau of small deformations at once; on the planted face it
+    /// finds fewer deformations (docs/ground-truth.md), hence not the default.
     Mean,
 }
 

@@ -1253,6 +1253,7 @@ mod tests {
             assert!(fused.grads.c.is_empty(), "the fused path stored the gradient of C");
         }
     }
+
     /// `init_bias = "mean"`: the channel means are the training features' own; a field equal to
     /// them everywhere convolves to 0 through the first layer (the encoder sees deviations) and
     /// a code of 0 decodes to them; on features far from 0 the first step's reconstruction error
