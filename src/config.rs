@@ -55,6 +55,7 @@
 //! | `scaling` | autoencoder | `global` (paper `per-dimension`) | feature scaling to [−0.95, 0.95]: `per-dimension` (the paper) \| `grouped` (the reference code: one range for the 3 rotation dims, one for the 6 stretch dims) \| `global` (one range for all 9, so rotation and stretch errors weigh alike) |
 //! | `scaling_quantile`, `scaling_fence` | autoencoder | 0.001, 1 (paper: 0, min/max) | outlier fence of the feature scaling: the q … 1 − q quantiles [a, b] of the training features (each group of `scaling`), widened by fence × (b − a) on each side, are the range mapped to [−0.95, 0.95] where they lie inside the minimum and maximum, values beyond clamped; q = 0: minimum and maximum. A few extreme features (slivers of a face stretched 70×) otherwise squeeze all others; q in [0, 0.05], fence ≥ 0 |
 //! | `dial_sparsity` | autoencoder | `"auto"` (paper: 0) | how the K dials are read from the latent space after training: 0, one latent dimension per dial; λ in (0, 1), a dial basis of the training codes at that sparsity; `"auto"`, the most concentrated of the bases at 0.003, 0.01, 0.03, 0.1 (the latent dimensions with fewer than 2K training shapes or on a mesh of several pieces); [`DialSparsity`] |
+//! | `feature_weights` | autoencoder | `uniform` (the paper) | `uniform` \| `noise`: each vertex's feature error weighted by min(1, median / its variance) of its scaled features under small position noise on the rest mesh, so vertices whose 1-ring fit amplifies noise stop dominating the loss; [`FeatureWeights`] |
 //! | `engine` | autoencoder | `hand` | `hand` (hand-written CPU step, fast) \| `graph` (Burn autodiff graph on `device`) |
 //! | `device` | autoencoder | `cpu` | `cpu` \| `wgpu` (needs `engine = "graph"` and a build with `--features wgpu`) |
 //! | `consistency` | autoencoder, pca, splocs | `global` | ACAP rotation consistency: `bfs` \| `global` |
@@ -70,8 +71,8 @@ pub use crate::representation::feature_cache::CachePolicy;
 
 mod method;
 pub use method::{
-    AE_GEODESIC_M, AutoencoderMethod, ConsistencyName, DialSparsity, FixedCenter, MethodConfig, MethodKind,
-    MethodSettings, PcaMethod, RegionPcaMethod, SPLOCS_GEODESIC_M, ScalingName, SplocsMethod, method_key,
+    AE_GEODESIC_M, AutoencoderMethod, ConsistencyName, DialSparsity, FeatureWeights, FixedCenter, MethodConfig,
+    MethodKind, MethodSettings, PcaMethod, RegionPcaMethod, SPLOCS_GEODESIC_M, ScalingName, SplocsMethod, method_key,
 };
 
 /// Which frames belong to a split, as 0-based indices (after natural sort).

@@ -12,6 +12,7 @@ use meshdeco::nn::kernels::padded_width;
 use meshdeco::nn::loss::{SupportMaps, reference_loss};
 use meshdeco::nn::model::NeighborTensors;
 use meshdeco::nn::rng::Rng;
+use meshdeco::nn::training::feature_error;
 use meshdeco::nn::{Autoencoder, AutoencoderConfig, HopDistances, NeighborIndex, RunOptions, Trainer, TrainingData};
 use meshdeco::representation::Features;
 
@@ -48,6 +49,12 @@ fn flat9(a: &[[f64; 9]; 9]) -> Vec<f32> {
 }
 
 fn gradient_check(layers: usize, lambda_code: f64) {
+    gradient_check_weighted(layers, lambda_code, false);
+}
+
+/// With `weighted`, every vertex's feature error is weighted (`feature_weights`): 0.05 to 1,
+/// unevenly, in both the hand pass and Burn's graph.
+fn gradient_check_weighted(layers: usize, lambda_code: f64, weighted: bool) {
     let (_, faces) = grid(7, 6);
     let n = 42;
     let nb = NeighborIndex::from_faces(n, &faces).unwrap();
@@ -78,8 +85,29 @@ fn gradient_check(layers: usize, lambda_code: f64) {
     let idx: Vec<usize> = (0..3).collect();
     let x = data.batch_vcb(&idx).unwrap();
     let mut ws = Workspace::new(n, cfg.components, layers, padded_width(3));
+    let vertex_w: Option<Vec<f32>> =
+        weighted.then(|| (0..n).map(|i| 0.05 + 0.95 * ((i * 7) % 11) as f32 / 10.0).collect());
+    ws.set_feature_weights(vertex_w.as_ref().map(|v| v.as_slice().into()));
     let mut g = Grads { layers: Vec::new(), c: Vec::new() };
     let terms = engine::loss_and_grad(&mut ws, &w, &nb, &x, None, 3, &maps, &cfg, &mut g, None);
+    if let Some(v) = &vertex_w {
+        // The weighted error is the weighted sum of the per-vertex errors of the decoding, in the
+        // loss and in `feature_error` (the validation error).
+        let mut plain = Workspace::new(n, cfg.components, layers, padded_width(3));
+        let unweighted = feature_error(&mut plain, &w, &nb, &x, 3);
+        let bp = plain.width();
+        let mut want = 0.0f64;
+        for (row, (o, t)) in plain.output().chunks_exact(bp).zip(x.chunks_exact(bp)).enumerate() {
+            want += (0..3).map(|j| f64::from(v[row / 9]) * f64::from(o[j] - t[j]).powi(2)).sum::<f64>();
+        }
+        want /= 3.0;
+        assert!(want < 0.9 * unweighted, "the weights change the error: {want} vs {unweighted}");
+        assert!((terms.reconstruction - want).abs() <= 1e-5 * want, "{} vs {want}", terms.reconstruction);
+        let mut weighted = Workspace::new(n, cfg.components, layers, padded_width(3));
+        weighted.set_feature_weights(Some(v.as_slice().into()));
+        let fe = feature_error(&mut weighted, &w, &nb, &x, 3);
+        assert!((fe - want).abs() <= 1e-5 * want, "feature_error {fe} vs {want}");
+    }
     assert!(terms.hinge > 0.0 && terms.sparsity > 0.0 && terms.reconstruction > 0.0, "{terms:?}");
     // The code term (`lambda_code`): the last lane plays the rest shape.
     assert_eq!(terms.code > 0.0, lambda_code > 0.0, "{terms:?}");
@@ -87,7 +115,7 @@ fn gradient_check(layers: usize, lambda_code: f64) {
     // Burn autodiff reference.
     let nbt = NeighborTensors::new(&nb, &device);
     let xt = data.batch_tensor(&idx, &device).unwrap();
-    let (loss, ref_terms) = reference_loss(&module, xt, &nbt, &maps, &cfg);
+    let (loss, ref_terms) = reference_loss(&module, xt, &nbt, &maps, &cfg, vertex_w.as_deref());
     let grads = loss.backward();
     for (a, b) in [
         (terms.total, ref_terms.total),
@@ -136,6 +164,12 @@ fn hand_gradients_match_burn_autodiff_three_layers() {
 #[test]
 fn hand_gradients_match_burn_autodiff_with_the_code_term() {
     gradient_check(1, 0.7);
+}
+
+/// `feature_weights`: the hand engine's weighted feature error and its gradients are Burn's.
+#[test]
+fn hand_gradients_match_burn_autodiff_with_feature_weights() {
+    gradient_check_weighted(2, 0.0, true);
 }
 
 #[test]
@@ -549,4 +583,34 @@ fn a_stalled_run_restarts_with_halved_step_sizes() {
     );
     assert!(bad.is_err_and(|e| e.to_string().contains("stall_restarts")));
     let _ = (std::fs::remove_dir_all(&stuck_dir), std::fs::remove_dir_all(&dir));
+}
+
+/// `feature_weights`: the trainer takes one weight in [0, 1] per vertex and refuses anything
+/// else, naming what is wrong; with every weight 1 a run is the unweighted run, step for step;
+/// with weights below 1 it is another run.
+#[test]
+fn feature_weights_reach_the_run_and_are_checked() {
+    let (nb, dist, data) = planted_problem();
+    let cfg = AutoencoderConfig { components: 4, iterations: 6, seed: 1, ..Default::default() };
+    let fresh = || Trainer::new(cfg.clone(), &data, &nb, &dist).unwrap();
+    let e = fresh().with_feature_weights(&[1.0; 5]).err().expect("5 weights for 72 vertices").to_string();
+    assert!(e.contains("5 feature weights") && e.contains("72"), "{e}");
+    let mut bad = vec![1.0; 72];
+    bad[9] = 1.5;
+    let e = fresh().with_feature_weights(&bad).err().expect("a weight above 1").to_string();
+    assert!(e.contains("vertex 9") && e.contains("1.5"), "{e}");
+    bad[9] = f64::NAN;
+    assert!(fresh().with_feature_weights(&bad).is_err(), "a NaN weight");
+    let run = |w: Option<Vec<f64>>| {
+        let mut t = fresh();
+        if let Some(w) = w {
+            t = t.with_feature_weights(&w).unwrap();
+        }
+        (0..6).map(|_| t.step().unwrap().reconstruction).collect::<Vec<f64>>()
+    };
+    let plain = run(None);
+    assert_eq!(run(Some(vec![1.0; 72])), plain, "weights of 1 are the unweighted run");
+    let half: Vec<f64> = (0..72).map(|i| if i % 2 == 0 { 0.5 } else { 1.0 }).collect();
+    let weighted = run(Some(half));
+    assert!(weighted[0] < 0.95 * plain[0], "the first step's error is weighted: {} vs {}", weighted[0], plain[0]);
 }

@@ -97,6 +97,27 @@ fn every_autoencoder_network_field_is_a_method_key() {
     assert_eq!(back, MethodConfig::Autoencoder(m));
 }
 
+/// `feature_weights` (a key of the method, not of the network): both values parse and round-trip
+/// through an artefact's `config.toml`; another names the key and the choices.
+#[test]
+fn feature_weights_is_a_method_key() {
+    use meshdeco::config::FeatureWeights;
+    for (line, want) in [
+        ("", AutoencoderMethod::default().feature_weights),
+        ("feature_weights = \"noise\"", FeatureWeights::Noise),
+        ("feature_weights = \"uniform\"", FeatureWeights::Uniform),
+    ] {
+        let t: toml::Table = toml::from_str(&format!("kind = \"autoencoder\"\n{line}")).unwrap();
+        let MethodConfig::Autoencoder(m) = MethodConfig::from_table(&t).unwrap() else { panic!("kind") };
+        assert_eq!(m.feature_weights, want, "`{line}`");
+        let back = MethodConfig::from_table(&MethodConfig::Autoencoder(m.clone()).to_table().unwrap()).unwrap();
+        assert_eq!(back, MethodConfig::Autoencoder(m));
+    }
+    let bad: toml::Table = toml::from_str("kind = \"autoencoder\"\nfeature_weights = \"area\"").unwrap();
+    let e = MethodConfig::from_table(&bad).unwrap_err().to_string();
+    assert!(e.contains("feature_weights") && e.contains("uniform") && e.contains("noise"), "{e}");
+}
+
 #[test]
 fn every_splocs_solver_field_is_a_method_key() {
     use serde_json::json;

@@ -325,3 +325,41 @@ fn the_autoencoders_dials_are_a_sparse_basis_of_its_training_codes() {
     assert!(err.contains("dial_basis"), "{err}");
     let _ = std::fs::remove_dir_all(&d);
 }
+
+/// `feature_weights = "noise"` reaches training from the command line: `train` says how many
+/// vertices weigh less than ½, the artefact's `config.toml` keeps the key, and the first step's
+/// feature error (same seed, so the same start) is the weighted one — below the uniform run's,
+/// since every weight is at most 1 and the noisier half of the vertices weigh less.
+#[test]
+fn noise_feature_weights_reach_training() {
+    let d = fresh_dir("planted", "feature-weights");
+    let run = |name: &str, weights: &str| {
+        let cfg = d.join(format!("{name}.toml"));
+        std::fs::write(
+            &cfg,
+            format!(
+                "name = \"{name}\"\n[data]\npath = \"synthetic:tube\"\ntrain = \"every:3\"\ntest = \"rest\"\n\
+                 [method]\nkind = \"autoencoder\"\ncomponents = 4\niterations = 3\nfit_test = false\n\
+                 feature_weights = \"{weights}\"\n"
+            ),
+        )
+        .unwrap();
+        let o = meshdeco(&["train", "--config", cfg.to_str().unwrap(), "--out", name], &d);
+        assert!(o.status.success(), "{}", output_text(&o));
+        let log = std::fs::read_to_string(d.join(name).join("training.jsonl")).unwrap();
+        let first: serde_json::Value = serde_json::from_str(log.lines().next().unwrap()).unwrap();
+        let config = std::fs::read_to_string(d.join(name).join("config.toml")).unwrap();
+        (output_text(&o), first["reconstruction"].as_f64().unwrap(), config)
+    };
+    let (text_u, rec_u, config_u) = run("uniform", "uniform");
+    let (text_n, rec_n, config_n) = run("noise", "noise");
+    assert!(!text_u.contains("feature_weights"), "{text_u}");
+    assert!(
+        text_n.contains("note: feature_weights = \"noise\":") && text_n.contains("weigh less than 1/2"),
+        "{text_n}"
+    );
+    assert!(config_u.contains("feature_weights = \"uniform\""), "{config_u}");
+    assert!(config_n.contains("feature_weights = \"noise\""), "{config_n}");
+    assert!(rec_n < rec_u, "first step's feature error: weighted {rec_n}, uniform {rec_u}");
+    let _ = std::fs::remove_dir_all(&d);
+}

@@ -332,7 +332,7 @@ impl RegionPcaMethod {
 /// (except `d_min`/`d_max`, written `support = [d_min, d_max]`), with its meaning documented
 /// there; [`network_keys!`] maps the two both ways, naming every field, so a new network field
 /// does not compile until it is a key. The method's own keys: `geodesic_m`, `scaling`,
-/// `scaling_quantile`, `scaling_fence`, `consistency`, `fit_test`, `dial_sparsity`. Keys at their default that older configs did not have are left out
+/// `scaling_quantile`, `scaling_fence`, `consistency`, `fit_test`, `dial_sparsity`, `feature_weights`. Keys at their default that older configs did not have are left out
 /// of a written `config.toml` (`skip_serializing_if`); they parse back to the same value.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -388,6 +388,9 @@ pub struct AutoencoderMethod {
     /// How the dials are read from the latent space after training: `"auto"` (the default) or
     /// a sparsity λ in [0, 1) ([`DialSparsity`]).
     pub dial_sparsity: DialSparsity,
+    /// `uniform` | `noise`: how each vertex's feature error counts in the loss
+    /// ([`FeatureWeights`]).
+    pub feature_weights: FeatureWeights,
     /// Synthetic shapes per training step (augmentation in feature space; 0: none).
     pub augment: usize,
     /// `local` | `blend` | `mixed` (default `local`).
@@ -485,6 +488,7 @@ macro_rules! network_keys {
                     consistency,
                     fit_test,
                     dial_sparsity,
+                    feature_weights,
                 } = own;
                 AutoencoderMethod {
                     support: [d_min, d_max],
@@ -495,6 +499,7 @@ macro_rules! network_keys {
                     consistency,
                     fit_test,
                     dial_sparsity,
+                    feature_weights,
                     $($field),*
                 }
             }
@@ -510,6 +515,7 @@ macro_rules! network_keys {
                     consistency: _,
                     fit_test: _,
                     dial_sparsity: _,
+                    feature_weights: _,
                     $($field),*
                 } = self.clone();
                 AutoencoderConfig { d_min: support[0], d_max: support[1], $($field),* }
@@ -565,6 +571,7 @@ struct AutoencoderOwnKeys {
     consistency: ConsistencyName,
     fit_test: bool,
     dial_sparsity: DialSparsity,
+    feature_weights: FeatureWeights,
 }
 
 /// Default `scaling_quantile` of a config file (the paper's is 0: minimum and maximum).
@@ -650,6 +657,25 @@ impl<'de> Deserialize<'de> for DialSparsity {
     }
 }
 
+/// Default `feature_weights` of a config file.
+pub const AE_FEATURE_WEIGHTS: FeatureWeights = FeatureWeights::Uniform;
+
+/// The autoencoder's `feature_weights`: how each vertex's feature error counts in the training
+/// loss (and in the validation error and the did-it-train check, which measure the same error).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum FeatureWeights {
+    /// Every vertex 1 (the paper).
+    #[default]
+    Uniform,
+    /// Each vertex weighted by `min(1, m / v_i)`, `v_i` the variance of its scaled features
+    /// under small isotropic position noise on the rest mesh and `m` the median variance
+    /// ([`crate::representation::noise_sensitivity`]): vertices whose 1-ring fit turns position
+    /// noise into large feature noise (slivers, degenerate rings of decimated meshes) stop
+    /// dominating the loss. Needs only the rest mesh; 8 noisy copies are encoded once.
+    Noise,
+}
+
 /// Default `scaling_fence` of a config file.
 pub const AE_SCALING_FENCE: f64 = 1.0;
 
@@ -665,12 +691,16 @@ impl Default for AutoencoderMethod {
                 consistency: ConsistencyName::Global,
                 fit_test: true,
                 dial_sparsity: AE_DIAL_SPARSITY,
+                feature_weights: AE_FEATURE_WEIGHTS,
             },
         )
     }
 }
 
 /// The `[method]` table: one variant per method, tagged by `kind`.
+// The autoencoder's keys make its variant the largest by some 200 bytes; a config is built once
+// per run and matched by value everywhere, so it is not boxed.
+#[allow(clippy::large_enum_variant)]
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "kebab-case")]
 pub enum MethodConfig {

@@ -10,6 +10,7 @@ use faer::linalg::matmul::matmul;
 use faer::prelude::ReborrowMut;
 use faer::{Accum, MatMut, MatRef, Par};
 use rayon::prelude::*;
+use std::sync::Arc;
 
 use super::config::AutoencoderConfig;
 use super::kernels::{self, Acc9, Mat9, transpose9};
@@ -219,6 +220,9 @@ pub struct Workspace {
     /// Lanes `0..dirty` of the buffers that served as `dec[0]` may be non-zero (the decoder GEMM
     /// writes the real lanes only; the backward pass needs zero padding lanes).
     dirty: usize,
+    /// Per-vertex weights of the feature error (`[N]`; `feature_weights = "noise"`), or none
+    /// (every vertex 1).
+    feature_weights: Option<Arc<[f32]>>,
 }
 
 impl Workspace {
@@ -245,7 +249,23 @@ impl Workspace {
             grad_c_finite: true,
             b_real: 0,
             dirty: 0,
+            feature_weights: None,
         }
+    }
+
+    /// Weights the feature error of every vertex `i` (its 9 rows) by `w[i]` in
+    /// [`loss_and_grad`], [`loss_and_layer_grads`] and [`crate::nn::training::feature_error`]
+    /// (none: every vertex 1). Panics unless `w` has one weight per vertex.
+    pub fn set_feature_weights(&mut self, w: Option<Arc<[f32]>>) {
+        if let Some(w) = &w {
+            assert_eq!(w.len(), self.n, "one feature weight per vertex");
+        }
+        self.feature_weights = w;
+    }
+
+    /// The per-vertex feature-error weights ([`Self::set_feature_weights`]).
+    pub fn feature_weights(&self) -> Option<&[f32]> {
+        self.feature_weights.as_deref()
     }
 
     /// Padded batch width.
@@ -508,7 +528,14 @@ fn backward_except_components(
     let inv_b = 1.0 / b_real as f64;
 
     // Reconstruction: dG_L = (2/B)(X̂ − X) on real lanes.
-    let sse = kernels::squared_error(&ws.dec[l], target, &ws.mask, (2.0 * inv_b) as f32, &mut ws.d_a);
+    let sse = kernels::squared_error(
+        &ws.dec[l],
+        target,
+        &ws.mask,
+        ws.feature_weights.as_deref(),
+        (2.0 * inv_b) as f32,
+        &mut ws.d_a,
+    );
     let reconstruction = sse * inv_b;
     // The caller's term on the decoded shapes (the vertex term): the mean over the lanes it
     // sees (all, or a sample of them), with this step's weight. With `vertex_clip`, its

@@ -645,20 +645,69 @@ dispatch! {
     fn sq_err_chunk(xhat: &[f32], x: &[f32], mask: &[f32], scale: f32, grad: &mut [f32]) -> f64 => sq_err_impl
 }
 
-/// Sum of squared errors over the real lanes (`mask` 1 for real shapes, 0 for padding) and its
-/// gradient scaled: `grad = scale·mask·(xhat − x)`. Returns Σ mask·(xhat − x)².
+/// [`sq_err_impl`] with row `r` of the chunk weighted by `vertex_w[(row0 + r) / 9]`.
+#[inline(always)]
+#[allow(clippy::extra_unused_type_parameters)]
+fn sq_err_weighted_impl<M: MulAdd>(
+    xhat: &[f32],
+    x: &[f32],
+    mask: &[f32],
+    vertex_w: &[f32],
+    row0: usize,
+    scale: f32,
+    grad: &mut [f32],
+) -> f64 {
+    let bp = mask.len();
+    let mut total = 0.0f64;
+    for (r, ((xh, xr), gr)) in xhat.chunks_exact(bp).zip(x.chunks_exact(bp)).zip(grad.chunks_exact_mut(bp)).enumerate()
+    {
+        let w = vertex_w[(row0 + r) / 9];
+        let mut acc = [0.0f32; LANES];
+        for c in (0..bp).step_by(LANES) {
+            for l in 0..LANES {
+                let d = (xh[c + l] - xr[c + l]) * mask[c + l];
+                acc[l] += d * d;
+                gr[c + l] = scale * w * d;
+            }
+        }
+        total += w as f64 * acc.iter().map(|&v| v as f64).sum::<f64>();
+    }
+    total
+}
+
+dispatch! {
+    fn sq_err_weighted_chunk(xhat: &[f32], x: &[f32], mask: &[f32], vertex_w: &[f32], row0: usize, scale: f32, grad: &mut [f32]) -> f64 => sq_err_weighted_impl
+}
+
+/// Sum of squared errors over the real lanes (`mask` 1 for real shapes, 0 for padding), each
+/// row weighted by its vertex's weight when `vertex_w` is given (row `i·9 + c` by
+/// `vertex_w[i]`; `feature_weights`), and its gradient scaled: `grad = scale·w·mask·(xhat − x)`.
+/// Returns Σ w·mask·(xhat − x)².
 ///
 /// # Shapes
-/// `xhat`, `x`, `grad`: rows of `bp = mask.len()` numbers.
-pub fn squared_error(xhat: &[f32], x: &[f32], mask: &[f32], scale: f32, grad: &mut [f32]) -> f64 {
+/// `xhat`, `x`, `grad`: rows of `bp = mask.len()` numbers (9N rows, VCB); `vertex_w`: `[N]`.
+pub fn squared_error(
+    xhat: &[f32],
+    x: &[f32],
+    mask: &[f32],
+    vertex_w: Option<&[f32]>,
+    scale: f32,
+    grad: &mut [f32],
+) -> f64 {
     let bp = mask.len();
     let ch = 512 * bp;
+    if let Some(w) = vertex_w {
+        assert_eq!(w.len() * 9 * bp, grad.len(), "one weight per vertex");
+    }
     let parts: Vec<f64> = grad
         .par_chunks_mut(ch)
         .enumerate()
         .map(|(ci, g)| {
             let s = ci * ch;
-            sq_err_chunk(&xhat[s..s + g.len()], &x[s..s + g.len()], mask, scale, g)
+            match vertex_w {
+                Some(w) => sq_err_weighted_chunk(&xhat[s..s + g.len()], &x[s..s + g.len()], mask, w, s / bp, scale, g),
+                None => sq_err_chunk(&xhat[s..s + g.len()], &x[s..s + g.len()], mask, scale, g),
+            }
         })
         .collect();
     parts.iter().sum()

@@ -407,8 +407,11 @@ pub fn sparsity_with_grad_checked(c: &[f32], maps: &SupportMaps, scale: f32, gra
 /// The same loss as a Burn graph (reference for the gradient check; small problems only).
 /// Λ comes from `maps` (already updated for the module's current `C`).
 ///
+/// `vertex_w` weights each vertex's feature error (`feature_weights`; none: every vertex 1).
+///
 /// # Shapes
 /// - `x`: `[B, N, 9]`
+/// - `vertex_w`: `[N]`
 /// - output: (`L` `[1]`, the terms as numbers)
 pub fn reference_loss(
     module: &AutoencoderModule,
@@ -416,11 +419,17 @@ pub fn reference_loss(
     nb: &NeighborTensors,
     maps: &SupportMaps,
     cfg: &AutoencoderConfig,
+    vertex_w: Option<&[f32]>,
 ) -> (Tensor<1>, LossTerms) {
     let device = x.device();
     let [b, n, _] = x.dims();
     let (xh, z) = module.forward(x.clone(), nb);
-    let recon = (xh - x).square().sum().div_scalar(b as f32);
+    let sq = (xh - x).square();
+    let sq = match vertex_w {
+        Some(w) => sq * Tensor::<1>::from_data(TensorData::new(w.to_vec(), [n]), &device).reshape([1, n, 1]),
+        None => sq,
+    };
+    let recon = sq.sum().div_scalar(b as f32);
     let [k, _] = module.components_shape();
     let c = module.components_tensor().reshape([k, n, 9]);
     let norms = c.square().sum_dim(2).reshape([k, n]).clamp_min(NORM_EPS * NORM_EPS).sqrt();

@@ -161,17 +161,20 @@ struct Validation<'a> {
     best: Option<(usize, f64, Weights)>,
 }
 
-/// Mean over the `b` real lanes of the squared error between encode–decode of `x` and `x`.
+/// Mean over the `b` real lanes of the squared error between encode–decode of `x` and `x`,
+/// each vertex's rows weighted by the workspace's feature weights (if any).
 pub fn feature_error(ws: &mut Workspace, w: &Weights, nb: &NeighborIndex, x: &[f32], b: usize) -> f64 {
     engine::encode(ws, w, nb, x, b);
     engine::decode(ws, w, nb, b);
     let bp = ws.width();
+    let weights = ws.feature_weights();
     let out = ws.output();
     let mut sse = 0.0f64;
-    for (ro, rx) in out.chunks_exact(bp).zip(x.chunks_exact(bp)) {
+    for (row, (ro, rx)) in out.chunks_exact(bp).zip(x.chunks_exact(bp)).enumerate() {
+        let wr = weights.map_or(1.0, |v| f64::from(v[row / 9]));
         for j in 0..b {
             let d = (ro[j] - rx[j]) as f64;
-            sse += d * d;
+            sse += wr * d * d;
         }
     }
     sse / b as f64
@@ -233,6 +236,8 @@ pub struct Trainer<'a> {
     /// The rest shape's scaled features (`9N`, vertex-major), the last lane of every batch when
     /// `lambda_code > 0` ([`Self::with_rest`]).
     rest: Option<Vec<f32>>,
+    /// Per-vertex weights of the feature error ([`Self::with_feature_weights`]).
+    feature_weights: Option<Arc<[f32]>>,
 }
 
 /// Lanes a batch has besides its shapes and synthetic shapes: the rest shape's, when the code
@@ -241,17 +246,47 @@ fn rest_lanes(config: &AutoencoderConfig) -> usize {
     usize::from(config.lambda_code > 0.0)
 }
 
-/// Root-mean-square over the training shapes of each shape's Euclidean norm of its scaled
-/// features (at most 256 evenly spaced shapes are read for a streamed set).
-pub fn feature_norm(data: &TrainingData) -> Result<f64> {
+/// The training shapes the trainer's statistics ([`feature_norm`], [`channel_means`]) read:
+/// every shape of a set held in memory, at most 256 evenly spaced ones of a streamed set.
+pub fn sampled_shapes(data: &TrainingData) -> Vec<usize> {
     let n = data.n_shapes();
     let take = if data.is_streamed() { n.min(256) } else { n };
-    let mut sum = 0.0f64;
-    for i in 0..take {
-        let s = if take == n { i } else { i * n / take };
-        sum += data.shape(s)?.iter().map(|&x| f64::from(x) * f64::from(x)).sum::<f64>();
+    (0..take).map(|i| i * n / take).collect()
+}
+
+/// Statistics of the scaled training features over [`sampled_shapes`], read in one pass.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FeatureStats {
+    /// Root-mean-square over the shapes of each shape's Euclidean norm.
+    pub norm: f64,
+    /// Mean of every feature channel over the vertices of the shapes.
+    pub channel_means: [f64; 9],
+}
+
+/// [`FeatureStats`] of the training data (all zero for a set without shapes).
+pub fn feature_stats(data: &TrainingData) -> Result<FeatureStats> {
+    let shapes = sampled_shapes(data);
+    let mut sq = 0.0f64;
+    let mut sum = [0.0f64; 9];
+    let mut count = 0usize;
+    for &s in &shapes {
+        let x = data.shape(s)?;
+        for v in x.chunks_exact(9) {
+            for (a, &b) in sum.iter_mut().zip(v) {
+                *a += f64::from(b);
+                sq += f64::from(b) * f64::from(b);
+            }
+            count += 1;
+        }
     }
-    Ok(if take == 0 { 0.0 } else { (sum / take as f64).sqrt() })
+    let norm = if shapes.is_empty() { 0.0 } else { (sq / shapes.len() as f64).sqrt() };
+    Ok(FeatureStats { norm, channel_means: sum.map(|a| if count > 0 { a / count as f64 } else { 0.0 }) })
+}
+
+/// Root-mean-square over the training shapes of each shape's Euclidean norm of its scaled
+/// features ([`feature_stats`]).
+pub fn feature_norm(data: &TrainingData) -> Result<f64> {
+    Ok(feature_stats(data)?.norm)
 }
 
 fn adam(cfg: &AutoencoderConfig) -> ModuleOptimizer {
@@ -303,23 +338,10 @@ pub fn epoch_batch(
     p[slot * b..(slot * b + b).min(p.len())].to_vec()
 }
 
-/// Mean of every feature channel over the vertices of the training shapes (at most 1 000 evenly
-/// spaced ones), in the scaled units the network sees.
+/// Mean of every feature channel over the vertices of the training shapes, in the scaled units
+/// the network sees ([`feature_stats`]).
 pub fn channel_means(data: &TrainingData) -> Result<[f64; 9]> {
-    let s = data.n_shapes();
-    let m = s.min(1000);
-    let mut sum = [0.0f64; 9];
-    let mut count = 0usize;
-    for q in 0..m {
-        let x = data.shape(q * s / m)?;
-        for v in x.chunks_exact(9) {
-            for (a, &b) in sum.iter_mut().zip(v) {
-                *a += f64::from(b);
-            }
-            count += 1;
-        }
-    }
-    Ok(sum.map(|a| if count > 0 { a / count as f64 } else { 0.0 }))
+    Ok(feature_stats(data)?.channel_means)
 }
 
 /// The biases of the first layer for [`InitBias::Mean`]: the encoder bias `b = −(W_point + W_nb)·μ`
@@ -353,9 +375,10 @@ impl<'a> Trainer<'a> {
         Self::check_sizes(&config, data, neighbors)?;
         let device = training_device(config.device)?;
         let (layers, c) = config.init_arrays(data.n_vertices());
+        let stats = feature_stats(data)?;
         let mu = match config.init_bias {
             InitBias::Zero => None,
-            InitBias::Mean => Some(channel_means(data)?),
+            InitBias::Mean => Some(stats.channel_means),
         };
         let layers = layers
             .iter()
@@ -369,7 +392,7 @@ impl<'a> Trainer<'a> {
                 MeshConv::from_arrays(wp, wn, &b, &bd, &device)
             })
             .collect();
-        Self::with_parameters(config, data, neighbors, distances, device, layers, c)
+        Self::with_parameters(config, data, neighbors, distances, device, layers, c, stats.norm)
     }
 
     fn check_sizes(config: &AutoencoderConfig, data: &TrainingData, neighbors: &NeighborIndex) -> Result<()> {
@@ -384,7 +407,9 @@ impl<'a> Trainer<'a> {
         Ok(())
     }
 
-    /// A run at step 0 with the given parameters (`c`: `[K, 9N]`).
+    /// A run at step 0 with the given parameters (`c`: `[K, 9N]`) on data whose
+    /// [`feature_norm`] is `norm`.
+    #[allow(clippy::too_many_arguments)]
     fn with_parameters(
         config: AutoencoderConfig,
         data: &'a TrainingData,
@@ -393,6 +418,7 @@ impl<'a> Trainer<'a> {
         device: Device,
         layers: Vec<MeshConv>,
         c: Vec<f32>,
+        norm: f64,
     ) -> Result<Self> {
         let n = data.n_vertices();
         let b = config.batch_for(data.n_shapes());
@@ -405,7 +431,6 @@ impl<'a> Trainer<'a> {
         } else {
             None
         };
-        let norm = feature_norm(data)?;
         let weights = Weights {
             layers: layer_weights(&layers),
             k: config.components,
@@ -446,6 +471,7 @@ impl<'a> Trainer<'a> {
             epoch_order: None,
             feature_norm: norm,
             rest: None,
+            feature_weights: None,
         })
     }
 
@@ -464,6 +490,27 @@ impl<'a> Trainer<'a> {
     /// The training features' size ([`feature_norm`]), which sets [`Self::learning_rate_scale`].
     pub fn feature_norm(&self) -> f64 {
         self.feature_norm
+    }
+
+    /// Weights every vertex's feature error by `weights[i]` (`[N]`, each finite and in [0, 1];
+    /// `feature_weights = "noise"`: [`crate::representation::noise_sensitivity`]) in the loss,
+    /// the validation error and the did-it-train check. Errors on a wrong length or a weight
+    /// out of range.
+    pub fn with_feature_weights(mut self, weights: &[f64]) -> Result<Self> {
+        let n = self.data.n_vertices();
+        if weights.len() != n {
+            return Err(Error::Invalid(format!("{} feature weights for {n} vertices", weights.len())));
+        }
+        if let Some((i, w)) = weights.iter().enumerate().find(|(_, w)| !(0.0..=1.0).contains(*w)) {
+            return Err(Error::Invalid(format!("feature weight {w} of vertex {i} is not in [0, 1]")));
+        }
+        let w: Arc<[f32]> = weights.iter().map(|&x| x as f32).collect();
+        self.workspace.set_feature_weights(Some(w.clone()));
+        if let Some(v) = self.validation.as_mut() {
+            v.workspace.set_feature_weights(Some(w.clone()));
+        }
+        self.feature_weights = Some(w);
+        Ok(self)
     }
 
     /// Gives the run the vertex term's loss (`lambda_vertex > 0` needs one; it is weighted by
@@ -510,6 +557,10 @@ impl<'a> Trainer<'a> {
         let n_shapes = self.data.n_shapes();
         let bp = padded_width(TRAINING_ERROR_RUN.min(n_shapes));
         let mut ws = Workspace::new(self.data.n_vertices(), self.config.components, self.config.layers, bp);
+        ws.set_feature_weights(self.feature_weights.clone());
+        // Row weights (each vertex's, or 1): the three errors are measured in the loss's terms.
+        let fw = self.feature_weights.clone();
+        let row_w = |row: usize| fw.as_ref().map_or(1.0, |v| f64::from(v[row / 9]));
         self.check_parameters()?;
         let (mut model, mut base) = (0.0f64, 0.0f64);
         for start in (0..n_shapes).step_by(TRAINING_ERROR_RUN) {
@@ -517,9 +568,10 @@ impl<'a> Trainer<'a> {
             let x = self.data.batch_vcb_width(&idx, bp)?;
             model += feature_error(&mut ws, &self.weights, self.neighbors, &x, idx.len()) * idx.len() as f64;
             for (row, &r) in rest.iter().enumerate() {
+                let w = row_w(row);
                 for j in 0..idx.len() {
                     let d = (x[row * bp + j] - r) as f64;
-                    base += d * d;
+                    base += w * d * d;
                 }
             }
         }
@@ -534,8 +586,9 @@ impl<'a> Trainer<'a> {
         let mut gram = faer::Mat::<f64>::zeros(m, m);
         let mut d = vec![0.0f64; m];
         for (row, &r) in rest.iter().enumerate() {
+            let w = row_w(row).sqrt();
             for (j, dj) in d.iter_mut().enumerate() {
-                *dj = (x[row * bm + j] - r) as f64;
+                *dj = w * (x[row * bm + j] - r) as f64;
             }
             for i in 0..m {
                 if d[i] != 0.0 {
@@ -576,7 +629,11 @@ impl<'a> Trainer<'a> {
         self.validation = Some(Validation {
             data,
             x: data.batch_vcb_width(&(0..b).collect::<Vec<_>>(), bp)?,
-            workspace: Workspace::new(data.n_vertices(), self.config.components, self.config.layers, bp),
+            workspace: {
+                let mut ws = Workspace::new(data.n_vertices(), self.config.components, self.config.layers, bp);
+                ws.set_feature_weights(self.feature_weights.clone());
+                ws
+            },
             best: None,
         });
         Ok(self)
@@ -680,7 +737,8 @@ impl<'a> Trainer<'a> {
         let optimizer = adam(&config)
             .from_bytes(Bytes::from_bytes_vec(ck.layers_optimizer))
             .map_err(|e| Error::parse(checkpoint, None, format!("optimizer record: {e}")))?;
-        let mut t = Self::with_parameters(config, data, neighbors, distances, device, layers, ck.components)?;
+        let norm = feature_norm(data)?;
+        let mut t = Self::with_parameters(config, data, neighbors, distances, device, layers, ck.components, norm)?;
         t.optimizer = optimizer;
         t.adam = ck.adam;
         t.iteration = ck.header.iteration;
@@ -954,7 +1012,7 @@ impl<'a> Trainer<'a> {
                 Tensor::from_data(TensorData::new(v, [lanes, n, 9]), &self.device)
             }
         };
-        let (loss, terms) = reference_loss(&module, x, nb, &self.maps, &self.config);
+        let (loss, terms) = reference_loss(&module, x, nb, &self.maps, &self.config, self.feature_weights.as_deref());
         if !terms.is_finite() {
             self.layers = Some(module.layers);
             return Err(non_finite_loss(self.iteration + 1, &terms));

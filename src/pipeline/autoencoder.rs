@@ -36,7 +36,7 @@ use super::metrics_file::DialReadout;
 use super::pose::single_frame;
 use super::registry::{FitContext, FitStats, Fitted};
 use crate::artifact::{self, ArrayStore};
-use crate::config::{AutoencoderMethod, DialSparsity, MethodConfig, MethodKind};
+use crate::config::{AutoencoderMethod, DialSparsity, FeatureWeights, MethodConfig, MethodKind};
 use crate::error::{Error, Result};
 use crate::mesh::{self, MeshSequence, TriMesh, Vec3};
 use crate::methods::sparse_dials::SparseDials;
@@ -50,6 +50,7 @@ use crate::nn::{
 };
 use crate::preprocess::{Prepared, UnitBox};
 use crate::representation::acap::Consistency;
+use crate::representation::noise_sensitivity::{NOISE_DRAWS, NOISE_LEVEL, feature_noise_variance, noise_weights};
 use crate::representation::roundtrip::Alignment;
 use crate::representation::scaling::{FeatureScaling, RangeHistogram, ScalingMode};
 use crate::representation::{Features, Representation, RepresentationKind, RepresentationOptions};
@@ -814,6 +815,27 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
         let (own, _) = representation.split_pieces(representation.encode(&seq)?)?;
         scaling.apply(&own)?.data.iter().map(|&x| x as f32).collect()
     };
+    // `feature_weights = "noise"`: each vertex's weight from its scaled features' sensitivity to
+    // position noise on the rest mesh.
+    let feature_weights = match m.feature_weights {
+        FeatureWeights::Uniform => None,
+        FeatureWeights::Noise => {
+            let map = |x: Features| {
+                let (own, _) = representation.split_pieces(x)?;
+                scaling.apply(&own)
+            };
+            let w =
+                noise_weights(&feature_noise_variance(&representation, NOISE_LEVEL, NOISE_DRAWS, ae_cfg.seed, &map)?);
+            let low = w.iter().filter(|&&x| x < 0.5).count();
+            let least = w.iter().copied().fold(1.0f64, f64::min);
+            eprintln!(
+                "note: feature_weights = \"noise\": {low} of {} vertices weigh less than 1/2 in the feature error \
+                 (their features are the most sensitive to position noise; the smallest weight {least:.2e})",
+                w.len()
+            );
+            Some(w)
+        }
+    };
     let representation_seconds = t_rep.elapsed().as_secs_f64();
 
     ctx.progress.stage("geodesics", 0);
@@ -869,6 +891,9 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
             trainer = trainer.with_output_loss(v);
         }
         trainer = trainer.with_rest(&rest_features)?;
+        if let Some(w) = &feature_weights {
+            trainer = trainer.with_feature_weights(w)?;
+        }
         Ok(trainer)
     };
     let mut trainer = make_trainer(ae_cfg.restarted(restart), resumed)?;

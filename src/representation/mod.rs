@@ -32,6 +32,7 @@ pub mod acap_reconstruct;
 pub mod acap_text;
 pub mod displacement;
 pub mod feature_cache;
+pub mod noise_sensitivity;
 pub mod piece_placement;
 pub mod roundtrip;
 pub mod scaling;
