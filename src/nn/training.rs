@@ -271,13 +271,16 @@ pub fn feature_stats(data: &TrainingData) -> Result<FeatureStats> {
     let mut count = 0usize;
     for &s in &shapes {
         let x = data.shape(s)?;
+        // Each shape's squared norm summed on its own first (the order the norm always used).
+        let mut shape_sq = 0.0f64;
         for v in x.chunks_exact(9) {
             for (a, &b) in sum.iter_mut().zip(v) {
                 *a += f64::from(b);
-                sq += f64::from(b) * f64::from(b);
+                shape_sq += f64::from(b) * f64::from(b);
             }
             count += 1;
         }
+        sq += shape_sq;
     }
     let norm = if shapes.is_empty() { 0.0 } else { (sq / shapes.len() as f64).sqrt() };
     Ok(FeatureStats { norm, channel_means: sum.map(|a| if count > 0 { a / count as f64 } else { 0.0 }) })
