@@ -25,11 +25,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let rest = meshdeco::mesh::load_mesh(&dir.join("template.obj"))?;
     let n = rest.positions.len();
     let npy = NpyFrames::open(&dir.join("frames.npy"), n)?.ok_or("frames.npy: not in C order")?;
-    let weights: Vec<Vec<f64>> = std::fs::read_to_string(dir.join("weights.csv"))?
-        .lines()
-        .skip(1)
-        .map(|l| l.split(',').skip(1).map(|x| x.parse::<f64>()).collect::<Result<Vec<_>, _>>())
-        .collect::<Result<_, _>>()?;
+    let weights = truth.weights()?;
     let frames = match a.get(2) {
         Some(s) => s.parse::<usize>().map_err(|_| format!("FRAMES `{s}` is not a count"))?,
         None => truth.file.train,

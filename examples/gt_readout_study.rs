@@ -73,12 +73,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     // network's function unchanged), each rotated axis read at its training extreme.
     let mut rotated = vec![];
     let wfile = std::path::Path::new(&a[1]).join("weights.csv");
-    if let Ok(text) = std::fs::read_to_string(&wfile) {
-        let codes: Vec<Vec<f64>> = text
-            .lines()
-            .skip(1)
-            .map(|l| l.split(',').skip(1).take(k).map(|x| x.parse::<f64>()).collect::<Result<Vec<_>, _>>())
-            .collect::<Result<_, _>>()?;
+    if wfile.is_file() {
+        let codes = meshdeco::artifact::read_weights_csv(&wfile)?.weights;
+        if codes.first().is_some_and(|c| c.len() < k) {
+            return Err(format!("{}: fewer than {k} codes per frame", wfile.display()).into());
+        }
         let y = faer::Mat::<f64>::from_fn(codes.len(), k, |i, c| codes[i][c] - w0[c]);
         let r = varimax(&y)?;
         let yr = &y * &r;

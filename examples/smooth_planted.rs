@@ -20,11 +20,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let n = rest.positions.len();
     let npy = NpyFrames::open(&dir.join("frames.npy"), n)?.ok_or("frames.npy: not in C order")?;
     let mut frames = (0..npy.n_frames()).map(|f| npy.read_frame(f)).collect::<Result<Vec<_>, _>>()?;
-    let weights: Vec<Vec<f64>> = std::fs::read_to_string(dir.join("weights.csv"))?
-        .lines()
-        .skip(1)
-        .map(|l| l.split(',').skip(1).map(|x| x.parse::<f64>()).collect::<Result<Vec<_>, _>>())
-        .collect::<Result<_, _>>()?;
+    let weights = truth.weights()?;
     let mut nbrs = vec![Vec::new(); n];
     for f in &rest.faces {
         for k in 0..3 {

@@ -366,6 +366,51 @@ pub fn write_weights_csv(path: &Path, frame_names: &[String], weights: &[f64], k
     write_atomic(path, s.as_bytes())
 }
 
+/// A weight table read back from a `weights.csv` that [`write_weights_csv`] wrote.
+#[derive(Debug, Clone, PartialEq)]
+pub struct WeightsTable {
+    /// Frame names, in file order.
+    pub frames: Vec<String>,
+    /// One row of K weights per frame (frame-major, as written).
+    pub weights: Vec<Vec<f64>>,
+}
+
+/// Reads a weight table (header `frame,c0,c1,…`, then one row per frame: its name and K finite
+/// numbers), verified: the header names the columns in order, every row has K + 1 fields, every
+/// weight is a finite number. Errors name the file and the 1-based line.
+pub fn read_weights_csv(path: &Path) -> Result<WeightsTable> {
+    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+    let bad = |line: usize, m: String| Error::parse(path, Some(line), m);
+    let mut lines = text.lines();
+    let header = lines.next().ok_or_else(|| Error::parse(path, None, "empty: no header `frame,c0,…`"))?;
+    let columns: Vec<&str> = header.split(',').collect();
+    if columns[0] != "frame" || columns.len() < 2 {
+        return Err(bad(1, format!("header `{header}` is not `frame,c0,c1,…`")));
+    }
+    let k = columns.len() - 1;
+    if let Some((c, name)) = columns[1..].iter().enumerate().find(|(c, name)| **name != format!("c{c}")) {
+        return Err(bad(1, format!("column {} is named `{name}`, expected `c{c}`", c + 2)));
+    }
+    let (mut frames, mut weights) = (Vec::new(), Vec::new());
+    for (i, row) in lines.enumerate() {
+        let line = i + 2;
+        let fields: Vec<&str> = row.split(',').collect();
+        if fields.len() != k + 1 {
+            return Err(bad(line, format!("{} fields, the header names {}", fields.len(), k + 1)));
+        }
+        let mut w = Vec::with_capacity(k);
+        for (c, x) in fields[1..].iter().enumerate() {
+            match x.trim().parse::<f64>() {
+                Ok(v) if v.is_finite() => w.push(v),
+                _ => return Err(bad(line, format!("weight c{c} `{x}` is not a finite number"))),
+            }
+        }
+        frames.push(fields[0].to_string());
+        weights.push(w);
+    }
+    Ok(WeightsTable { frames, weights })
+}
+
 /// Reads exactly `buf.len()` bytes of `file` at `offset`, without moving a shared cursor on
 /// Unix (so several threads may read one file: the feature cache, a `.npy` read a frame at a
 /// time).
@@ -425,6 +470,36 @@ mod tests {
         let e = write_weights_csv(&q, &names, &[0.5, 1.0, 2.0, f64::NAN, 0.0, 0.0], 2).unwrap_err().to_string();
         assert!(e.contains("frame f1, component 1") && e.contains("nan.csv"), "{e}");
         assert!(!q.exists());
+        std::fs::remove_dir_all(&d).unwrap();
+    }
+
+    /// The weight table reads back as written, and a damaged one is refused naming the file
+    /// and the line.
+    #[test]
+    fn weights_csv_reads_back_verified() {
+        let d = tmpdir("weights-csv-read");
+        std::fs::create_dir_all(&d).unwrap();
+        let names = vec!["f0".to_string(), "f1".to_string(), "f2".to_string()];
+        let p = d.join("w.csv");
+        write_weights_csv(&p, &names, &[0.5, 1.0, 2.0, 3.0, -4.0, 5.25], 2).unwrap();
+        let back = read_weights_csv(&p).unwrap();
+        assert_eq!(back.frames, names);
+        assert_eq!(back.weights, vec![vec![0.5, 1.0], vec![2.0, 3.0], vec![-4.0, 5.25]]);
+        // Read back verified: each damage is refused naming the file and its line.
+        for (text, want) in [
+            ("frame,c0,c1\nf0,0.5,1\nf1,2\n", ":3: 2 fields, the header names 3"),
+            ("frame,c0,c1\nf0,0.5,inf\n", ":2: weight c1 `inf` is not a finite number"),
+            ("frame,c0,c1\nf0,NaN,1\n", ":2: weight c0 `NaN`"),
+            ("frame,c0,c1\nf0,0.5,x\n", ":2: weight c1 `x`"),
+            ("frame,c1,c0\nf0,0.5,1\n", ":1: column 2 is named `c1`, expected `c0`"),
+            ("name,c0\nf0,1\n", ":1: header `name,c0`"),
+            ("", "empty"),
+        ] {
+            let r = d.join("bad.csv");
+            std::fs::write(&r, text).unwrap();
+            let e = read_weights_csv(&r).unwrap_err().to_string();
+            assert!(e.contains("bad.csv") && e.contains(want), "{text:?}: {e}");
+        }
         std::fs::remove_dir_all(&d).unwrap();
     }
 

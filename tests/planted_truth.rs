@@ -333,18 +333,23 @@ fn the_autoencoders_dials_are_a_sparse_basis_of_its_training_codes() {
 #[test]
 fn noise_feature_weights_reach_training() {
     let d = fresh_dir("planted", "feature-weights");
-    let run = |name: &str, weights: &str| {
-        let cfg = d.join(format!("{name}.toml"));
+    let train = |name: &str, weights: &str, iterations: usize, extra: &[&str]| {
+        let cfg = d.join(format!("{name}-{weights}-{iterations}.toml"));
         std::fs::write(
             &cfg,
             format!(
                 "name = \"{name}\"\n[data]\npath = \"synthetic:tube\"\ntrain = \"every:3\"\ntest = \"rest\"\n\
-                 [method]\nkind = \"autoencoder\"\ncomponents = 4\niterations = 3\nfit_test = false\n\
+                 [method]\nkind = \"autoencoder\"\ncomponents = 4\niterations = {iterations}\nfit_test = false\n\
                  feature_weights = \"{weights}\"\n"
             ),
         )
         .unwrap();
-        let o = meshdeco(&["train", "--config", cfg.to_str().unwrap(), "--out", name], &d);
+        let mut args = vec!["train", "--config", cfg.to_str().unwrap(), "--out", name];
+        args.extend_from_slice(extra);
+        meshdeco(&args, &d)
+    };
+    let run = |name: &str, weights: &str| {
+        let o = train(name, weights, 3, &[]);
         assert!(o.status.success(), "{}", output_text(&o));
         let log = std::fs::read_to_string(d.join(name).join("training.jsonl")).unwrap();
         let first: serde_json::Value = serde_json::from_str(log.lines().next().unwrap()).unwrap();
@@ -361,5 +366,20 @@ fn noise_feature_weights_reach_training() {
     assert!(config_u.contains("feature_weights = \"uniform\""), "{config_u}");
     assert!(config_n.contains("feature_weights = \"noise\""), "{config_n}");
     assert!(rec_n < rec_u, "first step's feature error: weighted {rec_n}, uniform {rec_u}");
+    // A run resumes only with the weighting it was trained with (the checkpoint records it; the
+    // default changed with issue 53): the other is refused naming the key and the checkpoint.
+    for (name, other) in [("noise", "uniform"), ("uniform", "noise")] {
+        let o = train(name, other, 5, &["--resume"]);
+        let text = output_text(&o);
+        assert!(!o.status.success(), "{name} resumed as {other}: {text}");
+        assert!(
+            text.contains("feature_weights")
+                && text.contains("checkpoint.bin")
+                && text.contains(&format!("= \"{name}\"")),
+            "{text}"
+        );
+        let o = train(name, name, 5, &["--resume"]);
+        assert!(o.status.success(), "{name} resumed as {name}: {}", output_text(&o));
+    }
     let _ = std::fs::remove_dir_all(&d);
 }

@@ -57,12 +57,17 @@ fn validation_frames_are_held_out_and_reported() {
 fn bad_validation_values_name_the_key() {
     for (v, want) in [
         ("validation = \"auto:0%\"", "auto:P%"),
+        ("validation = \"auto:100%\"", "auto:P%"),
         ("validation = \"auto:10\"", "auto:P%"),
         ("validation = \"rest\"", "out of data.train"),
         ("validation = \"auto:10%:x\"", "auto:P%"),
     ] {
         let e = cfg(v).unwrap_err().to_string();
         assert!(e.contains("data.validation") && e.contains(want), "{v}: {e}");
+    }
+    // Just inside the open interval (0, 100) is a share.
+    for p in [0.5, 99.5] {
+        assert_eq!(Validation::parse(&format!("auto:{p}%")).unwrap(), Validation::Share { percent: p, seed: 0 });
     }
     // Frames outside data.train, or all of them, fail when the data are split.
     let d = std::env::temp_dir().join(format!("meshdeco-validation-bad-{}", std::process::id()));

@@ -359,8 +359,9 @@ pub struct AutoencoderMethod {
     /// Standard deviation of the normal initialisation (default 0.02).
     #[serde(skip_serializing_if = "network_default::init_std")]
     pub init_std: f64,
-    /// `zero` (the paper) | `mean`: the first layer's initial biases ([`InitBias`]).
-    #[serde(skip_serializing_if = "network_default::init_bias")]
+    /// `zero` (the paper) | `mean` (the default since issue 53): the first layer's initial
+    /// biases ([`InitBias`]). Always written: configs written before issue 53 left out `zero`,
+    /// then the default.
     pub init_bias: InitBias,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub batch_size: Option<usize>,
@@ -454,7 +455,6 @@ mod network_default {
     is_default!(
         epsilon: f64,
         init_std: f64,
-        init_bias: crate::nn::config::InitBias,
         augment_mix: crate::nn::augment::AugmentMix,
         augment_radius: [f64; 2],
         input_noise: f64,
@@ -657,8 +657,10 @@ impl<'de> Deserialize<'de> for DialSparsity {
     }
 }
 
-/// Default `feature_weights` of a config file.
-pub const AE_FEATURE_WEIGHTS: FeatureWeights = FeatureWeights::Uniform;
+/// Default `feature_weights` of a config file: `noise` since issue 53 (with the recommended
+/// setting's `init_bias = "mean"` and `learning_rate = 5e-3`: the recovery setting, chosen on the
+/// ground-truth validation sets, docs/ground-truth.md). The paper: `uniform`.
+pub const AE_FEATURE_WEIGHTS: FeatureWeights = FeatureWeights::Noise;
 
 /// The autoencoder's `feature_weights`: how each vertex's feature error counts in the training
 /// loss (and in the validation error and the did-it-train check, which measure the same error).

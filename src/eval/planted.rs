@@ -69,6 +69,8 @@ pub const MIN_INDEPENDENCE: f64 = 0.1;
 pub const TRUTH_FILE: &str = "truth.json";
 /// The true fields' file name.
 pub const FIELDS_FILE: &str = "fields.npy";
+/// The true weights (frame × deformation, `frame,c0,c1,…`), beside the frames.
+pub const WEIGHTS_FILE: &str = "weights.csv";
 
 /// Which mirror plane pairs deformations (see the module docs).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -754,12 +756,33 @@ pub fn write(set: &PlantedSet, out: &Path) -> Result<()> {
         crate::mesh::write_obj(&dir.join("template.obj"), &set.rest)?;
         let names: Vec<String> = (1..=set.frames.len()).map(|i| format!("frames_{i}")).collect();
         let flat: Vec<f64> = set.weights.iter().flatten().copied().collect();
-        artifact::write_weights_csv(&dir.join("weights.csv"), &names, &flat, set.fields.len())?;
+        artifact::write_weights_csv(&dir.join(WEIGHTS_FILE), &names, &flat, set.fields.len())?;
         artifact::write_json(&dir.join(TRUTH_FILE), &set.truth)?;
         artifact::write_atomic(&dir.join("eval.toml"), eval_config_text(out, &set.truth).as_bytes())?;
         Ok(())
     })?;
     staging.commit()
+}
+
+/// Checks that the planted directory's manifest lists `name` with the file's present length and
+/// checksum.
+fn check_listed(dir: &Path, name: &str) -> Result<()> {
+    let manifest_path = dir.join(artifact::MANIFEST_FILE);
+    let manifest: artifact::Manifest = artifact::read_json(&manifest_path)?;
+    let entry = manifest
+        .files
+        .get(name)
+        .ok_or_else(|| Error::Invalid(format!("{}: does not list `{name}`", manifest_path.display())))?;
+    let path = dir.join(name);
+    let bytes = std::fs::read(&path).map_err(|e| Error::io(&path, e))?;
+    if bytes.len() as u64 != entry.bytes || artifact::crc32_hex(&bytes) != entry.crc32 {
+        return Err(Error::Invalid(format!(
+            "{}: length or checksum differs from {}: the planted set was changed or damaged; plant it again",
+            path.display(),
+            manifest_path.display()
+        )));
+    }
+    Ok(())
 }
 
 /// The ground truth of a planted directory, read back and verified: every file the manifest
@@ -775,28 +798,14 @@ pub struct Truth {
 impl Truth {
     /// Reads `dir` (a directory written by [`write`]). Errors name the file and what is wrong.
     pub fn load(dir: &Path) -> Result<Self> {
-        let manifest_path = dir.join(artifact::MANIFEST_FILE);
         if !dir.join(TRUTH_FILE).is_file() {
             return Err(Error::Invalid(format!(
                 "{}: no {TRUTH_FILE}: not a directory written by `meshdeco plant`",
                 dir.display()
             )));
         }
-        let manifest: artifact::Manifest = artifact::read_json(&manifest_path)?;
         for name in [TRUTH_FILE, FIELDS_FILE, "frames.npy", "template.obj"] {
-            let entry = manifest
-                .files
-                .get(name)
-                .ok_or_else(|| Error::Invalid(format!("{}: does not list `{name}`", manifest_path.display())))?;
-            let path = dir.join(name);
-            let bytes = std::fs::read(&path).map_err(|e| Error::io(&path, e))?;
-            if bytes.len() as u64 != entry.bytes || artifact::crc32_hex(&bytes) != entry.crc32 {
-                return Err(Error::Invalid(format!(
-                    "{}: length or checksum differs from {}: the planted set was changed or damaged; plant it again",
-                    path.display(),
-                    manifest_path.display()
-                )));
-            }
+            check_listed(dir, name)?;
         }
         let file: TruthFile = artifact::read_json(&dir.join(TRUTH_FILE))?;
         let bad = |m: String| Error::parse(dir.join(TRUTH_FILE), None, m);
@@ -819,6 +828,29 @@ impl Truth {
             return Err(bad(format!("deformation {}: centre {} is not a vertex", d.name, d.center)));
         }
         Ok(Truth { dir: dir.to_path_buf(), file, fields })
+    }
+
+    /// The true weights of every frame (training frames, then test frames; one weight per
+    /// deformation), read from `weights.csv` and verified: the manifest's length and checksum,
+    /// one row per frame the truth file counts, one column per deformation.
+    pub fn weights(&self) -> Result<Vec<Vec<f64>>> {
+        check_listed(&self.dir, WEIGHTS_FILE)?;
+        let path = self.dir.join(WEIGHTS_FILE);
+        let table = artifact::read_weights_csv(&path)?;
+        let (frames, d) = (self.file.train + self.file.test, self.file.deformations.len());
+        if table.weights.len() != frames || table.weights.first().is_some_and(|w| w.len() != d) {
+            return Err(Error::parse(
+                &path,
+                None,
+                format!(
+                    "{} frames of {} weights; {} lists {frames} frames of {d} deformations",
+                    table.weights.len(),
+                    table.weights.first().map_or(0, Vec::len),
+                    TRUTH_FILE
+                ),
+            ));
+        }
+        Ok(table.weights)
     }
 
     /// Which deformations count in the score.
@@ -925,6 +957,15 @@ mod tests {
         let t = Truth::load(&out).unwrap();
         assert_eq!(t.fields, set.fields);
         assert_eq!(t.file, set.truth);
+        // The true weights read back exactly (the CSV writes each f64 in its shortest exact form).
+        assert_eq!(t.weights().unwrap(), set.weights);
+        // A changed weight is refused, naming the file.
+        let w = out.join(WEIGHTS_FILE);
+        let text = std::fs::read_to_string(&w).unwrap();
+        std::fs::write(&w, text.replacen(",0,", ",0.5,", 1)).unwrap();
+        let e = t.weights().unwrap_err().to_string();
+        assert!(e.contains(WEIGHTS_FILE) && e.contains("changed or damaged"), "{e}");
+        std::fs::write(&w, text).unwrap();
         // A changed field is refused, naming the file.
         let f = out.join(FIELDS_FILE);
         let mut bytes = std::fs::read(&f).unwrap();

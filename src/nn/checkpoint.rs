@@ -65,6 +65,11 @@ pub struct CheckpointHeader {
     /// `batch_size` or the full batch ([`CheckpointHeader::batch`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub batch: Option<usize>,
+    /// Whether the run weighted its feature error per vertex ([`super::training::Trainer::with_feature_weights`],
+    /// `feature_weights = "noise"`); absent (false) in checkpoints of unweighted runs and of
+    /// runs before issue 53. A resume must weight alike.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub feature_weighted: bool,
 }
 
 impl CheckpointHeader {
@@ -373,6 +378,7 @@ mod tests {
             n_shapes: 4,
             neighbor_fingerprint: 0xdead_beef_f00d,
             batch: Some(3),
+            feature_weighted: true,
             last_loss: Some(LossTerms {
                 total: MISREAD[4],
                 reconstruction: MISREAD[2],

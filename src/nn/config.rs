@@ -289,11 +289,15 @@ impl AutoencoderConfig {
     /// components (`lambda_orthogonal` 10), and an encoder with two residual passes and up to
     /// five vertex steps (`encoder_steps`; they stop once a step's last chord step gains less
     /// than 0.5 %: one on SCAPE, two or three on the cactus); a run that stalls restarts with
-    /// halved step sizes (`stall_restarts` 2). The method's own keys `scaling`,
-    /// `scaling_quantile` and `scaling_fence` default to `global`, 0.001 and 1 with it.
+    /// halved step sizes (`stall_restarts` 2). Since issue 53 (the recovery setting, chosen on
+    /// the ground-truth validation sets: docs/ground-truth.md) the first layer's biases start at
+    /// the training features' channel means (`init_bias` mean) and the step size starts at 5e-3
+    /// (was 1e-2), with the method key `feature_weights = "noise"`. The method's own keys
+    /// `scaling`, `scaling_quantile` and `scaling_fence` default to `global`, 0.001 and 1 with it.
     pub fn recommended() -> Self {
         AutoencoderConfig {
-            learning_rate: 1e-2,
+            init_bias: InitBias::Mean,
+            learning_rate: 5e-3,
             learning_rate_final: Some(1e-4),
             learning_rate_norm: 75.0,
             stall_restarts: 2,
@@ -534,12 +538,13 @@ mod tests {
         // The recommended setting validates and differs from the paper's where documented.
         let r = AutoencoderConfig::recommended();
         r.validate().unwrap();
-        assert_eq!((r.learning_rate, r.learning_rate_final, r.learning_rate_norm), (1e-2, Some(1e-4), 75.0));
+        assert_eq!((r.learning_rate, r.learning_rate_final, r.learning_rate_norm), (5e-3, Some(1e-4), 75.0));
+        assert_eq!((r.init_bias, AutoencoderConfig::default().init_bias), (InitBias::Mean, InitBias::Zero));
         assert_eq!((r.beta2, r.lambda1, r.augment, r.lambda_orthogonal, r.encoder_passes), (0.99, 4.0, 3, 10.0, 2));
         assert_eq!((r.encoder_steps, AutoencoderConfig::default().encoder_steps), (5, 1));
         assert_eq!((r.stall_restarts, AutoencoderConfig::default().stall_restarts), (2, 0));
         let h = r.restarted(2);
-        assert_eq!((h.learning_rate, h.learning_rate_final, h.beta2), (2.5e-3, Some(2.5e-5), r.beta2));
+        assert_eq!((h.learning_rate, h.learning_rate_final, h.beta2), (1.25e-3, Some(2.5e-5), r.beta2));
         assert_eq!(r.restarted(0), r);
         assert_eq!(AutoencoderConfig { ..r.clone() }.iterations, AutoencoderConfig::default().iterations);
     }

@@ -1116,6 +1116,7 @@ impl<'a> Trainer<'a> {
             neighbor_fingerprint: self.neighbors.fingerprint(),
             last_loss: self.last_loss,
             batch: Some(self.config.batch_for(self.data.n_shapes())),
+            feature_weighted: self.feature_weights.is_some(),
         }
     }
 

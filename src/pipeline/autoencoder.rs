@@ -872,7 +872,20 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
     // A run that stalled and restarted with halved step sizes (`stall_restarts`) wrote its
     // checkpoints with the restart's rates: a resume continues that restart.
     let mut restart = 0;
-    if let Some((_, ck)) = &resumed {
+    if let Some((from, ck)) = &resumed {
+        // The feature weights are not part of the network's hyperparameters: a run resumes only
+        // with the weighting it was trained with (the default changed with issue 53).
+        if ck.header.feature_weighted != feature_weights.is_some() {
+            let (was, now) = if ck.header.feature_weighted { ("noise", "uniform") } else { ("uniform", "noise") };
+            return Err(Error::config(
+                "feature_weights",
+                format!(
+                    "{}: the checkpoint was trained with feature_weights = \"{was}\", this run would use \"{now}\": \
+                     set method.feature_weights = \"{was}\" to resume it",
+                    from.display()
+                ),
+            ));
+        }
         let saved = &ck.header.config;
         if let Some(r) = (1..=ae_cfg.stall_restarts).find(|&r| ae_cfg.restarted(r).check_resumable(saved).is_ok()) {
             restart = r;

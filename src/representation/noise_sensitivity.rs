@@ -122,30 +122,19 @@ mod tests {
     use crate::mesh::TriMesh;
     use crate::representation::{RepresentationKind, RepresentationOptions};
 
-    /// A bumpy grid (so that no ring is flat) with one vertex pushed almost onto its
-    /// neighbour: the sliver's ring is the noisiest.
+    /// A bumpy grid (so that no ring is flat; the library's 8 × 7 criss-cross grid, spacing
+    /// `scale`) with vertex 41 (a ring of 4) pushed almost onto its neighbour 40 (a ring of 8):
+    /// the sliver's ring is the noisiest (20× the median variance).
     fn grid_with_sliver(scale: f64) -> (TriMesh, usize) {
-        let (w, h) = (9usize, 8usize);
-        let mut positions = Vec::new();
-        for j in 0..h {
-            for i in 0..w {
-                let (x, y) = (i as f64, j as f64);
-                positions.push([x * scale, y * scale, 0.3 * scale * ((0.9 * x).sin() + (0.7 * y).cos())]);
-            }
+        let mut mesh = crate::mesh::primitives::grid(8, 7, 8.0 * scale);
+        for p in &mut mesh.positions {
+            let (x, y) = (p[0] / scale, p[1] / scale);
+            p[2] = 0.3 * scale * ((0.9 * x).sin() + (0.7 * y).cos());
         }
-        let mut faces = Vec::new();
-        for j in 0..h - 1 {
-            for i in 0..w - 1 {
-                let a = j * w + i;
-                faces.push([a, a + 1, a + w + 1]);
-                faces.push([a, a + w + 1, a + w]);
-            }
-        }
-        let v = 4 * w + 4;
-        let u = v + 1;
-        let (pu, pv) = (positions[u], positions[v]);
-        positions[v] = [0, 1, 2].map(|c| pu[c] + 0.03 * (pv[c] - pu[c]));
-        (TriMesh { positions, faces }, v)
+        let (v, u) = (41, 40);
+        let (pu, pv) = (mesh.positions[u], mesh.positions[v]);
+        mesh.positions[v] = [0, 1, 2].map(|c| pu[c] + 0.03 * (pv[c] - pu[c]));
+        (mesh, v)
     }
 
     fn acap(mesh: &TriMesh) -> Representation {
