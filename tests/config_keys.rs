@@ -118,6 +118,23 @@ fn feature_weights_is_a_method_key() {
     assert!(e.contains("feature_weights") && e.contains("uniform") && e.contains("noise"), "{e}");
 }
 
+/// The experiment's `name` becomes the artefact folder's name: empty, a path separator of
+/// either kind, `.` and `..` are each refused naming the key; a plain name is accepted (issue
+/// 58's mutants of the check's `||`s).
+#[test]
+fn an_experiment_name_is_one_file_name() {
+    let cfg = |name: &str| {
+        meshdeco::config::Config::from_toml(&format!(
+            "name = {name:?}\n[data]\npath = \"synthetic:tube\"\n[method]\nkind = \"pca\"\ncomponents = 3\n"
+        ))
+    };
+    for bad in ["", "a/b", "a\\b", ".", ".."] {
+        let e = cfg(bad).err().unwrap_or_else(|| panic!("name {bad:?} accepted")).to_string();
+        assert!(e.contains("`name`") && e.contains("without path separators"), "{bad:?}: {e}");
+    }
+    assert_eq!(cfg("scape-pca.2").unwrap().name, "scape-pca.2");
+}
+
 #[test]
 fn every_splocs_solver_field_is_a_method_key() {
     use serde_json::json;

@@ -80,3 +80,29 @@ fn bad_validation_values_name_the_key() {
         assert!(!d.exists(), "no artefact after a failed split");
     }
 }
+
+/// The share's bound (issue 58's mutants): a share may hold out every training frame but the
+/// first (which stays to train on); one frame more is refused naming the key.
+#[test]
+fn a_share_may_leave_only_the_first_frame() {
+    let train: Vec<usize> = (0..10).collect();
+    // 90 % of 10 = 9 frames: all but the first.
+    let (held, fit) = Validation::parse("auto:90%").unwrap().resolve(20, &train).unwrap();
+    assert_eq!((held, fit), ((1..10).collect::<Vec<_>>(), vec![0]));
+    // 95 % of 10 rounds to 10: none would be left.
+    let e = Validation::parse("auto:95%").unwrap().resolve(20, &train).unwrap_err().to_string();
+    assert!(e.contains("data.validation") && e.contains("leaves none to train on"), "{e}");
+}
+
+/// `data.validation` beside the autoencoder's `method.validation` is refused when the config is
+/// read, naming both keys; each alone is accepted (issue 58's mutants; the command line's
+/// refusal: `reliability.rs::data_and_method_validation_together_are_refused_naming_both`).
+#[test]
+fn data_and_method_validation_are_not_read_together() {
+    let data = "[data]\npath = \"synthetic:tube\"\ntrain = \"1-30\"\n";
+    let ae = "[method]\nkind = \"autoencoder\"\ncomponents = 3\n";
+    let e = Config::from_toml(&format!("{data}validation = \"28-30\"\n{ae}validation = 2\n")).unwrap_err().to_string();
+    assert!(e.contains("data.validation") && e.contains("method.validation = 2"), "{e}");
+    assert!(Config::from_toml(&format!("{data}validation = \"28-30\"\n{ae}validation = 0\n")).is_ok());
+    assert!(Config::from_toml(&format!("{data}{ae}validation = 2\n")).is_ok());
+}
