@@ -135,6 +135,39 @@ fn an_experiment_name_is_one_file_name() {
     assert_eq!(cfg("scape-pca.2").unwrap().name, "scape-pca.2");
 }
 
+/// The data keys that belong to one kind of `data.path` (issue 58's mutants): `template` to a
+/// NumPy or HDF5 path, `array` to a NumPy path, `dataset` to an HDF5 path — each elsewhere is
+/// refused naming the key; and the HDF5 source a path names (the file, the dataset from the key,
+/// the path's suffix or `verts`, the template).
+#[test]
+fn data_keys_belong_to_their_kind_of_path() {
+    use std::path::Path;
+    let cfg = |data: &str| {
+        meshdeco::config::Config::from_toml(&format!(
+            "name = \"k\"\n[data]\n{data}\n[method]\nkind = \"pca\"\ncomponents = 3\n"
+        ))
+    };
+    for (data, key) in [
+        ("path = \"shapes\"\ntemplate = \"t.obj\"", "data.template"),
+        ("path = \"shapes\"\narray = \"verts\"", "data.array"),
+        ("path = \"x.h5\"\narray = \"verts\"", "data.array"),
+        ("path = \"shapes\"\ndataset = \"verts\"", "data.dataset"),
+        ("path = \"x.npy\"\ntemplate = \"t.obj\"\ndataset = \"verts\"", "data.dataset"),
+    ] {
+        let e = cfg(data).err().unwrap_or_else(|| panic!("accepted: {data}")).to_string();
+        assert!(e.contains(key) && e.contains("only"), "{data}: {e}");
+    }
+    let c = cfg("path = \"x.h5:jump\"\ntemplate = \"t.obj\"").unwrap();
+    assert_eq!(c.data.hdf5_source(), Some((Path::new("x.h5"), "jump", Some(Path::new("t.obj")))));
+    let c = cfg("path = \"x.h5\"\ndataset = \"run\"").unwrap();
+    assert_eq!(c.data.hdf5_source(), Some((Path::new("x.h5"), "run", None)));
+    let c = cfg("path = \"x.hdf5\"").unwrap();
+    assert_eq!(c.data.hdf5_source(), Some((Path::new("x.hdf5"), "verts", None)));
+    let c = cfg("path = \"x.npy\"\ntemplate = \"t.obj\"").unwrap();
+    assert_eq!((c.data.hdf5_source(), c.data.numpy_template().unwrap()), (None, Some(Path::new("t.obj"))));
+    assert_eq!(cfg("path = \"shapes\"").unwrap().data.hdf5_source(), None);
+}
+
 #[test]
 fn every_splocs_solver_field_is_a_method_key() {
     use serde_json::json;
