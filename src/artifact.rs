@@ -456,15 +456,22 @@ mod tests {
         assert!(e.contains("model.json") && e.contains("`b.c`"), "{e}");
     }
 
-    /// The weight table: a header, one row per frame in frame-major order (weight `f·k + c`),
-    /// and nothing written when a weight is not finite.
-    #[test]
-    fn weights_csv_is_frame_major_and_refuses_non_finite() {
-        let d = tmpdir("weights-csv");
+    /// A fresh folder `tag` holding `w.csv`: three frames f0–f2 of two weights each,
+    /// 0.5, 1 / 2, 3 / −4, 5.25.
+    fn three_frame_weights(tag: &str) -> (PathBuf, Vec<String>, PathBuf) {
+        let d = tmpdir(tag);
         std::fs::create_dir_all(&d).unwrap();
         let names = vec!["f0".to_string(), "f1".to_string(), "f2".to_string()];
         let p = d.join("w.csv");
         write_weights_csv(&p, &names, &[0.5, 1.0, 2.0, 3.0, -4.0, 5.25], 2).unwrap();
+        (d, names, p)
+    }
+
+    /// The weight table: a header, one row per frame in frame-major order (weight `f·k + c`),
+    /// and nothing written when a weight is not finite.
+    #[test]
+    fn weights_csv_is_frame_major_and_refuses_non_finite() {
+        let (d, names, p) = three_frame_weights("weights-csv");
         assert_eq!(std::fs::read_to_string(&p).unwrap(), "frame,c0,c1\nf0,0.5,1\nf1,2,3\nf2,-4,5.25\n");
         let q = d.join("nan.csv");
         let e = write_weights_csv(&q, &names, &[0.5, 1.0, 2.0, f64::NAN, 0.0, 0.0], 2).unwrap_err().to_string();
@@ -477,11 +484,7 @@ mod tests {
     /// and the line.
     #[test]
     fn weights_csv_reads_back_verified() {
-        let d = tmpdir("weights-csv-read");
-        std::fs::create_dir_all(&d).unwrap();
-        let names = vec!["f0".to_string(), "f1".to_string(), "f2".to_string()];
-        let p = d.join("w.csv");
-        write_weights_csv(&p, &names, &[0.5, 1.0, 2.0, 3.0, -4.0, 5.25], 2).unwrap();
+        let (d, names, p) = three_frame_weights("weights-csv-read");
         let back = read_weights_csv(&p).unwrap();
         assert_eq!(back.frames, names);
         assert_eq!(back.weights, vec![vec![0.5, 1.0], vec![2.0, 3.0], vec![-4.0, 5.25]]);

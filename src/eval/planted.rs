@@ -764,23 +764,25 @@ pub fn write(set: &PlantedSet, out: &Path) -> Result<()> {
     staging.commit()
 }
 
-/// Checks that the planted directory's manifest lists `name` with the file's present length and
-/// checksum.
-fn check_listed(dir: &Path, name: &str) -> Result<()> {
+/// Checks that the planted directory's manifest (read once) lists each of `names` with the
+/// file's present length and checksum.
+fn check_listed(dir: &Path, names: &[&str]) -> Result<()> {
     let manifest_path = dir.join(artifact::MANIFEST_FILE);
     let manifest: artifact::Manifest = artifact::read_json(&manifest_path)?;
-    let entry = manifest
-        .files
-        .get(name)
-        .ok_or_else(|| Error::Invalid(format!("{}: does not list `{name}`", manifest_path.display())))?;
-    let path = dir.join(name);
-    let bytes = std::fs::read(&path).map_err(|e| Error::io(&path, e))?;
-    if bytes.len() as u64 != entry.bytes || artifact::crc32_hex(&bytes) != entry.crc32 {
-        return Err(Error::Invalid(format!(
-            "{}: length or checksum differs from {}: the planted set was changed or damaged; plant it again",
-            path.display(),
-            manifest_path.display()
-        )));
+    for name in names {
+        let entry = manifest
+            .files
+            .get(*name)
+            .ok_or_else(|| Error::Invalid(format!("{}: does not list `{name}`", manifest_path.display())))?;
+        let path = dir.join(name);
+        let bytes = std::fs::read(&path).map_err(|e| Error::io(&path, e))?;
+        if bytes.len() as u64 != entry.bytes || artifact::crc32_hex(&bytes) != entry.crc32 {
+            return Err(Error::Invalid(format!(
+                "{}: length or checksum differs from {}: the planted set was changed or damaged; plant it again",
+                path.display(),
+                manifest_path.display()
+            )));
+        }
     }
     Ok(())
 }
@@ -804,9 +806,7 @@ impl Truth {
                 dir.display()
             )));
         }
-        for name in [TRUTH_FILE, FIELDS_FILE, "frames.npy", "template.obj"] {
-            check_listed(dir, name)?;
-        }
+        check_listed(dir, &[TRUTH_FILE, FIELDS_FILE, "frames.npy", "template.obj"])?;
         let file: TruthFile = artifact::read_json(&dir.join(TRUTH_FILE))?;
         let bad = |m: String| Error::parse(dir.join(TRUTH_FILE), None, m);
         if file.format != TRUTH_FORMAT {
@@ -834,7 +834,7 @@ impl Truth {
     /// deformation), read from `weights.csv` and verified: the manifest's length and checksum,
     /// one row per frame the truth file counts, one column per deformation.
     pub fn weights(&self) -> Result<Vec<Vec<f64>>> {
-        check_listed(&self.dir, WEIGHTS_FILE)?;
+        check_listed(&self.dir, &[WEIGHTS_FILE])?;
         let path = self.dir.join(WEIGHTS_FILE);
         let table = artifact::read_weights_csv(&path)?;
         let (frames, d) = (self.file.train + self.file.test, self.file.deformations.len());
