@@ -32,7 +32,7 @@
 //! | `components` | all | 50 | number of components K (region-pca: total budget) |
 //! | `representation` | splocs, pca, region-pca | `displacement` | `displacement` \| `triangle-gradient` (pca and splocs also `acap`) |
 //! | `sparsity` | splocs | 2.0 | λ, weight of the group-sparsity term |
-//! | `support` | splocs, autoencoder | [0.1, 0.7] / [0.2, 0.4] | [d_min, d_max] of the support maps (normalised geodesic distance) |
+//! | `support` | splocs, autoencoder | [0.1, 0.7] / [0.3, 0.7] (paper [0.2, 0.4]) | [d_min, d_max] of the support maps (normalised geodesic distance) |
 //! | `weights` | splocs | `nonnegative` | `nonnegative` (Eq. 4) \| `signed` (Eq. 3) |
 //! | `max_iterations` | splocs | 10 | outer iterations |
 //! | `admm` | splocs | { rho = 10, iterations = 10 } | ADMM penalty and inner iterations |

@@ -292,7 +292,10 @@ impl AutoencoderConfig {
     /// halved step sizes (`stall_restarts` 2). Since issue 53 (the recovery setting, chosen on
     /// the ground-truth validation sets: docs/ground-truth.md) the first layer's biases start at
     /// the training features' channel means (`init_bias` mean) and the step size starts at 5e-3
-    /// (was 1e-2), with the method key `feature_weights = "noise"`. The method's own keys
+    /// (was 1e-2), with the method key `feature_weights = "noise"`, and the support maps' ramp
+    /// runs from 0.3 to 0.7 of the largest geodesic distance (`support`; the paper's [0.2, 0.4]
+    /// left deformations wider than a fifth of the mesh out of reach: docs/ground-truth.md
+    /// § "The reconstruction gap"). The method's own keys
     /// `scaling`, `scaling_quantile` and `scaling_fence` default to `global`, 0.001 and 1 with it.
     pub fn recommended() -> Self {
         AutoencoderConfig {
@@ -307,6 +310,8 @@ impl AutoencoderConfig {
             lambda_orthogonal: 10.0,
             encoder_passes: 2,
             encoder_steps: 5,
+            d_min: 0.3,
+            d_max: 0.7,
             ..AutoencoderConfig::default()
         }
     }
@@ -543,6 +548,8 @@ mod tests {
         assert_eq!((r.beta2, r.lambda1, r.augment, r.lambda_orthogonal, r.encoder_passes), (0.99, 4.0, 3, 10.0, 2));
         assert_eq!((r.encoder_steps, AutoencoderConfig::default().encoder_steps), (5, 1));
         assert_eq!((r.stall_restarts, AutoencoderConfig::default().stall_restarts), (2, 0));
+        let paper = AutoencoderConfig::default();
+        assert_eq!((r.d_min, r.d_max, paper.d_min, paper.d_max), (0.3, 0.7, 0.2, 0.4));
         let h = r.restarted(2);
         assert_eq!((h.learning_rate, h.learning_rate_final, h.beta2), (1.25e-3, Some(2.5e-5), r.beta2));
         assert_eq!(r.restarted(0), r);
