@@ -1,5 +1,7 @@
 //! Which ACAP decoder turns a trained autoencoder's output features into the best vertices?
 //! `cargo run --release --example ae_decoder_study -- checkpoints/scape-ae ../shared/data/scape 37-71`
+//! (a `.npy` sequence takes its template as a fourth argument, e.g. a planted set's
+//! `frames.npy 201-300 template.obj`)
 use meshdeco::pipeline::autoencoder::AeArtifact;
 use meshdeco::representation::acap::AcapDecoder;
 use meshdeco::representation::roundtrip::{Alignment, erms};
@@ -8,7 +10,12 @@ use meshdeco::representation::{Representation, RepresentationKind, Representatio
 fn main() -> anyhow::Result<()> {
     let args: Vec<String> = std::env::args().collect();
     let m = AeArtifact::load(std::path::Path::new(&args[1]))?;
-    let seq = meshdeco::mesh::load_sequence(&args[2])?;
+    let seq = match args.get(4) {
+        Some(t) => {
+            meshdeco::mesh::npy::load_npy_sequence(std::path::Path::new(&args[2]), None, std::path::Path::new(t))?
+        }
+        None => meshdeco::mesh::load_sequence(&args[2])?,
+    };
     let sel = meshdeco::config::FrameSelection::parse("frames", &args[3])?.resolve("frames", seq.n_frames(), None)?;
     let test = seq.select(&sel);
     let codes = m.encode_frames(&test)?;
@@ -16,9 +23,14 @@ fn main() -> anyhow::Result<()> {
     let x = m.header.scaling.invert(&xs)?;
     for (name, dec) in [
         ("fit-inverse 1e-6", AcapDecoder::FitInverse { edge_weight: 1e-6 }),
+        ("fit-inverse 1e-4", AcapDecoder::FitInverse { edge_weight: 1e-4 }),
+        ("fit-inverse 1e-3", AcapDecoder::FitInverse { edge_weight: 1e-3 }),
         ("fit-inverse 1e-2", AcapDecoder::FitInverse { edge_weight: 1e-2 }),
+        ("fit-inverse 3e-2", AcapDecoder::FitInverse { edge_weight: 3e-2 }),
         ("fit-inverse 0.1", AcapDecoder::FitInverse { edge_weight: 0.1 }),
+        ("fit-inverse 0.3", AcapDecoder::FitInverse { edge_weight: 0.3 }),
         ("fit-inverse 1", AcapDecoder::FitInverse { edge_weight: 1.0 }),
+        ("fit-inverse 3", AcapDecoder::FitInverse { edge_weight: 3.0 }),
         ("edge least squares", AcapDecoder::EdgeLeastSquares),
     ] {
         let opts = RepresentationOptions { acap_decoder: dec, ..Default::default() };

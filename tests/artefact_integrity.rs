@@ -497,3 +497,52 @@ fn fuzzed_artefacts_never_panic_pass_or_print_nan() {
     assert!(runs >= 300 && refused == runs, "{runs} runs, {refused} refused");
     std::fs::remove_dir_all(&d).unwrap();
 }
+
+/// `decoder_edge_weight` (issue 53): written into `model.json` by training, verified when read
+/// back (a value out of range is refused naming the file and the key), and the one the decoding
+/// uses: the same model encodes the same frames to another Erms with another weight; a
+/// `model.json` without it (models trained before the key) loads with the default.
+#[test]
+fn the_decoder_edge_weight_is_stored_verified_and_used() {
+    let d = tmp("decoder-edge-weight");
+    let ae = train(&d, "ae", &format!("{AE}decoder_edge_weight = 0.5\n"));
+    let json = ae.join("model.json");
+    let text = std::fs::read_to_string(&json).unwrap();
+    let header: serde_json::Value = serde_json::from_str(&text).unwrap();
+    assert_eq!(header["decoder_edge_weight"], serde_json::json!(0.5));
+    // Rewrites model.json with the key set to `w` (or removed) and the manifest to match.
+    let with = |w: Option<serde_json::Value>| {
+        let mut v = header.clone();
+        match w {
+            Some(w) => v["decoder_edge_weight"] = w,
+            None => {
+                v.as_object_mut().unwrap().remove("decoder_edge_weight");
+            }
+        }
+        std::fs::write(&json, serde_json::to_string_pretty(&v).unwrap()).unwrap();
+        let manifest = meshdeco::artifact::compute_manifest(&ae).unwrap();
+        meshdeco::artifact::write_json(&ae.join("manifest.json"), &manifest).unwrap();
+    };
+    let total = |o: &Output| -> f64 {
+        let t = output_text(o);
+        assert!(o.status.success(), "{t}");
+        let at = t.find("total Erms ").unwrap_or_else(|| panic!("no total in {t}"));
+        t[at + 11..].split_whitespace().next().unwrap().parse().unwrap()
+    };
+    let encode = |tag: &str| meshdeco(&["encode", ae.to_str().unwrap(), "synthetic:tube", "--out", tag], &d);
+    let at_half = total(&encode("e1"));
+    with(Some(serde_json::json!(1e-6)));
+    let exact = total(&encode("e2"));
+    assert!((at_half - exact).abs() > 1e-6 * exact.max(1e-12), "the weight changes nothing: {at_half} vs {exact}");
+    with(None);
+    let default = total(&encode("e3"));
+    assert!((default - exact).abs() > 1e-6 * exact.max(1e-12), "a model without the key is not decoded with 0.1");
+    for bad in [serde_json::json!(-1.0), serde_json::json!(1e9)] {
+        with(Some(bad.clone()));
+        let o = encode("e4");
+        fails_with(&o, "model.json");
+        assert!(output_text(&o).contains("decoder_edge_weight"), "{bad}: {}", output_text(&o));
+        assert!(!d.join("e4").exists(), "a refused encode wrote its output");
+    }
+    std::fs::remove_dir_all(&d).unwrap();
+}

@@ -332,7 +332,8 @@ impl RegionPcaMethod {
 /// (except `d_min`/`d_max`, written `support = [d_min, d_max]`), with its meaning documented
 /// there; [`network_keys!`] maps the two both ways, naming every field, so a new network field
 /// does not compile until it is a key. The method's own keys: `geodesic_m`, `scaling`,
-/// `scaling_quantile`, `scaling_fence`, `consistency`, `fit_test`, `dial_sparsity`, `feature_weights`. Keys at their default that older configs did not have are left out
+/// `scaling_quantile`, `scaling_fence`, `consistency`, `fit_test`, `dial_sparsity`, `feature_weights`,
+/// `decoder_edge_weight`. Keys at their default that older configs did not have are left out
 /// of a written `config.toml` (`skip_serializing_if`); they parse back to the same value.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -392,6 +393,12 @@ pub struct AutoencoderMethod {
     /// `uniform` | `noise`: how each vertex's feature error counts in the loss
     /// ([`FeatureWeights`]).
     pub feature_weights: FeatureWeights,
+    /// Edge weight μ of the ACAP decoder that turns the network's output features into vertices
+    /// ([`crate::representation::acap::AcapDecoder::FitInverse`]; default
+    /// [`AE_DECODER_EDGE_WEIGHT`]). An inference key: stored in `model.json`, models trained
+    /// before it get the default.
+    #[serde(skip_serializing_if = "is_default_decoder_edge_weight")]
+    pub decoder_edge_weight: f64,
     /// Synthetic shapes per training step (augmentation in feature space; 0: none).
     pub augment: usize,
     /// `local` | `blend` | `mixed` (default `local`).
@@ -435,6 +442,10 @@ pub struct AutoencoderMethod {
     /// Gauss–Newton steps of the encoder on the reconstructed vertices at inference (0: none).
     #[serde(skip_serializing_if = "network_default::encoder_steps")]
     pub encoder_steps: usize,
+}
+
+fn is_default_decoder_edge_weight(w: &f64) -> bool {
+    *w == AE_DECODER_EDGE_WEIGHT
 }
 
 fn is_zero(n: &usize) -> bool {
@@ -489,6 +500,7 @@ macro_rules! network_keys {
                     fit_test,
                     dial_sparsity,
                     feature_weights,
+                    decoder_edge_weight,
                 } = own;
                 AutoencoderMethod {
                     support: [d_min, d_max],
@@ -500,6 +512,7 @@ macro_rules! network_keys {
                     fit_test,
                     dial_sparsity,
                     feature_weights,
+                    decoder_edge_weight,
                     $($field),*
                 }
             }
@@ -516,6 +529,7 @@ macro_rules! network_keys {
                     fit_test: _,
                     dial_sparsity: _,
                     feature_weights: _,
+                    decoder_edge_weight: _,
                     $($field),*
                 } = self.clone();
                 AutoencoderConfig { d_min: support[0], d_max: support[1], $($field),* }
@@ -572,6 +586,7 @@ struct AutoencoderOwnKeys {
     fit_test: bool,
     dial_sparsity: DialSparsity,
     feature_weights: FeatureWeights,
+    decoder_edge_weight: f64,
 }
 
 /// Default `scaling_quantile` of a config file (the paper's is 0: minimum and maximum).
@@ -678,6 +693,18 @@ pub enum FeatureWeights {
     Noise,
 }
 
+/// Default `decoder_edge_weight` of a config file: 0.1, chosen on the ground-truth validation
+/// sets (docs/ground-truth.md § "Decoding the network's features"): the network's output
+/// features are not exactly realisable, and a share of the edge least squares beside the exact
+/// inverse of the 1-ring fit turns them into vertices 2–11 % closer to the shapes there than the
+/// representation's own 1e-6 ([`crate::representation::acap::DEFAULT_EDGE_WEIGHT`], which
+/// keeps exact features' round trips exact; the decoding before, and the `paper` setting).
+pub const AE_DECODER_EDGE_WEIGHT: f64 = 0.1;
+
+/// Largest accepted `decoder_edge_weight` (beyond it the edge least squares alone, which the
+/// exact inverse is meant to beat, decides).
+pub const AE_DECODER_EDGE_WEIGHT_MAX: f64 = 100.0;
+
 /// Default `scaling_fence` of a config file.
 pub const AE_SCALING_FENCE: f64 = 1.0;
 
@@ -694,6 +721,7 @@ impl Default for AutoencoderMethod {
                 fit_test: true,
                 dial_sparsity: AE_DIAL_SPARSITY,
                 feature_weights: AE_FEATURE_WEIGHTS,
+                decoder_edge_weight: AE_DECODER_EDGE_WEIGHT,
             },
         )
     }
@@ -875,6 +903,15 @@ impl MethodSettings for AutoencoderMethod {
             return Err(Error::config(
                 "method.scaling_fence",
                 format!("{} must be a finite number ≥ 0", self.scaling_fence),
+            ));
+        }
+        if !(0.0..=AE_DECODER_EDGE_WEIGHT_MAX).contains(&self.decoder_edge_weight) {
+            return Err(Error::config(
+                "method.decoder_edge_weight",
+                format!(
+                    "{} must be a number in [0, {AE_DECODER_EDGE_WEIGHT_MAX}] (1e-6: the exact inverse of the features' 1-ring fit)",
+                    self.decoder_edge_weight
+                ),
             ));
         }
         if let DialSparsity::Fixed(s) = self.dial_sparsity

@@ -49,7 +49,7 @@ use crate::nn::{
     stall_check_step,
 };
 use crate::preprocess::{Prepared, UnitBox};
-use crate::representation::acap::Consistency;
+use crate::representation::acap::{AcapDecoder, Consistency};
 use crate::representation::noise_sensitivity::{NOISE_DRAWS, NOISE_LEVEL, feature_noise_variance, noise_weights};
 use crate::representation::roundtrip::Alignment;
 use crate::representation::scaling::{FeatureScaling, RangeHistogram, ScalingMode};
@@ -68,6 +68,11 @@ pub struct AeHeader {
     pub representation: String,
     /// ACAP rotation consistency (`bfs` or `global`).
     pub consistency: String,
+    /// Edge weight μ of the ACAP decoder of the network's features (`decoder_edge_weight`;
+    /// models trained before it get today's default,
+    /// [`crate::config::AE_DECODER_EDGE_WEIGHT`]).
+    #[serde(default = "default_decoder_edge_weight")]
+    pub decoder_edge_weight: f64,
     /// Feature scaling to [−0.95, 0.95] fitted on the training frames.
     pub scaling: FeatureScaling,
     /// Data scaling applied before encoding (identity unless `data.unit_box`).
@@ -105,6 +110,21 @@ impl CenterDistances for GeodesicSupport {
     }
 }
 
+fn default_decoder_edge_weight() -> f64 {
+    crate::config::AE_DECODER_EDGE_WEIGHT
+}
+
+/// The representation of an autoencoder: ACAP with its rotation consistency and the decoder
+/// edge weight μ (`decoder_edge_weight`).
+fn ae_representation(rest: &TriMesh, consistency: Consistency, edge_weight: f64) -> Result<Representation> {
+    let options = RepresentationOptions {
+        acap_consistency: consistency,
+        acap_decoder: AcapDecoder::FitInverse { edge_weight },
+        ..Default::default()
+    };
+    Representation::new(RepresentationKind::Acap, rest, options)
+}
+
 fn consistency_of(s: &str) -> Consistency {
     if s == "bfs" { Consistency::Bfs } else { Consistency::Global }
 }
@@ -132,6 +152,13 @@ fn check_header(header: &AeHeader, json: &Path, n: usize) -> Result<()> {
         return Err(bad(format!(
             "`components` is {}; an autoencoder on {n} vertices has 1 to {n} (one centre vertex each)",
             header.components
+        )));
+    }
+    let w = header.decoder_edge_weight;
+    if !(0.0..=crate::config::AE_DECODER_EDGE_WEIGHT_MAX).contains(&w) {
+        return Err(bad(format!(
+            "`decoder_edge_weight` is {w}; it must be in [0, {}]",
+            crate::config::AE_DECODER_EDGE_WEIGHT_MAX
         )));
     }
     let f = header.train_frames.len();
@@ -166,10 +193,8 @@ impl AeArtifact {
         let dir = artifact::model_dir(dir);
         let (header, arrays): (AeHeader, ArrayStore) = artifact::load_model(&dir)?;
         let rest = rest_from_arrays(&arrays)?;
-        let options =
-            RepresentationOptions { acap_consistency: consistency_of(&header.consistency), ..Default::default() };
-        let representation = Representation::new(RepresentationKind::Acap, &rest, options)?;
         check_header(&header, &dir.join("model.json"), rest.n_vertices())?;
+        let representation = ae_representation(&rest, consistency_of(&header.consistency), header.decoder_edge_weight)?;
         // The network's K must be the header's, checked before the network is built with it.
         let meta = dir.join(crate::nn::inference::META_FILE);
         let meta_k =
@@ -773,8 +798,7 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
     }
     ctx.progress.stage("acap features", prep.train.len() as u64);
     let t_rep = Instant::now();
-    let options = RepresentationOptions { acap_consistency: m.consistency.to_acap(), ..Default::default() };
-    let representation = Representation::new(RepresentationKind::Acap, &prep.rest, options)?;
+    let representation = ae_representation(&prep.rest, m.consistency.to_acap(), m.decoder_edge_weight)?;
     // The network's 9 numbers per vertex, and the pieces' translations (multi-piece meshes).
     // When the features are cached in a file (large data: `data.cache`), training reads them
     // from it a batch at a time; otherwise they are computed into memory and scaled in place.
@@ -1114,6 +1138,7 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
             method: MethodKind::Autoencoder.name().into(),
             representation: RepresentationKind::Acap.name().into(),
             consistency: m.consistency.name().into(),
+            decoder_edge_weight: m.decoder_edge_weight,
             scaling,
             unit_box: prep.unit_box,
             components: ae_cfg.components,
