@@ -55,7 +55,7 @@
 //! | `scaling` | autoencoder | `global` (paper `per-dimension`) | feature scaling to [−0.95, 0.95]: `per-dimension` (the paper) \| `grouped` (the reference code: one range for the 3 rotation dims, one for the 6 stretch dims) \| `global` (one range for all 9, so rotation and stretch errors weigh alike) |
 //! | `scaling_quantile`, `scaling_fence` | autoencoder | 0.001, 1 (paper: 0, min/max) | outlier fence of the feature scaling: the q … 1 − q quantiles [a, b] of the training features (each group of `scaling`), widened by fence × (b − a) on each side, are the range mapped to [−0.95, 0.95] where they lie inside the minimum and maximum, values beyond clamped; q = 0: minimum and maximum. A few extreme features (slivers of a face stretched 70×) otherwise squeeze all others; q in [0, 0.05], fence ≥ 0 |
 //! | `dial_sparsity` | autoencoder | `"auto"` (paper: 0) | how the K dials are read from the latent space after training: 0, one latent dimension per dial; λ in (0, 1), a dial basis of the training codes at that sparsity; `"auto"`, the most concentrated of the bases at 0.003, 0.01, 0.03, 0.1 (the latent dimensions with fewer than 2K training shapes or on a mesh of several pieces); [`DialSparsity`] |
-//! | `decoder_edge_weight` | autoencoder | 0.1 (exact inverse: 1e-6) | μ of the ACAP decoder that turns the network's output features into vertices: the exact inverse of the features' 1-ring fit plus μ × the edge least squares (÷ the mean edge length²); the network's features are not exactly realisable, and a share of the edge term decodes them closer to the shapes (chosen on the planted validation sets); an inference key stored in `model.json` (models trained before get the default); in [0, 100] |
+//! | `decoder_edge_weight`, `decoder_noise_power` | autoencoder | 1e-4, 1 (exact, unweighted inverse: 1e-6, 0) | the ACAP decoder that turns the network's output features into vertices: the exact inverse of the features' 1-ring fit with each vertex's residual weighted by w_i^p (w_i its noise weight, `feature_weights = "noise"`'s, from the rest mesh; p = `decoder_noise_power`, 0: unweighted), plus μ = `decoder_edge_weight` × the edge least squares (÷ the mean edge length²); the network does not reproduce the features of slivers, which the unweighted inverse follows as closely as any other (chosen on the planted validation sets); inference keys stored in `model.json` (models trained before get the defaults); μ in [0, 100], p in [0, 8] |
 //! | `feature_weights` | autoencoder | `uniform` (the paper) | `uniform` \| `noise`: each vertex's feature error weighted by min(1, median / its variance) of its scaled features under small position noise on the rest mesh, so vertices whose 1-ring fit amplifies noise stop dominating the loss; [`FeatureWeights`] |
 //! | `engine` | autoencoder | `hand` | `hand` (hand-written CPU step, fast) \| `graph` (Burn autodiff graph on `device`) |
 //! | `device` | autoencoder | `cpu` | `cpu` \| `wgpu` (needs `engine = "graph"` and a build with `--features wgpu`) |
@@ -72,9 +72,9 @@ pub use crate::representation::feature_cache::CachePolicy;
 
 mod method;
 pub use method::{
-    AE_DECODER_EDGE_WEIGHT, AE_DECODER_EDGE_WEIGHT_MAX, AE_GEODESIC_M, AutoencoderMethod, ConsistencyName,
-    DialSparsity, FeatureWeights, FixedCenter, MethodConfig, MethodKind, MethodSettings, PcaMethod, RegionPcaMethod,
-    SPLOCS_GEODESIC_M, ScalingName, SplocsMethod, method_key,
+    AE_DECODER_EDGE_WEIGHT, AE_DECODER_EDGE_WEIGHT_MAX, AE_DECODER_NOISE_POWER, AE_DECODER_NOISE_POWER_MAX,
+    AE_GEODESIC_M, AutoencoderMethod, ConsistencyName, DialSparsity, FeatureWeights, FixedCenter, MethodConfig,
+    MethodKind, MethodSettings, PcaMethod, RegionPcaMethod, SPLOCS_GEODESIC_M, ScalingName, SplocsMethod, method_key,
 };
 
 /// Which frames belong to a split, as 0-based indices (after natural sort).
@@ -549,6 +549,9 @@ admm = { rho = 10, iterations = 10 }
             ("decoder_edge_weight = -0.1", "method.decoder_edge_weight", "-0.1 must be a number in [0, 100]"),
             ("decoder_edge_weight = nan", "method.decoder_edge_weight", "NaN must be a number in [0, 100]"),
             ("decoder_edge_weight = 1e3", "method.decoder_edge_weight", "1000 must be a number in [0, 100]"),
+            ("decoder_noise_power = -1", "method.decoder_noise_power", "-1 must be a number in [0, 8]"),
+            ("decoder_noise_power = nan", "method.decoder_noise_power", "NaN must be a number in [0, 8]"),
+            ("decoder_noise_power = 9", "method.decoder_noise_power", "9 must be a number in [0, 8]"),
         ] {
             let e = Config::from_toml(&format!("{base}{line}\n")).unwrap_err().to_string();
             assert!(e.contains(key) && e.contains(value), "{e}");
@@ -556,12 +559,13 @@ admm = { rho = 10, iterations = 10 }
         let ok = Config::from_toml(&format!("{base}beta2 = 0.99\nscaling = \"global\"\n")).unwrap();
         let MethodConfig::Autoencoder(m) = &ok.method else { panic!("kind") };
         assert_eq!((m.beta2, m.scaling, m.scaling_quantile, m.scaling_fence), (0.99, ScalingName::Global, 1e-3, 1.0));
-        assert_eq!(m.decoder_edge_weight, 0.1);
-        // The key at its default is left out of a written config; another value is written.
-        assert!(!toml::to_string(&ok.method).unwrap().contains("decoder_edge_weight"));
-        let exact = Config::from_toml(&format!("{base}decoder_edge_weight = 1e-6\n")).unwrap();
+        assert_eq!((m.decoder_edge_weight, m.decoder_noise_power), (AE_DECODER_EDGE_WEIGHT, AE_DECODER_NOISE_POWER));
+        // The keys at their defaults are left out of a written config; other values are written.
+        let written = toml::to_string(&ok.method).unwrap();
+        assert!(!written.contains("decoder_edge_weight") && !written.contains("decoder_noise_power"), "{written}");
+        let exact = Config::from_toml(&format!("{base}decoder_edge_weight = 1e-6\ndecoder_noise_power = 0\n")).unwrap();
         let written = toml::to_string(&exact.method).unwrap();
-        assert!(written.contains("decoder_edge_weight = "), "{written}");
+        assert!(written.contains("decoder_edge_weight = ") && written.contains("decoder_noise_power = "), "{written}");
         let pca = "[data]\npath = \"synthetic:tube\"\n[method]\nkind = \"pca\"\nengine = \"graph\"\n";
         assert!(Config::from_toml(pca).unwrap_err().to_string().contains("engine"));
     }

@@ -510,19 +510,21 @@ fn the_decoder_edge_weight_is_stored_verified_and_used() {
     let text = std::fs::read_to_string(&json).unwrap();
     let header: serde_json::Value = serde_json::from_str(&text).unwrap();
     assert_eq!(header["decoder_edge_weight"], serde_json::json!(0.5));
-    // Rewrites model.json with the key set to `w` (or removed) and the manifest to match.
-    let with = |w: Option<serde_json::Value>| {
+    assert_eq!(header["decoder_noise_power"], serde_json::json!(meshdeco::config::AE_DECODER_NOISE_POWER));
+    // Rewrites model.json with `key` set to `w` (or removed) and the manifest to match.
+    let with_key = |key: &str, w: Option<serde_json::Value>| {
         let mut v = header.clone();
         match w {
-            Some(w) => v["decoder_edge_weight"] = w,
+            Some(w) => v[key] = w,
             None => {
-                v.as_object_mut().unwrap().remove("decoder_edge_weight");
+                v.as_object_mut().unwrap().remove(key);
             }
         }
         std::fs::write(&json, serde_json::to_string_pretty(&v).unwrap()).unwrap();
         let manifest = meshdeco::artifact::compute_manifest(&ae).unwrap();
         meshdeco::artifact::write_json(&ae.join("manifest.json"), &manifest).unwrap();
     };
+    let with = |w: Option<serde_json::Value>| with_key("decoder_edge_weight", w);
     let total = |o: &Output| -> f64 {
         let t = output_text(o);
         assert!(o.status.success(), "{t}");
@@ -535,14 +537,33 @@ fn the_decoder_edge_weight_is_stored_verified_and_used() {
     let exact = total(&encode("e2"));
     assert!((at_half - exact).abs() > 1e-6 * exact.max(1e-12), "the weight changes nothing: {at_half} vs {exact}");
     with(None);
-    let default = total(&encode("e3"));
-    assert!((default - exact).abs() > 1e-6 * exact.max(1e-12), "a model without the key is not decoded with 0.1");
+    let absent = total(&encode("e3"));
+    with(Some(serde_json::json!(meshdeco::config::AE_DECODER_EDGE_WEIGHT)));
+    let default = total(&encode("e3b"));
+    assert_eq!(absent, default, "a model without the key is not decoded with the default");
+    assert!((default - at_half).abs() > 1e-6 * at_half.max(1e-12), "the default decodes as 0.5 does: {default}");
     for bad in [serde_json::json!(-1.0), serde_json::json!(1e9)] {
         with(Some(bad.clone()));
         let o = encode("e4");
         fails_with(&o, "model.json");
         assert!(output_text(&o).contains("decoder_edge_weight"), "{bad}: {}", output_text(&o));
         assert!(!d.join("e4").exists(), "a refused encode wrote its output");
+    }
+    // The noise power of the decoder's per-vertex weights: stored at its default above; 0 (every
+    // vertex alike) decodes otherwise than the default, and so does a model without the key
+    // (it gets the default, not 0); out of range is refused naming the file and the key.
+    with_key("decoder_noise_power", Some(serde_json::json!(0.0)));
+    let uniform = total(&encode("p1"));
+    assert!((uniform - at_half).abs() > 1e-6 * at_half.max(1e-12), "the noise weights change nothing: {uniform}");
+    with_key("decoder_noise_power", None);
+    let absent = total(&encode("p2"));
+    assert_eq!(absent, at_half, "a model without decoder_noise_power is not decoded with the default");
+    for bad in [serde_json::json!(-1.0), serde_json::json!(9.0)] {
+        with_key("decoder_noise_power", Some(bad.clone()));
+        let o = encode("p3");
+        fails_with(&o, "model.json");
+        assert!(output_text(&o).contains("decoder_noise_power"), "{bad}: {}", output_text(&o));
+        assert!(!d.join("p3").exists(), "a refused encode wrote its output");
     }
     std::fs::remove_dir_all(&d).unwrap();
 }

@@ -73,6 +73,11 @@ pub struct AeHeader {
     /// [`crate::config::AE_DECODER_EDGE_WEIGHT`]).
     #[serde(default = "default_decoder_edge_weight")]
     pub decoder_edge_weight: f64,
+    /// Power of the per-vertex noise weights of that decoder's fit residual
+    /// (`decoder_noise_power`; models trained before it get today's default,
+    /// [`crate::config::AE_DECODER_NOISE_POWER`]).
+    #[serde(default = "default_decoder_noise_power")]
+    pub decoder_noise_power: f64,
     /// Feature scaling to [−0.95, 0.95] fitted on the training frames.
     pub scaling: FeatureScaling,
     /// Data scaling applied before encoding (identity unless `data.unit_box`).
@@ -114,15 +119,35 @@ fn default_decoder_edge_weight() -> f64 {
     crate::config::AE_DECODER_EDGE_WEIGHT
 }
 
-/// The representation of an autoencoder: ACAP with its rotation consistency and the decoder
-/// edge weight μ (`decoder_edge_weight`).
-fn ae_representation(rest: &TriMesh, consistency: Consistency, edge_weight: f64) -> Result<Representation> {
+fn default_decoder_noise_power() -> f64 {
+    crate::config::AE_DECODER_NOISE_POWER
+}
+
+/// The representation of an autoencoder: ACAP with its rotation consistency, the decoder edge
+/// weight μ (`decoder_edge_weight`) and, for a noise power p > 0 (`decoder_noise_power`), each
+/// vertex's fit residual in the decoder weighted by w_i^p, w_i the noise weight of its raw
+/// features ([`noise_weights`] of [`feature_noise_variance`]
+/// on the rest mesh: 1 up to the median sensitivity, below it for slivers and degenerate rings).
+fn ae_representation(
+    rest: &TriMesh,
+    consistency: Consistency,
+    edge_weight: f64,
+    noise_power: f64,
+) -> Result<Representation> {
     let options = RepresentationOptions {
         acap_consistency: consistency,
         acap_decoder: AcapDecoder::FitInverse { edge_weight },
         ..Default::default()
     };
-    Representation::new(RepresentationKind::Acap, rest, options)
+    let rep = Representation::new(RepresentationKind::Acap, rest, options)?;
+    if noise_power <= 0.0 {
+        return Ok(rep);
+    }
+    let raw = |x: Features| Ok(x);
+    let variance = feature_noise_variance(&rep, NOISE_LEVEL, NOISE_DRAWS, 0, &raw)?;
+    let weights: Vec<f64> =
+        noise_weights(&variance).iter().map(|w| w.powf(noise_power).max(f64::MIN_POSITIVE)).collect();
+    rep.with_acap_fit_weights(&weights)
 }
 
 fn consistency_of(s: &str) -> Consistency {
@@ -161,6 +186,13 @@ fn check_header(header: &AeHeader, json: &Path, n: usize) -> Result<()> {
             crate::config::AE_DECODER_EDGE_WEIGHT_MAX
         )));
     }
+    let p = header.decoder_noise_power;
+    if !(0.0..=crate::config::AE_DECODER_NOISE_POWER_MAX).contains(&p) {
+        return Err(bad(format!(
+            "`decoder_noise_power` is {p}; it must be in [0, {}]",
+            crate::config::AE_DECODER_NOISE_POWER_MAX
+        )));
+    }
     let f = header.train_frames.len();
     if header.reference >= f {
         return Err(bad(format!("`reference` is {}, not one of the {f} training frames", header.reference)));
@@ -194,7 +226,12 @@ impl AeArtifact {
         let (header, arrays): (AeHeader, ArrayStore) = artifact::load_model(&dir)?;
         let rest = rest_from_arrays(&arrays)?;
         check_header(&header, &dir.join("model.json"), rest.n_vertices())?;
-        let representation = ae_representation(&rest, consistency_of(&header.consistency), header.decoder_edge_weight)?;
+        let representation = ae_representation(
+            &rest,
+            consistency_of(&header.consistency),
+            header.decoder_edge_weight,
+            header.decoder_noise_power,
+        )?;
         // The network's K must be the header's, checked before the network is built with it.
         let meta = dir.join(crate::nn::inference::META_FILE);
         let meta_k =
@@ -798,7 +835,8 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
     }
     ctx.progress.stage("acap features", prep.train.len() as u64);
     let t_rep = Instant::now();
-    let representation = ae_representation(&prep.rest, m.consistency.to_acap(), m.decoder_edge_weight)?;
+    let representation =
+        ae_representation(&prep.rest, m.consistency.to_acap(), m.decoder_edge_weight, m.decoder_noise_power)?;
     // The network's 9 numbers per vertex, and the pieces' translations (multi-piece meshes).
     // When the features are cached in a file (large data: `data.cache`), training reads them
     // from it a batch at a time; otherwise they are computed into memory and scaled in place.
@@ -1139,6 +1177,7 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
             representation: RepresentationKind::Acap.name().into(),
             consistency: m.consistency.name().into(),
             decoder_edge_weight: m.decoder_edge_weight,
+            decoder_noise_power: m.decoder_noise_power,
             scaling,
             unit_box: prep.unit_box,
             components: ae_cfg.components,

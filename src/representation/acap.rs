@@ -250,6 +250,13 @@ impl Acap {
     /// bad face indices, non-finite positions, a singular 1-ring fit (a degenerate
     /// neighbourhood), or a failed factorisation.
     pub fn with_options(reference: &TriMesh, options: AcapOptions) -> Result<Acap> {
+        Acap::with_fit_weights(reference, options, None)
+    }
+
+    /// [`Acap::with_options`] whose [`AcapDecoder::FitInverse`] weights vertex i's fit residual
+    /// by `fit_weights[i]` (N, each finite and > 0; [`FitInverse`]); `None`, or another decoder:
+    /// unweighted. Encoding is unchanged.
+    pub fn with_fit_weights(reference: &TriMesh, options: AcapOptions, fit_weights: Option<&[f64]>) -> Result<Acap> {
         options.validate()?;
         let n = reference.n_vertices();
         if let Some((f, face)) = reference.first_bad_index() {
@@ -324,7 +331,7 @@ impl Acap {
                     ref_normal_rows: &ref_normal_rows,
                     inv_ata: &inv_ata,
                 };
-                Decoder::FitInverse(FitInverse::new(q, &topo.edges, fit, Some((&edge_weight, scale)))?)
+                Decoder::FitInverse(FitInverse::new(q, &topo.edges, fit, Some((&edge_weight, scale)), fit_weights)?)
             }
         };
         Ok(Acap {
@@ -725,6 +732,65 @@ mod tests {
                     assert!((b[k] - want[k]).abs() < 1e-9, "{decoder:?}");
                 }
             }
+        }
+    }
+
+    #[test]
+    fn fit_weights_keep_exact_round_trips_and_discount_their_vertex() {
+        let m = octahedron();
+        let moved: Vec<Vec3> =
+            m.positions.iter().map(|p| [1.2 * p[0] + 0.1 * p[1], p[1], 0.9 * p[2] - 0.2 * p[0]]).collect();
+        let options = AcapOptions { decoder: AcapDecoder::FitInverse { edge_weight: 1e-6 } };
+        let plain = Acap::with_options(&m, options).unwrap();
+        let f = plain.encode_frame(&moved, Consistency::Bfs).unwrap().features();
+        let weights = [1e-4, 1.0, 0.3, 1.0, 0.05, 1.0];
+        let weighted = Acap::with_fit_weights(&m, options, Some(&weights)).unwrap();
+        let centroid = |p: &[Vec3]| -> Vec3 {
+            let mut c = [0.0; 3];
+            for q in p {
+                for k in 0..3 {
+                    c[k] += q[k] / p.len() as f64;
+                }
+            }
+            c
+        };
+        let (cm, cw) = (centroid(&moved), centroid(&m.positions));
+        // Exact features decode exactly under any weights (up to the translation).
+        for acap in [&plain, &weighted] {
+            let back = acap.decode_frame(&f).unwrap();
+            for (b, p) in back.iter().zip(&moved) {
+                for k in 0..3 {
+                    assert!((b[k] - cw[k] - (p[k] - cm[k])).abs() < 1e-6, "{b:?} vs {p:?}");
+                }
+            }
+        }
+        // A wrong rotation at one vertex moves the decoding far less where that vertex weighs
+        // 1e-4 (on a bumpy, jittered grid: the octahedron's antipodal fans leave motions the fit
+        // alone cannot see).
+        let mut grid = crate::mesh::primitives::grid(5, 5, 5.0);
+        let n = grid.positions.len();
+        for (v, p) in grid.positions.iter_mut().enumerate() {
+            let j = ((v * 7919) % 13) as f64 / 13.0 - 0.5;
+            *p = [p[0] + 0.2 * j, p[1] - 0.15 * j, 0.3 * (0.9 * p[0]).sin() * (0.7 * p[1]).cos() + 0.1 * j];
+        }
+        let options = AcapOptions { decoder: AcapDecoder::FitInverse { edge_weight: 1e-4 } };
+        let plain = Acap::with_options(&grid, options).unwrap();
+        let centre = 2 * 6 + 2; // vertex (2, 2) of the 6 × 6
+        let mut weights = vec![1.0; n];
+        weights[centre] = 1e-4;
+        let weighted = Acap::with_fit_weights(&grid, options, Some(&weights)).unwrap();
+        let f = plain.encode_frame(&grid.positions, Consistency::Bfs).unwrap().features();
+        let mut bad = f.clone();
+        bad[9 * centre] += 0.8;
+        let shift = |acap: &Acap| -> f64 {
+            let (a, b) = (acap.decode_frame(&f).unwrap(), acap.decode_frame(&bad).unwrap());
+            a.iter().zip(&b).map(|(x, y)| (0..3).map(|k| (x[k] - y[k]).powi(2)).sum::<f64>()).sum::<f64>().sqrt()
+        };
+        let (sp, sw) = (shift(&plain), shift(&weighted));
+        assert!(sp > 1e-2 && sw < 0.1 * sp, "unweighted {sp}, weighted {sw}");
+        // Weights are checked.
+        for w in [vec![1.0; 5], vec![0.0, 1.0, 1.0, 1.0, 1.0, 1.0], vec![f64::NAN; 6]] {
+            assert!(Acap::with_fit_weights(&m, options, Some(&w)).is_err(), "{w:?}");
         }
     }
 

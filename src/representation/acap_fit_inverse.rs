@@ -34,6 +34,11 @@
 //! residual, so the round trip is exact to rounding. (On a flat 1-ring, h_i is the normal and
 //! the removed component of the residual does not depend on p at all, so nothing is lost.)
 //!
+//! Optional per-vertex weights ω_i multiply vertex i's residual (all ω_i = 1 without them):
+//! `min_p Σ_i ω_i Σ_c ‖…‖²`. Features that are not exactly realisable (a network's) are then
+//! followed less where they are least reliable; exact features still round trip exactly (a
+//! zero residual is zero under any weights).
+//!
 //! Some meshes leave motions the fit cannot see: symmetric 1-ring fans, e.g. the 3-colouring
 //! patterns of a regular triangle grid or the antipodal pairs of an octahedron, whose fitted
 //! gradients vanish. The optional edge term (weight μ, see
@@ -82,24 +87,41 @@ pub struct FitInverse {
     h: Vec<Vec3>,
     system: PinnedSystem,
     edge_term: Option<EdgeTerm>,
+    /// Per vertex: √ω_i (empty: every ω_i = 1).
+    root_weights: Vec<f64>,
 }
 
 impl FitInverse {
     /// Precomputes and factorises for reference positions `rest` (N), undirected `edges`
     /// (defining the components) and the encoder's fit data. `edge_term = Some((c, μ))` adds
     /// μ × the edge least squares Σ c_ij ‖(p_i − p_j) − ½(T_i + T_j)(q_i − q_j)‖² (c per edge,
-    /// μ ≥ 0; μ = 0 or `None` leaves it out).
+    /// μ ≥ 0; μ = 0 or `None` leaves it out). `vertex_weights` (N, each finite and > 0) weights
+    /// every vertex's residual (module docs; `None`: all 1).
     pub fn new(
         rest: &[Vec3],
         edges: &[[usize; 2]],
         fit: RingFit<'_>,
         edge_term: Option<(&[f64], f64)>,
+        vertex_weights: Option<&[f64]>,
     ) -> Result<Self> {
         let RingFit { ring_offsets, ring, row_scale, ref_rows, ref_normal_rows, inv_ata } = fit;
         let n = rest.len();
         if ring_offsets.len() != n + 1 || ring.len() != row_scale.len() || ring.len() != ref_rows.len() {
             return Err(Error::Invalid("fit inverse: inconsistent ring arrays".into()));
         }
+        let root_weights: Vec<f64> = match vertex_weights {
+            None => Vec::new(),
+            Some(w) => {
+                if w.len() != n {
+                    return Err(Error::Invalid(format!("fit inverse: {} vertex weights for {n} vertices", w.len())));
+                }
+                if let Some(i) = w.iter().position(|x| !(x.is_finite() && *x > 0.0)) {
+                    return Err(Error::Invalid(format!("fit inverse: vertex {i}'s weight {} is not positive", w[i])));
+                }
+                w.iter().map(|x| x.sqrt()).collect()
+            }
+        };
+        let root = |i: usize| root_weights.get(i).copied().unwrap_or(1.0);
         let mut g = Vec::with_capacity(ring.len());
         let mut g_sum = Vec::with_capacity(n);
         let mut h = Vec::with_capacity(n);
@@ -107,9 +129,12 @@ impl FitInverse {
             let hi = mat_vec(&inv_ata[i], ref_normal_rows[i]);
             let u = normalize(hi);
             let mut sum = [0.0; 3];
+            // √ω_i is folded into vertex i's rows here and into its targets in `rhs`.
+            let wi = root(i);
             for k in ring_offsets[i]..ring_offsets[i + 1] {
                 let ai = mat_vec(&inv_ata[i], ref_rows[k]);
-                let gk = project(u, [row_scale[k] * ai[0], row_scale[k] * ai[1], row_scale[k] * ai[2]]);
+                let s = wi * row_scale[k];
+                let gk = project(u, [s * ai[0], s * ai[1], s * ai[2]]);
                 for m in 0..3 {
                     sum[m] += gk[m];
                 }
@@ -153,7 +178,16 @@ impl FitInverse {
             t.edges.iter().zip(&t.weights).flat_map(|(&[i, j], &c)| [(i, i, c), (j, j, c), (i, j, -c), (j, i, -c)])
         });
         let system = PinnedSystem::new(rest, edges, entries.chain(laplacian), "ACAP fit inverse")?;
-        Ok(FitInverse { ring_offsets: ring_offsets.to_vec(), ring: ring.to_vec(), g, g_sum, h, system, edge_term })
+        Ok(FitInverse {
+            ring_offsets: ring_offsets.to_vec(),
+            ring: ring.to_vec(),
+            g,
+            g_sum,
+            h,
+            system,
+            edge_term,
+            root_weights,
+        })
     }
 
     /// Positions (N) whose encoder gradients best match `transforms` (N), centred on the
@@ -180,9 +214,11 @@ impl FitInverse {
             if s == e {
                 continue;
             }
+            let wi = self.root_weights.get(i).copied().unwrap_or(1.0);
             for c in 0..3 {
-                // y = P_i T_i[c]
-                let y = project(self.h[i], transforms[i][c]);
+                // y = √ω_i P_i T_i[c]
+                let t = transforms[i][c];
+                let y = project(self.h[i], [wi * t[0], wi * t[1], wi * t[2]]);
                 let col = &mut rhs[c * mrows..(c + 1) * mrows];
                 let ri = self.system.row(i);
                 if ri != usize::MAX {
@@ -240,6 +276,7 @@ impl FitInverse {
             if s == e {
                 continue;
             }
+            let wi = self.root_weights.get(i).copied().unwrap_or(1.0);
             for c in 0..3 {
                 let li = at(c, i);
                 let mut y = [-self.g_sum[i][0] * li, -self.g_sum[i][1] * li, -self.g_sum[i][2] * li];
@@ -249,7 +286,7 @@ impl FitInverse {
                         y[m] += self.g[k][m] * lj;
                     }
                 }
-                out[i][c] = project(self.h[i], y);
+                out[i][c] = project(self.h[i], [wi * y[0], wi * y[1], wi * y[2]]);
             }
         }
         if let Some(EdgeTerm { rest, edges, weights }) = &self.edge_term {

@@ -304,6 +304,24 @@ impl Representation {
         })
     }
 
+    /// The same representation with its ACAP decoder's fit residual weighted per vertex by
+    /// `weights` (N, each finite and > 0; [`acap::Acap::with_fit_weights`]). Errors for another
+    /// kind or another ACAP decoder than `FitInverse`.
+    pub fn with_acap_fit_weights(mut self, weights: &[f64]) -> Result<Self> {
+        if self.kind != RepresentationKind::Acap
+            || !matches!(self.options.acap_decoder, acap::AcapDecoder::FitInverse { .. })
+        {
+            return Err(Error::Invalid(format!(
+                "fit weights need the acap representation with its fit-inverse decoder, not {} ({:?})",
+                self.kind.name(),
+                self.options.acap_decoder
+            )));
+        }
+        let options = acap::AcapOptions { decoder: self.options.acap_decoder };
+        self.codec = Codec::Acap(Box::new(Acap::with_fit_weights(&self.rest, options, Some(weights))?));
+        Ok(self)
+    }
+
     /// The ACAP codec, when the kind is acap (energies, neighbourhoods, raw matrices).
     pub fn acap(&self) -> Option<&Acap> {
         match &self.codec {

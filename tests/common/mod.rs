@@ -18,7 +18,7 @@ use std::path::{Path, PathBuf};
 #[allow(dead_code)]
 pub const PAPER_AE_KEYS: &str = "scaling = \"per-dimension\"\nscaling_quantile = 0.0\nlearning_rate_norm = 0.0\n\
      beta2 = 0.999\nlambda1 = 0.5\naugment = 0\nlambda_orthogonal = 0.0\nencoder_passes = 0\nencoder_steps = 1\nstall_restarts = 0\n\
-     init_bias = \"zero\"\nfeature_weights = \"uniform\"\nsupport = [0.2, 0.4]\ndecoder_edge_weight = 1e-6\n";
+     init_bias = \"zero\"\nfeature_weights = \"uniform\"\nsupport = [0.2, 0.4]\ndecoder_edge_weight = 1e-6\ndecoder_noise_power = 0\n";
 
 pub fn shared_root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared")
