@@ -87,7 +87,7 @@ pub struct FitInverse {
     h: Vec<Vec3>,
     system: PinnedSystem,
     edge_term: Option<EdgeTerm>,
-    /// Per vertex: √ω_i (empty: every ω_i = 1).
+    /// Per vertex: √ω_i (all 1 without weights).
     root_weights: Vec<f64>,
 }
 
@@ -110,7 +110,7 @@ impl FitInverse {
             return Err(Error::Invalid("fit inverse: inconsistent ring arrays".into()));
         }
         let root_weights: Vec<f64> = match vertex_weights {
-            None => Vec::new(),
+            None => vec![1.0; n],
             Some(w) => {
                 if w.len() != n {
                     return Err(Error::Invalid(format!("fit inverse: {} vertex weights for {n} vertices", w.len())));
@@ -121,7 +121,6 @@ impl FitInverse {
                 w.iter().map(|x| x.sqrt()).collect()
             }
         };
-        let root = |i: usize| root_weights.get(i).copied().unwrap_or(1.0);
         let mut g = Vec::with_capacity(ring.len());
         let mut g_sum = Vec::with_capacity(n);
         let mut h = Vec::with_capacity(n);
@@ -130,7 +129,7 @@ impl FitInverse {
             let u = normalize(hi);
             let mut sum = [0.0; 3];
             // √ω_i is folded into vertex i's rows here and into its targets in `rhs`.
-            let wi = root(i);
+            let wi = root_weights[i];
             for k in ring_offsets[i]..ring_offsets[i + 1] {
                 let ai = mat_vec(&inv_ata[i], ref_rows[k]);
                 let s = wi * row_scale[k];
@@ -214,7 +213,7 @@ impl FitInverse {
             if s == e {
                 continue;
             }
-            let wi = self.root_weights.get(i).copied().unwrap_or(1.0);
+            let wi = self.root_weights[i];
             for c in 0..3 {
                 // y = √ω_i P_i T_i[c]
                 let t = transforms[i][c];
@@ -276,7 +275,7 @@ impl FitInverse {
             if s == e {
                 continue;
             }
-            let wi = self.root_weights.get(i).copied().unwrap_or(1.0);
+            let wi = self.root_weights[i];
             for c in 0..3 {
                 let li = at(c, i);
                 let mut y = [-self.g_sum[i][0] * li, -self.g_sum[i][1] * li, -self.g_sum[i][2] * li];
