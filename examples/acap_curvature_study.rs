@@ -11,10 +11,16 @@
 //! noise weight (`feature_weights = "noise"`) and rotation angle; and decoded by the
 //! noise-weighted decoder (`decoder_noise_power`, `decoder_edge_weight`). Last, the best linear
 //! models of the training frames' features (PCA on them, unweighted and noise-weighted, K
-//! components) on the test frames, decoded: the floor of a model linear in the features.
+//! components) on the test frames, decoded: the floor of a model linear in the features. And the
+//! true deformations as such a model, each test frame from its true weights (`weights.csv`):
+//! linear in the features (r + Σ w_d (F_d(1) − r)), each deformation along its own exact path
+//! summed (r + Σ (F_d(w_d) − r), what is left is their interaction in the features), and the
+//! linear one with every weight fitted to the frame's vertices (Gauss–Newton from the true
+//! weights, as the autoencoder's encoder steps fit its code): the floor of a model additive in
+//! the ACAP features with K = the number of deformations.
 //!
 //! `cargo run --release --example acap_curvature_study -- TRUTH_DIR [POWER EDGE_WEIGHT]`
-//! (defaults: the autoencoder's defaults; < 1 min on a 4 000-vertex face).
+//! (defaults: the autoencoder's defaults; 2–3 min on a 4 000-vertex face, 2 cores).
 use meshdeco::config::{AE_DECODER_EDGE_WEIGHT, AE_DECODER_NOISE_POWER};
 use meshdeco::eval::planted::Truth;
 use meshdeco::math::vec3::Vec3;
@@ -144,5 +150,112 @@ fn main() -> Res<()> {
         }
         println!("{row}");
     }
+    // The true components as a model of the features, with the true weights of each test frame:
+    // linear in the features (r + Σ w_d (F_d(1) − r)), and each deformation along its own exact
+    // path, summed (r + Σ (F_d(w_d) − r)): what is left in the second is the deformations'
+    // interaction in the features.
+    let csv = std::fs::read_to_string(dir.join("weights.csv"))?;
+    let rows: Vec<Vec<f64>> = csv
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').skip(1).map(|x| x.parse::<f64>()).collect::<Result<Vec<_>, _>>())
+        .collect::<Result<_, _>>()?;
+    let ones: Vec<Vec<f64>> = truth
+        .fields
+        .iter()
+        .map(|field| -> Res<Vec<f64>> {
+            let one: Vec<Vec3> =
+                rest.positions.iter().zip(field).map(|(p, q)| [p[0] + q[0], p[1] + q[1], p[2] + q[2]]).collect();
+            Ok(rep.encode_frame(&one)?)
+        })
+        .collect::<Res<_>>()?;
+    let (mut lin, mut path) = (fte.clone(), fte.clone());
+    for f in 0..fte.n_frames {
+        let w = &rows[ntr + f];
+        let (l, p) = (&mut lin.data[f * per..(f + 1) * per], &mut path.data[f * per..(f + 1) * per]);
+        l.copy_from_slice(&rest_f);
+        p.copy_from_slice(&rest_f);
+        for (d, &wd) in w.iter().enumerate().filter(|(_, w)| **w != 0.0) {
+            let at: Vec<Vec3> = rest
+                .positions
+                .iter()
+                .zip(&truth.fields[d])
+                .map(|(p, q)| [p[0] + wd * q[0], p[1] + wd * q[1], p[2] + wd * q[2]])
+                .collect();
+            let fd = rep.encode_frame(&at)?;
+            for i in 0..per {
+                l[i] += wd * (ones[d][i] - rest_f[i]);
+                p[i] += fd[i] - rest_f[i];
+            }
+        }
+    }
+    for (label, feats) in [("linear in the features", &lin), ("each on its own path, summed", &path)] {
+        let e = erms(&test.frames, &rep.decode(feats)?, Alignment::Centroid)?;
+        let ew = erms(&test.frames, &weighted.decode(feats)?, Alignment::Centroid)?;
+        println!("true components and weights, {label}: test Erms {e:.3} ({ew:.3} weighted decoder)");
+    }
+    // The same linear model with each test frame's weights fitted in vertex space (Gauss–Newton
+    // from the true weights, every component free): the floor of a model linear in the features
+    // with the true components, as the autoencoder's encoder steps would meet it.
+    let dn = truth.fields.len();
+    let centred = |x: &[Vec3]| -> Vec<f64> {
+        let mut c = [0.0; 3];
+        for p in x {
+            for k in 0..3 {
+                c[k] += p[k] / x.len() as f64;
+            }
+        }
+        x.iter().flat_map(|p| [p[0] - c[0], p[1] - c[1], p[2] - c[2]]).collect()
+    };
+    let decode_w = |w: &[f64]| -> Res<Vec<f64>> {
+        let mut f = Features::zeros(1, n, 9);
+        f.data.copy_from_slice(&rest_f);
+        for (d, &wd) in w.iter().enumerate() {
+            for i in 0..per {
+                f.data[i] += wd * (ones[d][i] - rest_f[i]);
+            }
+        }
+        Ok(centred(&weighted.decode(&f)?[0]))
+    };
+    let mut fitted = Vec::with_capacity(test.frames.len());
+    for f in 0..test.frames.len() {
+        let t = centred(&test.frames[f]);
+        let mut w = rows[ntr + f].clone();
+        let res = |x: &[f64]| -> Vec<f64> { x.iter().zip(&t).map(|(a, b)| a - b).collect() };
+        let mut r = res(&decode_w(&w)?);
+        let mut e = r.iter().map(|x| x * x).sum::<f64>();
+        for _ in 0..12 {
+            let h = 1e-4;
+            let mut j = DMatrix::zeros(3 * n, dn);
+            for d in 0..dn {
+                let mut wp = w.clone();
+                wp[d] += h;
+                let rp = res(&decode_w(&wp)?);
+                for i in 0..3 * n {
+                    j[(i, d)] = (rp[i] - r[i]) / h;
+                }
+            }
+            let rv = DVector::from_column_slice(&r);
+            let mut a = j.transpose() * &j;
+            let lam = 1e-6 * a.trace() / dn as f64;
+            for d in 0..dn {
+                a[(d, d)] += lam;
+            }
+            let step = a.cholesky().ok_or("cholesky")?.solve(&(-(j.transpose() * rv)));
+            let wn: Vec<f64> = w.iter().zip(step.iter()).map(|(a, b)| a + b).collect();
+            let rn = res(&decode_w(&wn)?);
+            let en = rn.iter().map(|x| x * x).sum::<f64>();
+            if en >= e {
+                break;
+            }
+            (w, r, e) = (wn, rn, en);
+        }
+        fitted.push(e);
+    }
+    let total: f64 = fitted.iter().sum();
+    println!(
+        "true components, linear in the features, weights fitted in vertex space: test Erms {:.3} (weighted decoder)",
+        1000.0 * (total / (3 * n * test.frames.len()) as f64).sqrt()
+    );
     Ok(())
 }
