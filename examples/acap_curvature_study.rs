@@ -160,6 +160,15 @@ fn main() -> Res<()> {
         .skip(1)
         .map(|l| l.split(',').skip(1).map(|x| x.parse::<f64>()).collect::<Result<Vec<_>, _>>())
         .collect::<Result<_, _>>()?;
+    if rows.len() != npy.n_frames() || rows.iter().any(|r| r.len() != truth.fields.len()) {
+        return Err(format!(
+            "{}: expected {} rows of {} weights (frames.npy, the deformations)",
+            dir.join("weights.csv").display(),
+            npy.n_frames(),
+            truth.fields.len()
+        )
+        .into());
+    }
     let ones: Vec<Vec<f64>> = truth
         .fields
         .iter()
@@ -171,11 +180,11 @@ fn main() -> Res<()> {
         .collect::<Res<_>>()?;
     let (mut lin, mut path) = (fte.clone(), fte.clone());
     for f in 0..fte.n_frames {
-        let w = &rows[ntr + f];
+        let wt = &rows[ntr + f];
         let (l, p) = (&mut lin.data[f * per..(f + 1) * per], &mut path.data[f * per..(f + 1) * per]);
         l.copy_from_slice(&rest_f);
         p.copy_from_slice(&rest_f);
-        for (d, &wd) in w.iter().enumerate().filter(|(_, w)| **w != 0.0) {
+        for (d, &wd) in wt.iter().enumerate().filter(|(_, x)| **x != 0.0) {
             let at: Vec<Vec3> = rest
                 .positions
                 .iter()
@@ -220,15 +229,15 @@ fn main() -> Res<()> {
     let mut fitted = Vec::with_capacity(test.frames.len());
     for f in 0..test.frames.len() {
         let t = centred(&test.frames[f]);
-        let mut w = rows[ntr + f].clone();
+        let mut wt = rows[ntr + f].clone();
         let res = |x: &[f64]| -> Vec<f64> { x.iter().zip(&t).map(|(a, b)| a - b).collect() };
-        let mut r = res(&decode_w(&w)?);
+        let mut r = res(&decode_w(&wt)?);
         let mut e = r.iter().map(|x| x * x).sum::<f64>();
         for _ in 0..12 {
             let h = 1e-4;
             let mut j = DMatrix::zeros(3 * n, dn);
             for d in 0..dn {
-                let mut wp = w.clone();
+                let mut wp = wt.clone();
                 wp[d] += h;
                 let rp = res(&decode_w(&wp)?);
                 for i in 0..3 * n {
@@ -242,13 +251,13 @@ fn main() -> Res<()> {
                 a[(d, d)] += lam;
             }
             let step = a.cholesky().ok_or("cholesky")?.solve(&(-(j.transpose() * rv)));
-            let wn: Vec<f64> = w.iter().zip(step.iter()).map(|(a, b)| a + b).collect();
+            let wn: Vec<f64> = wt.iter().zip(step.iter()).map(|(a, b)| a + b).collect();
             let rn = res(&decode_w(&wn)?);
             let en = rn.iter().map(|x| x * x).sum::<f64>();
             if en >= e {
                 break;
             }
-            (w, r, e) = (wn, rn, en);
+            (wt, r, e) = (wn, rn, en);
         }
         fitted.push(e);
     }
