@@ -26,6 +26,7 @@ use meshdeco::eval::planted::Truth;
 use meshdeco::math::vec3::Vec3;
 use meshdeco::mesh::MeshSequence;
 use meshdeco::mesh::npy::NpyFrames;
+use meshdeco::metrics::erms::erms_from_squared_error;
 use meshdeco::representation::acap::{AcapDecoder, Consistency};
 use meshdeco::representation::noise_sensitivity::{NOISE_DRAWS, NOISE_LEVEL, feature_noise_variance, noise_weights};
 use meshdeco::representation::roundtrip::{Alignment, erms};
@@ -169,13 +170,14 @@ fn main() -> Res<()> {
         )
         .into());
     }
-    let ones: Vec<Vec<f64>> = truth
+    // F_d(1) − r per deformation.
+    let deltas: Vec<Vec<f64>> = truth
         .fields
         .iter()
         .map(|field| -> Res<Vec<f64>> {
             let one: Vec<Vec3> =
                 rest.positions.iter().zip(field).map(|(p, q)| [p[0] + q[0], p[1] + q[1], p[2] + q[2]]).collect();
-            Ok(rep.encode_frame(&one)?)
+            Ok(rep.encode_frame(&one)?.iter().zip(&rest_f).map(|(a, r)| a - r).collect())
         })
         .collect::<Res<_>>()?;
     let (mut lin, mut path) = (fte.clone(), fte.clone());
@@ -193,7 +195,7 @@ fn main() -> Res<()> {
                 .collect();
             let fd = rep.encode_frame(&at)?;
             for i in 0..per {
-                l[i] += wd * (ones[d][i] - rest_f[i]);
+                l[i] += wd * deltas[d][i];
                 p[i] += fd[i] - rest_f[i];
             }
         }
@@ -219,14 +221,14 @@ fn main() -> Res<()> {
     let decode_w = |w: &[f64]| -> Res<Vec<f64>> {
         let mut f = Features::zeros(1, n, 9);
         f.data.copy_from_slice(&rest_f);
-        for (d, &wd) in w.iter().enumerate() {
-            for i in 0..per {
-                f.data[i] += wd * (ones[d][i] - rest_f[i]);
+        for (delta, &wd) in deltas.iter().zip(w) {
+            for (x, dx) in f.data.iter_mut().zip(delta) {
+                *x += wd * dx;
             }
         }
         Ok(centred(&weighted.decode(&f)?[0]))
     };
-    let mut fitted = Vec::with_capacity(test.frames.len());
+    let mut total = 0.0;
     for f in 0..test.frames.len() {
         let t = centred(&test.frames[f]);
         let mut wt = rows[ntr + f].clone();
@@ -259,12 +261,11 @@ fn main() -> Res<()> {
             }
             (wt, r, e) = (wn, rn, en);
         }
-        fitted.push(e);
+        total += e;
     }
-    let total: f64 = fitted.iter().sum();
     println!(
         "true components, linear in the features, weights fitted in vertex space: test Erms {:.3} (weighted decoder)",
-        1000.0 * (total / (3 * n * test.frames.len()) as f64).sqrt()
+        erms_from_squared_error(total, 3 * n * test.frames.len())
     );
     Ok(())
 }
