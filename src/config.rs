@@ -381,6 +381,15 @@ impl Config {
         Ok(c)
     }
 
+    /// Whether `self` and `other` train the same model: equal but for inference keys
+    /// ([`MethodConfig::training_keys`]); the file they came from does not count.
+    pub fn trains_as(&self, other: &Config) -> bool {
+        self.name == other.name
+            && self.data == other.data
+            && self.output == other.output
+            && self.method.training_keys() == other.method.training_keys()
+    }
+
     /// Parses and validates TOML text.
     pub fn from_toml(text: &str) -> Result<Self> {
         let raw: RawConfig = toml::from_str(text).map_err(|e| {
@@ -477,6 +486,46 @@ components = 5
 support = [0.1, 0.7]
 admm = { rho = 10, iterations = 10 }
 "#;
+
+    /// Which keys count for training (`Config::trains_as`): the autoencoder's inference keys do
+    /// not — the decoder's only while the vertex term does not decode in training — every other
+    /// key does, and every key of a linear method.
+    #[test]
+    fn training_keys_leave_out_inference_keys_only() {
+        let ae = |extra: &str| {
+            Config::from_toml(&format!(
+                "name = \"t\"\n[data]\npath = \"synthetic:tube\"\ntrain = \"1-36\"\n[method]\nkind = \"autoencoder\"\ncomponents = 4\n{extra}"
+            ))
+            .unwrap()
+        };
+        let base = ae("");
+        for inference in [
+            "decoder_edge_weight = 0.5",
+            "decoder_noise_power = 0",
+            "encoder_passes = 0",
+            "encoder_steps = 0",
+            "fit_test = false",
+            "dial_sparsity = 0.5",
+        ] {
+            assert!(ae(inference).trains_as(&base), "{inference} should be an inference key");
+            assert_ne!(ae(inference), base, "{inference} changes the config");
+        }
+        for training in
+            ["seed = 1", "lambda1 = 1.0", "iterations = 10", "feature_weights = \"uniform\"", "engine = \"graph\""]
+        {
+            assert!(!ae(training).trains_as(&base), "{training} should be a training key");
+        }
+        // With the vertex term the decoder decodes in training.
+        let vertex = ae("lambda_vertex = 1.0");
+        assert!(!ae("lambda_vertex = 1.0\ndecoder_edge_weight = 0.5").trains_as(&vertex));
+        assert!(ae("lambda_vertex = 1.0\nencoder_steps = 0").trains_as(&vertex));
+        // Other data, or a linear method's key, count.
+        let other_data = Config::from_toml(&GOOD.replace("1-36", "1-30")).unwrap();
+        assert!(!other_data.trains_as(&Config::from_toml(GOOD).unwrap()));
+        let splocs = Config::from_toml(GOOD).unwrap();
+        assert!(splocs.trains_as(&splocs.clone()));
+        assert!(!Config::from_toml(&GOOD.replace("components = 5", "components = 6")).unwrap().trains_as(&splocs));
+    }
 
     #[test]
     fn parses_a_valid_config() {

@@ -292,6 +292,82 @@ fn interrupted_autoencoder_cell_resumes_from_its_checkpoint() {
     let _ = std::fs::remove_dir_all(&whole);
 }
 
+/// A trained autoencoder cell whose config changes only in an inference key
+/// (`decoder_edge_weight`) is measured again from its finished checkpoint, not trained again:
+/// no training step runs, the checkpoint and the training log stay byte for byte, the cell's
+/// seconds stay the training's, the model records the new key, and the numbers equal a fresh
+/// run of the changed config. A training key (`seed`) trains it again.
+#[test]
+fn an_inference_key_change_measures_the_trained_cell_again() {
+    let cfg = EvalConfig::from_toml(CONFIG).unwrap();
+    let a = tmp("remeasure");
+    run_silent(&cfg, &a, &EvalOptions::default()).unwrap();
+    let ae = cell_dir(&a, "tube", "ae", 3);
+    let bytes = |f: &str| std::fs::read(ae.join(f)).unwrap();
+    let (checkpoint, log) = (bytes("checkpoint.bin"), bytes("training.jsonl"));
+    let cell = |dir: &Path| -> serde_json::Value {
+        serde_json::from_str(&read(&cell_dir(dir, "tube", "ae", 3).join(CELL_FILE))).unwrap()
+    };
+    let before = cell(&a);
+
+    let changed_text = CONFIG.replace("seed = 3\n", "seed = 3\ndecoder_edge_weight = 0.5\n");
+    let changed = EvalConfig::from_toml(&changed_text).unwrap();
+    let mut p = StopDuringAe { stop: Arc::new(AtomicBool::new(false)), at: u64::MAX, in_ae: false, steps: Vec::new() };
+    let o =
+        meshdeco::eval::run(&changed, &a, &EvalOptions::default(), &mut meshdeco::pipeline::Silent, &mut p).unwrap();
+    eprintln!("trained {}, reused {}, measured again {}, AE steps {:?}", o.trained, o.reused, o.remeasured, p.steps);
+    assert_eq!((o.trained, o.reused, o.remeasured), (0, 3, 1));
+    assert!(p.steps.iter().all(|&s| s == 8), "training steps ran: {:?}", p.steps);
+    assert!(bytes("checkpoint.bin") == checkpoint, "the checkpoint changed");
+    // The log keeps every step; the measuring run adds no step (only the end-of-run check's line).
+    let new_log = String::from_utf8(bytes("training.jsonl")).unwrap();
+    let added = new_log.strip_prefix(std::str::from_utf8(&log).unwrap()).expect("the training log was rewritten");
+    assert!(!added.contains("\"iteration\""), "steps were logged: {added}");
+    let after = cell(&a);
+    assert_eq!(after["seconds"], before["seconds"], "the seconds stay the training's");
+    assert_ne!(after["config_text"], before["config_text"]);
+    assert_ne!(after["test_erms"], before["test_erms"], "the new decoder weight decodes otherwise");
+    let model: serde_json::Value = serde_json::from_str(&read(&ae.join("model.json"))).unwrap();
+    assert_eq!(model["decoder_edge_weight"], serde_json::json!(0.5));
+    // Rerun: reused as is.
+    let o = run_silent(&changed, &a, &EvalOptions::default()).unwrap();
+    assert_eq!((o.trained, o.reused, o.remeasured), (0, 4, 0));
+    // A default that changed since the cell was made, though the text is the same: as recorded in
+    // cell.json, the method's resolved keys differ. An inference key's: measured again; a
+    // training key's: trained again.
+    let cell_file = ae.join(CELL_FILE);
+    let edit = |key: &str| {
+        let mut v: serde_json::Value = serde_json::from_str(&read(&cell_file)).unwrap();
+        let k = v[key].as_str().expect("the resolved keys are recorded").replace("seed: 3", "seed: 99");
+        v[key] = serde_json::json!(k);
+        std::fs::write(&cell_file, serde_json::to_string(&v).unwrap()).unwrap();
+    };
+    edit("method_keys");
+    let o = run_silent(&changed, &a, &EvalOptions::default()).unwrap();
+    assert_eq!((o.trained, o.reused, o.remeasured), (0, 3, 1), "an inference default changed");
+    assert!(bytes("checkpoint.bin") == checkpoint);
+    edit("method_keys");
+    edit("training_keys");
+    let o = run_silent(&changed, &a, &EvalOptions::default()).unwrap();
+    assert_eq!((o.trained, o.reused, o.remeasured), (1, 3, 0), "a training default changed");
+
+    // The same numbers as training the changed config afresh.
+    let b = tmp("remeasure-fresh");
+    run_silent(&changed, &b, &EvalOptions::default()).unwrap();
+    let row = |dir: &Path| {
+        without_seconds(&read(&dir.join("results.csv"))).into_iter().find(|l| l.starts_with("tube,ae,")).unwrap()
+    };
+    assert_same_numbers(&[row(&a)], &[row(&b)]);
+    std::fs::remove_dir_all(&b).unwrap();
+
+    // A training key trains the cell again.
+    let reseeded = EvalConfig::from_toml(&changed_text.replace("seed = 3\n", "seed = 4\n")).unwrap();
+    let o = run_silent(&reseeded, &a, &EvalOptions::default()).unwrap();
+    assert_eq!((o.trained, o.reused, o.remeasured), (1, 3, 0));
+    assert!(bytes("checkpoint.bin") != checkpoint, "a new seed trains a new network");
+    std::fs::remove_dir_all(&a).unwrap();
+}
+
 /// `sweep.select = "validation"` (issue 31): per dataset the report marks the cell of lowest
 /// validation Erms — the argmin of the `validation_erms` column, whatever the test column says —
 /// and `selection.csv` names it; without a validation split in every dataset, or with another

@@ -48,10 +48,11 @@ pub fn run(a: EvalArgs) -> Result<()> {
     let o = meshdeco::eval::run(&cfg, &out, &opts, &mut sweep, &mut inner)
         .with_context(|| format!("evaluating {} into {}", a.config.display(), out.display()))?;
     outln!(
-        "{} cells: {} trained, {} reused; {} control-point rows; {:.1} s",
+        "{} cells: {} trained, {} reused, {} measured again (only inference keys changed); {} control-point rows; {:.1} s",
         o.results.len(),
         o.trained,
         o.reused,
+        o.remeasured,
         o.control_points.len(),
         t0.elapsed().as_secs_f64()
     );

@@ -757,6 +757,29 @@ impl Default for AutoencoderMethod {
     }
 }
 
+impl AutoencoderMethod {
+    /// This method with its inference keys at their defaults: the keys that change only how a
+    /// trained network is measured and read, not what training computes — the encoder's passes
+    /// and vertex steps (`encoder_passes`, `encoder_steps`), `fit_test`, `dial_sparsity`, and the
+    /// ACAP decoder's `decoder_edge_weight` and `decoder_noise_power` unless the vertex term
+    /// (`lambda_vertex` > 0) decodes while training. Two methods with equal training keys train
+    /// the same network (same seed, same steps), so `meshdeco eval` measures a trained cell again
+    /// instead of training it again when only inference keys changed.
+    pub fn training_keys(&self) -> AutoencoderMethod {
+        let d = AutoencoderMethod::default();
+        let mut t = self.clone();
+        t.encoder_passes = d.encoder_passes;
+        t.encoder_steps = d.encoder_steps;
+        t.fit_test = d.fit_test;
+        t.dial_sparsity = d.dial_sparsity;
+        if t.lambda_vertex == 0.0 {
+            t.decoder_edge_weight = d.decoder_edge_weight;
+            t.decoder_noise_power = d.decoder_noise_power;
+        }
+        t
+    }
+}
+
 /// The `[method]` table: one variant per method, tagged by `kind`.
 // The autoencoder's keys make its variant the largest by some 200 bytes; a config is built once
 // per run and matched by value everywhere, so it is not boxed.
@@ -994,6 +1017,16 @@ impl MethodConfig {
     /// See [`MethodSettings::can_resume`].
     pub fn can_resume(&self) -> bool {
         self.settings().can_resume()
+    }
+
+    /// The method with the keys that do not change training at their defaults (the
+    /// autoencoder's [`AutoencoderMethod::training_keys`]; every key of a linear method, which
+    /// fits in one go, counts).
+    pub fn training_keys(&self) -> MethodConfig {
+        match self {
+            MethodConfig::Autoencoder(m) => MethodConfig::Autoencoder(m.training_keys()),
+            other => other.clone(),
+        }
     }
 
     /// Parses and validates a `[method]` table. Errors name `method.<key>`: an unknown key, a

@@ -29,8 +29,12 @@
 //! Caching: a cell whose `cell.json` holds the same train config text is reused without loading
 //! any data; otherwise it is (re)trained. `cell.json` is written last, atomically, so an
 //! interrupted cell is never taken as finished. An interrupted autoencoder cell resumes from its
-//! checkpoint when its config is unchanged. Training is seeded, so a rerun from scratch gives the
-//! same numbers (except seconds).
+//! checkpoint when its config is unchanged. A trained autoencoder cell whose config changed
+//! only in inference keys ([`crate::config::AutoencoderMethod::training_keys`]: the decoder's and
+//! the encoder's keys, `fit_test`, `dial_sparsity`) is measured again from its finished
+//! checkpoint instead of trained again; its `seconds` stay the training's. `cell.json` records
+//! the method's resolved keys, so a default changed since is seen as a changed key. Training is
+//! seeded, so a rerun from scratch gives the same numbers (except seconds).
 
 pub mod config;
 pub mod control_points;
@@ -136,6 +140,16 @@ pub struct CellResult {
     /// Recovery of the true deformations of a planted dataset (`truth = "DIR"`).
     #[serde(default)]
     pub recovery: Option<CellRecovery>,
+    /// The method's every key as it was resolved when the cell was made, defaults included
+    /// ([`resolved_keys`]): a key left out of the config text whose default changed since no
+    /// longer matches. Absent in cells made before it was recorded (those are matched by their
+    /// text alone).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub method_keys: Option<String>,
+    /// The same for the keys that change training ([`crate::config::MethodConfig::training_keys`]):
+    /// what decides whether a changed cell is measured again or trained again.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub training_keys: Option<String>,
     /// Version of the autoencoder's encoding the numbers were measured with
     /// ([`ENCODER_VERSION`]); a cached autoencoder cell of an older one is trained and measured again.
     #[serde(default)]
@@ -284,6 +298,8 @@ pub struct EvalOutcome {
     pub trained: usize,
     /// Cells reused from an earlier run.
     pub reused: usize,
+    /// Trained autoencoder cells measured again (only inference keys changed; not trained).
+    pub remeasured: usize,
     /// Files written (results, report, plots).
     pub files: Vec<PathBuf>,
 }
@@ -434,18 +450,74 @@ fn measure(
             .transpose()?,
         vertex_support: metrics.median_vertex_support,
         recovery,
+        method_keys: Some(resolved_keys(&cell.config.method)),
+        training_keys: Some(resolved_keys(&cell.config.method.training_keys())),
     };
     Ok((result, matches))
 }
 
-fn read_cached(dir: &Path, text: &str) -> Option<CellResult> {
+/// Every key of a method as resolved, defaults included (its `Debug` text: every field, numbers
+/// in the shortest text that reads back to the same value).
+pub fn resolved_keys(method: &crate::config::MethodConfig) -> String {
+    format!("{method:?}")
+}
+
+/// A cell's finished result when it was made from the same config text, with the same resolved
+/// keys (where recorded) and, for the autoencoder, today's encoding version.
+fn read_cached(dir: &Path, cell: &Cell) -> Option<CellResult> {
     let path = dir.join(CELL_FILE);
     if !path.is_file() {
         return None;
     }
-    artifact::read_json::<CellResult>(&path)
-        .ok()
-        .filter(|r| r.config_text == text && (r.kind != "autoencoder" || r.encoder_version == ENCODER_VERSION))
+    artifact::read_json::<CellResult>(&path).ok().filter(|r| {
+        r.config_text == cell.config_text
+            && r.method_keys.as_ref().is_none_or(|k| *k == resolved_keys(&cell.config.method))
+            && (r.kind != "autoencoder" || r.encoder_version == ENCODER_VERSION)
+    })
+}
+
+/// The finished result of a trained autoencoder cell that `cell` measures again instead of
+/// training it again: its `cell.json` was made from a config that trains the same network
+/// ([`crate::config::Config::trains_as`]: only inference keys differ), with today's encoding
+/// version, and its finished checkpoint is there. A run that held out validation shapes is not
+/// one: it keeps its best step's parameters, which the checkpoint does not hold.
+fn remeasurable(dir: &Path, cell: &Cell) -> Option<CellResult> {
+    let crate::config::MethodConfig::Autoencoder(m) = &cell.config.method else {
+        return None;
+    };
+    if m.validation > 0 || !dir.join(artifact::CHECKPOINT_FILE).is_file() {
+        return None;
+    }
+    let earlier = artifact::read_json::<CellResult>(&dir.join(CELL_FILE)).ok()?;
+    // The earlier text read with today's defaults; its recorded training keys (where there are
+    // any) say whether a default of a training key changed since.
+    let trained_with = crate::config::Config::from_toml(&earlier.config_text).ok()?;
+    let training_keys_held =
+        earlier.training_keys.as_ref().is_none_or(|k| *k == resolved_keys(&cell.config.method.training_keys()));
+    (earlier.kind == "autoencoder"
+        && earlier.encoder_version == ENCODER_VERSION
+        && training_keys_held
+        && trained_with.trains_as(&cell.config))
+    .then_some(earlier)
+}
+
+/// Measures a trained autoencoder cell again ([`remeasurable`]): resumes its finished
+/// checkpoint with the cell's config (no steps left, so only the measuring runs, with the new
+/// inference keys). The earlier `cell.json` stays until the new one replaces it, so an
+/// interrupted measurement is measured again on the rerun. `None` when the resume is refused
+/// (the cell is then trained afresh).
+fn remeasure_cell(
+    cell: &Cell,
+    prep: &Prepared,
+    dir: &Path,
+    opts: &EvalOptions,
+    inner: &mut dyn Progress,
+) -> Result<Option<TrainOutcome>> {
+    match train_prepared(&cell.config, prep, dir, &TrainOptions { resume: true, stop: opts.stop.clone() }, inner) {
+        Ok(o) => Ok(Some(o)),
+        Err(e) if stopped(opts) => Err(e),
+        Err(_) => Ok(None),
+    }
 }
 
 fn stopped(opts: &EvalOptions) -> bool {
@@ -515,7 +587,7 @@ pub fn run(
     let mut data: Vec<Option<DatasetData>> = cfg.datasets.iter().map(|_| None).collect();
     let mut results = Vec::with_capacity(cells.len());
     let mut failed = Vec::new();
-    let (mut trained, mut reused) = (0, 0);
+    let (mut trained, mut reused, mut remeasured) = (0, 0, 0);
     sweep.stage("eval", cells.len() as u64);
     for (i, cell) in cells.iter().enumerate() {
         let d = &cfg.datasets[cell.dataset];
@@ -523,7 +595,7 @@ pub fn run(
         let label = format!("{}/{}/K{}", d.name, m.label, cell.k);
         sweep.step(i as u64, &label);
         let dir = cell_dir(out, &d.name, &m.label, cell.k);
-        if let Some(mut r) = read_cached(&dir, &cell.config_text) {
+        if let Some(mut r) = read_cached(&dir, cell) {
             // A planted dataset's truth added or planted again since: score the cached model.
             if let Some(truth_dir) = &d.truth {
                 let key = truth_key(truth_dir)?;
@@ -555,12 +627,27 @@ pub fn run(
         if stopped(opts) {
             return Err(interrupted());
         }
+        // A trained autoencoder cell whose config changed only in inference keys is measured
+        // again from its checkpoint; its `seconds` stay the training's.
+        let earlier = remeasurable(&dir, cell);
+        let mut again = false;
         let attempt = DatasetData::cached(&mut data[cell.dataset], d).and_then(|ds| {
-            let outcome = train_cell(cell, &ds.prep, &dir, opts, inner)?;
+            let remeasured = match &earlier {
+                Some(_) => remeasure_cell(cell, &ds.prep, &dir, opts, inner)?,
+                None => None,
+            };
+            again = remeasured.is_some();
+            let outcome = match remeasured {
+                Some(o) => o,
+                None => train_cell(cell, &ds.prep, &dir, opts, inner)?,
+            };
             measure(cell, cfg, ds, &outcome)
         });
         let r = match attempt {
-            Ok((r, rows)) => {
+            Ok((mut r, rows)) => {
+                if again && let Some(e) = &earlier {
+                    r.seconds = e.seconds;
+                }
                 match rows {
                     Some(rows) => artifact::write_json(&dir.join(RECOVERY_FILE), &rows)?,
                     None => {
@@ -589,7 +676,11 @@ pub fn run(
         let pending = dir.join(PENDING_FILE);
         let _ = std::fs::remove_file(&pending);
         results.push(r);
-        trained += 1;
+        if again {
+            remeasured += 1;
+        } else {
+            trained += 1;
+        }
     }
     sweep.step(cells.len() as u64, "done");
     sweep.finish_stage();
@@ -649,7 +740,7 @@ pub fn run(
     }
 
     let files = report::write_all(cfg, out, &results, &failed, &cp_rows)?;
-    Ok(EvalOutcome { results, failed, control_points: cp_rows, trained, reused, files })
+    Ok(EvalOutcome { results, failed, control_points: cp_rows, trained, reused, remeasured, files })
 }
 
 /// [`run`] without progress reporting.
