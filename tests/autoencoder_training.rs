@@ -463,6 +463,51 @@ fn resume_reproduces_the_uninterrupted_run() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// A run holding out validation shapes keeps its best validation step; the checkpoint holds that
+/// step, so a run interrupted after it and resumed keeps the same step and ends with the same
+/// model as the uninterrupted run (before checkpoints held it, the resumed run chose among the
+/// steps after the interruption).
+#[test]
+fn resume_keeps_the_best_validation_step_from_before_the_interruption() {
+    let (nb, dist, data) = planted_problem();
+    // Held-out shapes unlike the training shapes: their error is lowest early.
+    let val = TrainingData::from_features(&random_features(4, 72, 0.5, 17)).unwrap();
+    let cfg = AutoencoderConfig { validation: 4, validate_every: 2, ..resume_config() };
+    let mut full = Trainer::new(cfg.clone(), &data, &nb, &dist).unwrap().with_validation(&val).unwrap();
+    let s_full = full.run(&RunOptions::default(), |_| {}).unwrap();
+    let (best_it, best_err) = s_full.best.expect("a best validation step");
+    eprintln!("uninterrupted: best validation step {best_it} (error {best_err})");
+    assert!(best_it < 20, "the fixture's best step ({best_it}) must come before the interruption at 20");
+    let expected = flat_weights(full.into_model().unwrap().weights());
+
+    let dir = tmp_dir("resume-best");
+    let ck = dir.join("checkpoint.mdae");
+    let stop = Arc::new(AtomicBool::new(false));
+    let opts = RunOptions { checkpoint: Some(ck.clone()), stop: Some(stop.clone()), ..Default::default() };
+    let mut first = Trainer::new(cfg.clone(), &data, &nb, &dist).unwrap().with_validation(&val).unwrap();
+    first
+        .run(&opts, |r| {
+            if r.iteration == 20 {
+                stop.store(true, Ordering::SeqCst);
+            }
+        })
+        .unwrap();
+    drop(first);
+    stop.store(false, Ordering::SeqCst);
+    let mut resumed = Trainer::resume(&ck, cfg.clone(), &data, &nb, &dist).unwrap().with_validation(&val).unwrap();
+    let s = resumed.run(&opts, |_| {}).unwrap();
+    assert_eq!(s.iterations_done, 40);
+    assert_eq!(s.best.map(|b| b.0), Some(best_it), "the resumed run's best step");
+    let got = flat_weights(resumed.into_model().unwrap().weights());
+    let max_diff = expected.iter().zip(&got).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
+    assert!(max_diff <= 1e-6, "the resumed run's kept model differs by {max_diff}");
+    // Resumed once more with no step left (the finished checkpoint): the same kept model.
+    let done = Trainer::resume(&ck, cfg, &data, &nb, &dist).unwrap().with_validation(&val).unwrap();
+    let again = flat_weights(done.into_model().unwrap().weights());
+    assert_eq!(again, got);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 #[test]
 fn nan_never_reaches_a_checkpoint() {
     let (_, faces) = grid(6, 6);

@@ -479,13 +479,14 @@ fn read_cached(dir: &Path, cell: &Cell) -> Option<CellResult> {
 /// The finished result of a trained autoencoder cell that `cell` measures again instead of
 /// training it again: its `cell.json` was made from a config that trains the same network
 /// ([`crate::config::Config::trains_as`]: only inference keys differ), with today's encoding
-/// version, and its finished checkpoint is there. A run that held out validation shapes is not
-/// one: it keeps its best step's parameters, which the checkpoint does not hold.
+/// version, and its finished checkpoint is there. A run that held out validation shapes keeps
+/// its best step's parameters: only a checkpoint that stores them (version 4) will do.
 fn remeasurable(dir: &Path, cell: &Cell) -> Option<CellResult> {
     let crate::config::MethodConfig::Autoencoder(m) = &cell.config.method else {
         return None;
     };
-    if m.validation > 0 || !dir.join(artifact::CHECKPOINT_FILE).is_file() {
+    let checkpoint = dir.join(artifact::CHECKPOINT_FILE);
+    if !checkpoint.is_file() || (m.validation > 0 && !crate::nn::checkpoint::stores_best_step(&checkpoint)) {
         return None;
     }
     let earlier = artifact::read_json::<CellResult>(&dir.join(CELL_FILE)).ok()?;

@@ -3,7 +3,7 @@
 //!
 //! File layout (little-endian):
 //! ```text
-//! b"MDAECKPT"  u32 format version (3)
+//! b"MDAECKPT"  u32 format version (4; 3 is read too: it has no best step)
 //! u64 n, n bytes   JSON header (CheckpointHeader)
 //! u64 n, n bytes   module record of the convolution layers (burnpack, Burn's ModuleRecord of
 //!                  an AutoencoderModule without component blocks)
@@ -12,6 +12,9 @@
 //! K·9N × f32       C, row-major
 //! K·9N × f32       Adam's first moment of C   (only when t > 0)
 //! K·9N × f32       Adam's second moment of C  (only when t > 0)
+//! u64 s            the best validation step (0: none; version 4)
+//! when s > 0: u64 bits of its validation error (f64), u64 L, L × 180 f32 (each layer's
+//!                  W_point and W_nb row-major, encoder and decoder bias), K·9N × f32 its C
 //! u32              CRC-32 of every byte before it
 //! ```
 //!
@@ -27,6 +30,11 @@
 //! the resumed trainer's (no intermediate copies of the 13 M-number arrays of a large mesh). The
 //! checksum is verified, in a first pass over the file, before anything else is read: a damaged
 //! checkpoint is named, never resumed from.
+//!
+//! A run that holds out validation shapes (`validation > 0`) keeps the parameters of its best
+//! validation step, not its last; the checkpoint holds them too, so that a resumed run keeps a
+//! best step from before the interruption (version 3 did not: a run resumed from one chooses among
+//! the steps after it).
 
 use std::fs::File;
 use std::io::{BufReader, Read, Seek, SeekFrom, Write};
@@ -36,12 +44,58 @@ use serde::{Deserialize, Serialize};
 
 use super::adam::ComponentAdam;
 use super::config::AutoencoderConfig;
+use super::engine::LayerWeights;
 use super::loss::LossTerms;
 use crate::artifact::write_atomic_with;
 use crate::error::{Error, Result};
 
 const MAGIC: &[u8; 8] = b"MDAECKPT";
-const VERSION: u32 = 3;
+const VERSION: u32 = 4;
+/// The last version without the best validation step.
+const VERSION_WITHOUT_BEST: u32 = 3;
+/// f32 numbers of one layer in the best step's section (W_point, W_nb, two biases).
+const LAYER_FLOATS: usize = 2 * 81 + 2 * 9;
+
+/// The parameters of a run's best validation step (`validation > 0`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct BestStep {
+    /// The step (≥ 1).
+    pub iteration: usize,
+    /// Its validation error.
+    pub error: f64,
+    /// The encoder layers in forward order.
+    pub layers: Vec<LayerWeights>,
+    /// Its `C`, `[K, 9N]` row-major.
+    pub components: Vec<f32>,
+}
+
+/// A best step borrowed from a trainer.
+#[derive(Clone, Copy)]
+pub struct BestStepParts<'a> {
+    pub iteration: usize,
+    pub error: f64,
+    pub layers: &'a [LayerWeights],
+    pub components: &'a [f32],
+}
+
+fn layer_floats(l: &LayerWeights) -> Vec<f32> {
+    let mut v = Vec::with_capacity(LAYER_FLOATS);
+    v.extend(l.wp.iter().flatten());
+    v.extend(l.wn.iter().flatten());
+    v.extend(l.b);
+    v.extend(l.bd);
+    v
+}
+
+fn layer_from_floats(v: &[f32]) -> LayerWeights {
+    let mat = |o: usize| std::array::from_fn(|r| std::array::from_fn(|c| v[o + 9 * r + c]));
+    LayerWeights {
+        wp: mat(0),
+        wn: mat(81),
+        b: std::array::from_fn(|i| v[162 + i]),
+        bd: std::array::from_fn(|i| v[171 + i]),
+    }
+}
 
 /// Metadata of a checkpoint.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -95,6 +149,8 @@ pub struct Checkpoint {
     pub columns: usize,
     /// Adam's state for `C`.
     pub adam: ComponentAdam,
+    /// The best validation step's parameters (runs with `validation > 0`, version 4).
+    pub best: Option<BestStep>,
 }
 
 /// The parts of a checkpoint, borrowed from a trainer (see [`write()`]).
@@ -111,6 +167,8 @@ pub struct CheckpointParts<'a> {
     pub columns: usize,
     /// Adam's state for `C`.
     pub adam: &'a ComponentAdam,
+    /// The best validation step so far (runs with `validation > 0`).
+    pub best: Option<BestStepParts<'a>>,
 }
 
 /// Key of the header's exact floats (module docs).
@@ -231,6 +289,11 @@ pub fn write(path: &Path, parts: &CheckpointParts<'_>) -> Result<()> {
     {
         return Err(Error::Invalid("checkpoint: inconsistent sizes of C and its Adam state".into()));
     }
+    if let Some(b) = &parts.best
+        && (b.iteration == 0 || b.components.len() != parts.components.len() || !b.error.is_finite())
+    {
+        return Err(Error::Invalid("checkpoint: the best step's iteration, error or C is inconsistent".into()));
+    }
     write_atomic_with(path, |w| {
         let mut w = Crc { inner: w, hasher: crc32fast::Hasher::new() };
         w.write_all(MAGIC)?;
@@ -247,9 +310,30 @@ pub fn write(path: &Path, parts: &CheckpointParts<'_>) -> Result<()> {
             write_f32s(&mut w, &parts.adam.moment_1)?;
             write_f32s(&mut w, &parts.adam.moment_2)?;
         }
+        match &parts.best {
+            None => w.write_all(&0u64.to_le_bytes())?,
+            Some(b) => {
+                w.write_all(&(b.iteration as u64).to_le_bytes())?;
+                w.write_all(&b.error.to_bits().to_le_bytes())?;
+                w.write_all(&(b.layers.len() as u64).to_le_bytes())?;
+                for l in b.layers {
+                    write_f32s(&mut w, &layer_floats(l))?;
+                }
+                write_f32s(&mut w, b.components)?;
+            }
+        }
         let crc = w.hasher.clone().finalize();
         w.inner.write_all(&crc.to_le_bytes())
     })
+}
+
+/// Whether the checkpoint at `path` is of a version that stores the best validation step (4 and
+/// later; read from its first 12 bytes, nothing verified).
+pub fn stores_best_step(path: &Path) -> bool {
+    let mut head = [0u8; 12];
+    File::open(path).and_then(|mut f| f.read_exact(&mut head)).is_ok()
+        && &head[..8] == MAGIC
+        && u32::from_le_bytes(head[8..12].try_into().unwrap()) >= VERSION
 }
 
 impl Checkpoint {
@@ -264,6 +348,12 @@ impl Checkpoint {
                 components: &self.components,
                 columns: self.columns,
                 adam: &self.adam,
+                best: self.best.as_ref().map(|b| BestStepParts {
+                    iteration: b.iteration,
+                    error: b.error,
+                    layers: &b.layers,
+                    components: &b.components,
+                }),
             },
         )
     }
@@ -281,8 +371,10 @@ impl Checkpoint {
             return Err(corrupt("bad magic"));
         }
         let version = u32::from_le_bytes(head[8..12].try_into().unwrap());
-        if version != VERSION {
-            return Err(corrupt(&format!("format version {version}, this build reads {VERSION}")));
+        if version != VERSION && version != VERSION_WITHOUT_BEST {
+            return Err(corrupt(&format!(
+                "format version {version}, this build reads {VERSION_WITHOUT_BEST} and {VERSION}"
+            )));
         }
         if len < 16 {
             return Err(corrupt("truncated"));
@@ -338,22 +430,54 @@ impl Checkpoint {
         let (k, columns, time) = (u64_at(&mut r, &mut pos)?, u64_at(&mut r, &mut pos)?, u64_at(&mut r, &mut pos)?);
         let len_c = k.checked_mul(columns).filter(|&l| l <= (body - pos) / 4).ok_or_else(|| corrupt("truncated"))?;
         let arrays = if time > 0 { 3 } else { 1 };
-        if columns == 0 || pos + 4 * arrays * len_c != body {
-            return Err(corrupt(if pos + 4 * arrays * len_c > body { "truncated" } else { "trailing bytes" }));
+        let end = pos + 4 * arrays * len_c;
+        let fits = if version == VERSION { end + 8 <= body } else { end == body };
+        if columns == 0 || !fits {
+            return Err(corrupt(if end > body { "truncated" } else { "trailing bytes" }));
         }
-        let read = |r: &mut BufReader<File>| -> Result<Vec<f32>> {
-            let mut v = vec![0.0f32; len_c as usize];
+        let read = |r: &mut BufReader<File>, n: usize| -> Result<Vec<f32>> {
+            let mut v = vec![0.0f32; n];
             read_f32s(r, &mut v).map_err(io)?;
             Ok(v)
         };
-        let components = read(&mut r)?;
+        let components = read(&mut r, len_c as usize)?;
         let adam = if time > 0 {
-            ComponentAdam { time: time as usize, moment_1: read(&mut r)?, moment_2: read(&mut r)? }
+            ComponentAdam {
+                time: time as usize,
+                moment_1: read(&mut r, len_c as usize)?,
+                moment_2: read(&mut r, len_c as usize)?,
+            }
         } else {
             ComponentAdam::default()
         };
+        pos = end;
+        let mut best = None;
+        if version == VERSION {
+            let iteration = u64_at(&mut r, &mut pos)?;
+            if iteration > 0 {
+                let error = f64::from_bits(u64_at(&mut r, &mut pos)?);
+                let n_layers = u64_at(&mut r, &mut pos)?;
+                let floats = n_layers
+                    .checked_mul(LAYER_FLOATS as u64)
+                    .and_then(|f| f.checked_add(len_c))
+                    .filter(|&f| f <= (body - pos) / 4)
+                    .ok_or_else(|| corrupt("truncated"))?;
+                if pos + 4 * floats != body {
+                    return Err(corrupt("trailing bytes"));
+                }
+                let layers = (0..n_layers)
+                    .map(|_| read(&mut r, LAYER_FLOATS).map(|v| layer_from_floats(&v)))
+                    .collect::<Result<Vec<_>>>()?;
+                let components = read(&mut r, len_c as usize)?;
+                pos += 4 * floats;
+                best = Some(BestStep { iteration: iteration as usize, error, layers, components });
+            } else if pos != body {
+                return Err(corrupt("trailing bytes"));
+            }
+        }
+        debug_assert_eq!(pos, body);
         let header = parse_header(&header).map_err(|e| corrupt(&format!("header: {e}")))?;
-        Ok(Checkpoint { header, layers, layers_optimizer, components, columns: columns as usize, adam })
+        Ok(Checkpoint { header, layers, layers_optimizer, components, columns: columns as usize, adam, best })
     }
 }
 
@@ -394,9 +518,86 @@ mod tests {
     fn save(path: &Path, header: &CheckpointHeader) {
         let adam = ComponentAdam::default();
         let c = vec![0.5f32; 18];
-        let parts =
-            CheckpointParts { header, layers: b"L", layers_optimizer: b"O", components: &c, columns: 18, adam: &adam };
+        let parts = CheckpointParts {
+            header,
+            layers: b"L",
+            layers_optimizer: b"O",
+            components: &c,
+            columns: 18,
+            adam: &adam,
+            best: None,
+        };
         write(path, &parts).unwrap();
+    }
+
+    /// The best validation step reads back to the bit; a version-3 file (no best section) still
+    /// reads, without one; a damaged best section is refused.
+    #[test]
+    fn the_best_step_reads_back_and_version_3_still_reads() {
+        let dir = std::env::temp_dir().join(format!("meshdeco-ckpt-best-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("checkpoint.bin");
+        let h = header();
+        let adam = ComponentAdam { time: 2, moment_1: vec![0.25; 18], moment_2: vec![0.125; 18] };
+        let c = vec![0.5f32; 18];
+        let layer = |x: f32| LayerWeights {
+            wp: std::array::from_fn(|r| std::array::from_fn(|k| x + (9 * r + k) as f32)),
+            wn: std::array::from_fn(|r| std::array::from_fn(|k| -x - (9 * r + k) as f32)),
+            b: std::array::from_fn(|i| x * i as f32),
+            bd: std::array::from_fn(|i| 1e-3 * x * i as f32),
+        };
+        let layers = [layer(0.1), layer(-7.5)];
+        let best_c: Vec<f32> = (0..18).map(|i| i as f32 * 0.37).collect();
+        let best = BestStepParts { iteration: 20, error: MISREAD[1], layers: &layers, components: &best_c };
+        let parts = CheckpointParts {
+            header: &h,
+            layers: b"L",
+            layers_optimizer: b"O",
+            components: &c,
+            columns: 18,
+            adam: &adam,
+            best: Some(best),
+        };
+        write(&path, &parts).unwrap();
+        let back = Checkpoint::load(&path).unwrap();
+        let b = back.best.clone().expect("the best step is stored");
+        assert_eq!((b.iteration, b.error.to_bits()), (20, MISREAD[1].to_bits()));
+        assert_eq!(b.layers, layers.to_vec());
+        assert_eq!(b.components, best_c);
+        assert_eq!((back.components, back.adam.moment_2), (c.clone(), vec![0.125; 18]));
+        // Written again from what was read: the same bytes.
+        let again = dir.join("again.bin");
+        Checkpoint::load(&path).unwrap().save(&again).unwrap();
+        assert_eq!(std::fs::read(&again).unwrap(), std::fs::read(&path).unwrap());
+
+        // Version 3: the same file without the best section's marker, the version and the CRC
+        // rewritten.
+        write(&path, &CheckpointParts { best: None, ..parts }).unwrap();
+        let mut bytes = std::fs::read(&path).unwrap();
+        bytes.truncate(bytes.len() - 12);
+        bytes[8..12].copy_from_slice(&3u32.to_le_bytes());
+        let crc = crc32fast::hash(&bytes);
+        bytes.extend_from_slice(&crc.to_le_bytes());
+        std::fs::write(&path, &bytes).unwrap();
+        let old = Checkpoint::load(&path).unwrap();
+        assert!(old.best.is_none());
+        assert!(!stores_best_step(&path) && stores_best_step(&again) && !stores_best_step(&dir.join("none")));
+        assert_eq!(old.components, c);
+
+        // A best section cut short (CRC made to match): refused, named.
+        write(&path, &parts).unwrap();
+        let mut bytes = std::fs::read(&path).unwrap();
+        bytes.truncate(bytes.len() - 4 - 8);
+        let crc = crc32fast::hash(&bytes);
+        bytes.extend_from_slice(&crc.to_le_bytes());
+        std::fs::write(&path, &bytes).unwrap();
+        let e = Checkpoint::load(&path).unwrap_err().to_string();
+        assert!(e.contains("truncated") || e.contains("trailing"), "{e}");
+        // A best step of another size of C: refused when written.
+        let short = [0.0f32; 9];
+        let bad = CheckpointParts { best: Some(BestStepParts { components: &short, ..best }), ..parts };
+        assert!(write(&dir.join("bad.bin"), &bad).is_err());
+        let _ = std::fs::remove_dir_all(&dir);
     }
 
     #[test]

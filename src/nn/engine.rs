@@ -21,7 +21,7 @@ use super::output_loss::OutputTerm;
 use crate::error::{Error, Result};
 
 /// Weights of one layer as plain arrays.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub struct LayerWeights {
     /// `W_point` `[out][in]`.
     pub wp: Mat9,

@@ -225,6 +225,9 @@ pub struct Trainer<'a> {
     /// The encoder's noisy input of a step with `input_noise > 0` (same layout as the batch).
     noisy_buf: Vec<f32>,
     validation: Option<Validation<'a>>,
+    /// The best validation step of the checkpoint this run resumed from, until
+    /// [`Self::with_validation`] takes it.
+    resumed_best: Option<checkpoint::BestStep>,
     /// The caller's term on the decoded shapes (`lambda_vertex`).
     output_loss: Option<&'a dyn OutputLoss>,
     /// The lanes the vertex term sees this step (all, or `vertex_batch` drawn each step).
@@ -469,6 +472,7 @@ impl<'a> Trainer<'a> {
             batch_buf: Vec::new(),
             noisy_buf: Vec::new(),
             validation: None,
+            resumed_best: None,
             output_loss: None,
             vertex_lanes: Vec::new(),
             epoch_order: None,
@@ -639,6 +643,23 @@ impl<'a> Trainer<'a> {
             },
             best: None,
         });
+        // A resumed run keeps the best step from before the interruption.
+        if let Some(b) = self.resumed_best.take() {
+            let layers_match = b.layers.len() == self.weights.layers.len();
+            if !layers_match || b.components.len() != self.weights.c.len() {
+                return Err(Error::Invalid(format!(
+                    "the checkpoint's best validation step has {} layers and {} numbers of C, the run {} and {}",
+                    b.layers.len(),
+                    b.components.len(),
+                    self.weights.layers.len(),
+                    self.weights.c.len()
+                )));
+            }
+            let weights = Weights { layers: b.layers, c: b.components, ..self.weights.clone() };
+            if let Some(v) = &mut self.validation {
+                v.best = Some((b.iteration, b.error, weights));
+            }
+        }
         Ok(self)
     }
 
@@ -747,6 +768,7 @@ impl<'a> Trainer<'a> {
         t.iteration = ck.header.iteration;
         t.rng = Rng { state: ck.header.rng_state };
         t.last_loss = ck.header.last_loss;
+        t.resumed_best = ck.best;
         Ok(t)
     }
 
@@ -1143,6 +1165,14 @@ impl<'a> Trainer<'a> {
             components: self.weights.c.clone(),
             columns: 9 * self.weights.n,
             adam: self.adam.clone(),
+            best: self.validation.as_ref().and_then(|v| v.best.as_ref()).map(|(iteration, error, w)| {
+                checkpoint::BestStep {
+                    iteration: *iteration,
+                    error: *error,
+                    layers: w.layers.clone(),
+                    components: w.c.clone(),
+                }
+            }),
         })
     }
 
@@ -1158,6 +1188,14 @@ impl<'a> Trainer<'a> {
                 components: &self.weights.c,
                 columns: 9 * self.weights.n,
                 adam: &self.adam,
+                best: self.validation.as_ref().and_then(|v| v.best.as_ref()).map(|(iteration, error, w)| {
+                    checkpoint::BestStepParts {
+                        iteration: *iteration,
+                        error: *error,
+                        layers: &w.layers,
+                        components: &w.c,
+                    }
+                }),
             },
         )
     }

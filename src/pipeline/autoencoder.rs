@@ -948,6 +948,17 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
                 ),
             ));
         }
+        // A checkpoint written before checkpoints held the best validation step: the step kept
+        // is chosen among those after the resume.
+        if ae_cfg.validation > 0 && ck.best.is_none() && ck.header.iteration >= ae_cfg.validate_every.max(1) {
+            eprintln!(
+                "note: {} was written before checkpoints held the best validation step (method.validation = {}): \
+                 the step kept is the best of those after iteration {}",
+                from.display(),
+                ae_cfg.validation,
+                ck.header.iteration
+            );
+        }
         let saved = &ck.header.config;
         if let Some(r) = (1..=ae_cfg.stall_restarts).find(|&r| ae_cfg.restarted(r).check_resumable(saved).is_ok()) {
             restart = r;
