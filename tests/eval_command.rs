@@ -325,6 +325,13 @@ fn an_inference_key_change_measures_the_trained_cell_again() {
     assert!(!added.contains("\"iteration\""), "steps were logged: {added}");
     let after = cell(&a);
     assert_eq!(after["seconds"], before["seconds"], "the seconds stay the training's");
+    // The model folder's training time: the checkpoint's, plus the measuring run's (no step).
+    let trained_for =
+        meshdeco::nn::checkpoint::Checkpoint::load(&ae.join("checkpoint.bin")).unwrap().header.train_seconds;
+    let metrics: serde_json::Value = serde_json::from_str(&read(&ae.join("metrics.json"))).unwrap();
+    let seconds = metrics["train_seconds"].as_f64().unwrap();
+    eprintln!("checkpoint: trained {trained_for} s; metrics.json after measuring again: {seconds} s");
+    assert!(trained_for > 0.0 && seconds >= trained_for, "{seconds} s against the checkpoint's {trained_for} s");
     assert_ne!(after["config_text"], before["config_text"]);
     assert_ne!(after["test_erms"], before["test_erms"], "the new decoder weight decodes otherwise");
     let model: serde_json::Value = serde_json::from_str(&read(&ae.join("model.json"))).unwrap();

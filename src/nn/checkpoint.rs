@@ -124,6 +124,15 @@ pub struct CheckpointHeader {
     /// runs before issue 53. A resume must weight alike.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub feature_weighted: bool,
+    /// Seconds the run has trained up to this checkpoint (its steps, their validation and the
+    /// checkpoints before this one), summed over the runs it was resumed through; absent (0) in
+    /// checkpoints written before it was recorded.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub train_seconds: f64,
+}
+
+fn is_zero(x: &f64) -> bool {
+    *x == 0.0
 }
 
 impl CheckpointHeader {
@@ -503,6 +512,7 @@ mod tests {
             neighbor_fingerprint: 0xdead_beef_f00d,
             batch: Some(3),
             feature_weighted: true,
+            train_seconds: MISREAD[2],
             last_loss: Some(LossTerms {
                 total: MISREAD[4],
                 reconstruction: MISREAD[2],

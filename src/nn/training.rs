@@ -228,6 +228,9 @@ pub struct Trainer<'a> {
     /// The best validation step of the checkpoint this run resumed from, until
     /// [`Self::with_validation`] takes it.
     resumed_best: Option<checkpoint::BestStep>,
+    /// Seconds trained so far (the steps, their validation and checkpoints; a resumed run starts
+    /// from its checkpoint's).
+    train_seconds: f64,
     /// The caller's term on the decoded shapes (`lambda_vertex`).
     output_loss: Option<&'a dyn OutputLoss>,
     /// The lanes the vertex term sees this step (all, or `vertex_batch` drawn each step).
@@ -473,6 +476,7 @@ impl<'a> Trainer<'a> {
             noisy_buf: Vec::new(),
             validation: None,
             resumed_best: None,
+            train_seconds: 0.0,
             output_loss: None,
             vertex_lanes: Vec::new(),
             epoch_order: None,
@@ -769,12 +773,18 @@ impl<'a> Trainer<'a> {
         t.rng = Rng { state: ck.header.rng_state };
         t.last_loss = ck.header.last_loss;
         t.resumed_best = ck.best;
+        t.train_seconds = ck.header.train_seconds;
         Ok(t)
     }
 
     /// Completed steps.
     pub fn iteration(&self) -> usize {
         self.iteration
+    }
+
+    /// Seconds trained so far, including those before a resume (the checkpoint's).
+    pub fn train_seconds(&self) -> f64 {
+        self.train_seconds
     }
 
     /// The hyperparameters.
@@ -1139,6 +1149,7 @@ impl<'a> Trainer<'a> {
             last_loss: self.last_loss,
             batch: Some(self.config.batch_for(self.data.n_shapes())),
             feature_weighted: self.feature_weights.is_some(),
+            train_seconds: self.train_seconds,
         }
     }
 
@@ -1219,6 +1230,7 @@ impl<'a> Trainer<'a> {
                 break;
             }
             let t0 = Instant::now();
+            let seconds_before = self.train_seconds;
             let loss = self.step()?;
             let dt = t0.elapsed().as_secs_f64();
             time += dt;
@@ -1244,10 +1256,12 @@ impl<'a> Trainer<'a> {
                 if let Some(path) = &options.checkpoint
                     && ((every > 0 && self.iteration.is_multiple_of(every)) || self.iteration == total)
                 {
+                    self.train_seconds = seconds_before + t0.elapsed().as_secs_f64();
                     self.save_checkpoint(path)?;
                     checkpointed = true;
                 }
             }
+            self.train_seconds = seconds_before + t0.elapsed().as_secs_f64();
             on_iteration(&IterationReport {
                 iteration: self.iteration,
                 iterations: total,

@@ -982,6 +982,8 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
         }
         Ok(trainer)
     };
+    // A resumed run's training time counts the time trained before (the checkpoint's).
+    let seconds_before = resumed.as_ref().map_or(0.0, |(_, ck)| ck.header.train_seconds);
     let mut trainer = make_trainer(ae_cfg.restarted(restart), resumed)?;
     let log_path = out.join(LOG_FILE);
     let mut log = std::fs::OpenOptions::new()
@@ -1137,7 +1139,7 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
         trainer = make_trainer(cfg, None)?;
         progress.stage(&format!("{stage}, restart {restart}"), ae_cfg.iterations as u64);
     };
-    let train_seconds = t_train.elapsed().as_secs_f64();
+    let train_seconds = seconds_before + t_train.elapsed().as_secs_f64();
     if let Some((it, err)) = summary.best {
         let line = format!("{{\"best_iteration\":{it},\"validation_error\":{err}}}\n");
         if let Err(e) = log.write_all(line.as_bytes()) {
