@@ -655,7 +655,9 @@ impl Autoencoder {
         Ok(())
     }
 
-    /// The model stored in a training checkpoint.
+    /// The model stored in a training checkpoint: its last step's parameters (a run with
+    /// `validation` > 0 keeps its best step's instead, which the checkpoint holds beside them:
+    /// [`Checkpoint::best`]).
     pub fn from_checkpoint(path: &Path, neighbors: NeighborIndex) -> Result<Self> {
         let ck = Checkpoint::load(path)?;
         Self::check_mesh(path, ck.header.n_vertices, ck.header.neighbor_fingerprint, &neighbors)?;
