@@ -375,6 +375,28 @@ fn an_inference_key_change_measures_the_trained_cell_again() {
     std::fs::remove_dir_all(&a).unwrap();
 }
 
+/// An autoencoder cell that held out validation shapes keeps its best validation step's model;
+/// its checkpoint holds that step, so it too is measured again (not trained) on an inference key
+/// change, to the numbers of a fresh run of the changed config.
+#[test]
+fn a_cell_with_held_out_validation_shapes_is_measured_again_with_its_best_step() {
+    let held = CONFIG.replace("seed = 3\n", "seed = 3\nvalidation = 2\nvalidate_every = 2\n");
+    let a = tmp("remeasure-val");
+    run_silent(&EvalConfig::from_toml(&held).unwrap(), &a, &EvalOptions::default()).unwrap();
+    let changed_text = held.replace("seed = 3\n", "seed = 3\ndecoder_edge_weight = 0.5\n");
+    let changed = EvalConfig::from_toml(&changed_text).unwrap();
+    let o = run_silent(&changed, &a, &EvalOptions::default()).unwrap();
+    assert_eq!((o.trained, o.reused, o.remeasured), (0, 3, 1));
+    let b = tmp("remeasure-val-fresh");
+    run_silent(&changed, &b, &EvalOptions::default()).unwrap();
+    let row = |dir: &Path| {
+        without_seconds(&read(&dir.join("results.csv"))).into_iter().find(|l| l.starts_with("tube,ae,")).unwrap()
+    };
+    assert_same_numbers(&[row(&a)], &[row(&b)]);
+    std::fs::remove_dir_all(&a).unwrap();
+    std::fs::remove_dir_all(&b).unwrap();
+}
+
 /// `sweep.select = "validation"` (issue 31): per dataset the report marks the cell of lowest
 /// validation Erms — the argmin of the `validation_erms` column, whatever the test column says —
 /// and `selection.csv` names it; without a validation split in every dataset, or with another
