@@ -70,6 +70,11 @@ fn without_seconds(csv: &str) -> Vec<String> {
 }
 
 /// Same rows, same text fields, numbers equal to a relative 1e-9.
+/// The autoencoder cell's row of `results.csv` in `dir`, without its seconds.
+fn ae_row(dir: &Path) -> String {
+    without_seconds(&read(&dir.join("results.csv"))).into_iter().find(|l| l.starts_with("tube,ae,")).unwrap()
+}
+
 fn assert_same_numbers(a: &[String], b: &[String]) {
     assert_eq!(a.len(), b.len());
     for (x, y) in a.iter().zip(b) {
@@ -284,10 +289,7 @@ fn interrupted_autoencoder_cell_resumes_from_its_checkpoint() {
     assert_eq!((o.trained, o.reused), (1, 3));
     let first = *p.steps.first().expect("the autoencoder cell trained");
     assert!(first > 4, "the rerun started at step {first}, not after the checkpoint at 4: {:?}", p.steps);
-    let row = |dir: &Path| {
-        without_seconds(&read(&dir.join("results.csv"))).into_iter().find(|l| l.starts_with("tube,ae,")).unwrap()
-    };
-    assert_same_numbers(&[row(&d)], &[row(&whole)]);
+    assert_same_numbers(&[ae_row(&d)], &[ae_row(&whole)]);
     let _ = std::fs::remove_dir_all(&d);
     let _ = std::fs::remove_dir_all(&whole);
 }
@@ -361,10 +363,7 @@ fn an_inference_key_change_measures_the_trained_cell_again() {
     // The same numbers as training the changed config afresh.
     let b = tmp("remeasure-fresh");
     run_silent(&changed, &b, &EvalOptions::default()).unwrap();
-    let row = |dir: &Path| {
-        without_seconds(&read(&dir.join("results.csv"))).into_iter().find(|l| l.starts_with("tube,ae,")).unwrap()
-    };
-    assert_same_numbers(&[row(&a)], &[row(&b)]);
+    assert_same_numbers(&[ae_row(&a)], &[ae_row(&b)]);
     std::fs::remove_dir_all(&b).unwrap();
 
     // A training key trains the cell again.
@@ -389,10 +388,7 @@ fn a_cell_with_held_out_validation_shapes_is_measured_again_with_its_best_step()
     assert_eq!((o.trained, o.reused, o.remeasured), (0, 3, 1));
     let b = tmp("remeasure-val-fresh");
     run_silent(&changed, &b, &EvalOptions::default()).unwrap();
-    let row = |dir: &Path| {
-        without_seconds(&read(&dir.join("results.csv"))).into_iter().find(|l| l.starts_with("tube,ae,")).unwrap()
-    };
-    assert_same_numbers(&[row(&a)], &[row(&b)]);
+    assert_same_numbers(&[ae_row(&a)], &[ae_row(&b)]);
     std::fs::remove_dir_all(&a).unwrap();
     std::fs::remove_dir_all(&b).unwrap();
 }

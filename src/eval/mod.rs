@@ -462,44 +462,47 @@ pub fn resolved_keys(method: &crate::config::MethodConfig) -> String {
     format!("{method:?}")
 }
 
-/// A cell's finished result when it was made from the same config text, with the same resolved
-/// keys (where recorded) and, for the autoencoder, today's encoding version.
-fn read_cached(dir: &Path, cell: &Cell) -> Option<CellResult> {
+/// The finished result stored in a cell's folder (`cell.json`), if one reads.
+fn read_cell(dir: &Path) -> Option<CellResult> {
     let path = dir.join(CELL_FILE);
     if !path.is_file() {
         return None;
     }
-    artifact::read_json::<CellResult>(&path).ok().filter(|r| {
-        r.config_text == cell.config_text
-            && r.method_keys.as_ref().is_none_or(|k| *k == resolved_keys(&cell.config.method))
-            && (r.kind != "autoencoder" || r.encoder_version == ENCODER_VERSION)
-    })
+    artifact::read_json::<CellResult>(&path).ok()
 }
 
-/// The finished result of a trained autoencoder cell that `cell` measures again instead of
-/// training it again: its `cell.json` was made from a config that trains the same network
+/// Whether stored result `r` is `cell`'s: made from the same config text, with the same resolved
+/// keys (where recorded) and, for the autoencoder, today's encoding version.
+fn is_cached(r: &CellResult, cell: &Cell) -> bool {
+    r.config_text == cell.config_text
+        && r.method_keys.as_ref().is_none_or(|k| *k == resolved_keys(&cell.config.method))
+        && (r.kind != "autoencoder" || r.encoder_version == ENCODER_VERSION)
+}
+
+/// Whether stored result `earlier` is of a trained autoencoder cell that `cell` measures again
+/// instead of training it again: made from a config that trains the same network
 /// ([`crate::config::Config::trains_as`]: only inference keys differ), with today's encoding
 /// version, and its finished checkpoint is there. A run that held out validation shapes keeps
 /// its best step's parameters: only a checkpoint that stores them (version 4) will do.
-fn remeasurable(dir: &Path, cell: &Cell) -> Option<CellResult> {
+fn remeasurable(dir: &Path, cell: &Cell, earlier: &CellResult) -> bool {
     let crate::config::MethodConfig::Autoencoder(m) = &cell.config.method else {
-        return None;
+        return false;
     };
     let checkpoint = dir.join(artifact::CHECKPOINT_FILE);
     if !checkpoint.is_file() || (m.validation > 0 && !crate::nn::checkpoint::stores_best_step(&checkpoint)) {
-        return None;
+        return false;
     }
-    let earlier = artifact::read_json::<CellResult>(&dir.join(CELL_FILE)).ok()?;
     // The earlier text read with today's defaults; its recorded training keys (where there are
     // any) say whether a default of a training key changed since.
-    let trained_with = crate::config::Config::from_toml(&earlier.config_text).ok()?;
+    let Ok(trained_with) = crate::config::Config::from_toml(&earlier.config_text) else {
+        return false;
+    };
     let training_keys_held =
         earlier.training_keys.as_ref().is_none_or(|k| *k == resolved_keys(&cell.config.method.training_keys()));
-    (earlier.kind == "autoencoder"
+    earlier.kind == "autoencoder"
         && earlier.encoder_version == ENCODER_VERSION
         && training_keys_held
-        && trained_with.trains_as(&cell.config))
-    .then_some(earlier)
+        && trained_with.trains_as(&cell.config)
 }
 
 /// Measures a trained autoencoder cell again ([`remeasurable`]): resumes its finished
@@ -596,7 +599,10 @@ pub fn run(
         let label = format!("{}/{}/K{}", d.name, m.label, cell.k);
         sweep.step(i as u64, &label);
         let dir = cell_dir(out, &d.name, &m.label, cell.k);
-        if let Some(mut r) = read_cached(&dir, cell) {
+        // The folder's stored result, read once: reused when it is this cell's, else perhaps
+        // measured again (below).
+        let stored = read_cell(&dir);
+        if let Some(mut r) = stored.as_ref().filter(|r| is_cached(r, cell)).cloned() {
             // A planted dataset's truth added or planted again since: score the cached model.
             if let Some(truth_dir) = &d.truth {
                 let key = truth_key(truth_dir)?;
@@ -630,7 +636,7 @@ pub fn run(
         }
         // A trained autoencoder cell whose config changed only in inference keys is measured
         // again from its checkpoint; its `seconds` stay the training's.
-        let earlier = remeasurable(&dir, cell);
+        let earlier = stored.filter(|r| remeasurable(&dir, cell, r));
         let mut again = false;
         let attempt = DatasetData::cached(&mut data[cell.dataset], d).and_then(|ds| {
             let remeasured = match &earlier {

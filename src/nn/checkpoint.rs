@@ -78,6 +78,30 @@ pub struct BestStepParts<'a> {
     pub components: &'a [f32],
 }
 
+impl BestStep {
+    /// Borrowed, as [`write()`] takes it.
+    pub fn parts(&self) -> BestStepParts<'_> {
+        BestStepParts {
+            iteration: self.iteration,
+            error: self.error,
+            layers: &self.layers,
+            components: &self.components,
+        }
+    }
+}
+
+impl BestStepParts<'_> {
+    /// An owned copy.
+    pub fn to_owned(&self) -> BestStep {
+        BestStep {
+            iteration: self.iteration,
+            error: self.error,
+            layers: self.layers.to_vec(),
+            components: self.components.to_vec(),
+        }
+    }
+}
+
 fn layer_floats(l: &LayerWeights) -> Vec<f32> {
     let mut v = Vec::with_capacity(LAYER_FLOATS);
     v.extend(l.wp.iter().flatten());
@@ -357,12 +381,7 @@ impl Checkpoint {
                 components: &self.components,
                 columns: self.columns,
                 adam: &self.adam,
-                best: self.best.as_ref().map(|b| BestStepParts {
-                    iteration: b.iteration,
-                    error: b.error,
-                    layers: &b.layers,
-                    components: &b.components,
-                }),
+                best: self.best.as_ref().map(BestStep::parts),
             },
         )
     }

@@ -625,8 +625,8 @@ impl<'a> Trainer<'a> {
 
     /// Gives the run held-out shapes (`config.validation > 0`): every `validate_every` steps
     /// and at the end, the encode–decode feature error on them is measured and the parameters
-    /// of the lowest one are what [`Self::into_model`] returns. (A resumed run starts the
-    /// search afresh.)
+    /// of the lowest one are what [`Self::into_model`] returns. (A resumed run starts from the
+    /// best step its checkpoint holds, if any.)
     pub fn with_validation(mut self, data: &'a TrainingData) -> Result<Self> {
         if data.n_vertices() != self.data.n_vertices() {
             return Err(Error::Invalid(format!(
@@ -635,6 +635,23 @@ impl<'a> Trainer<'a> {
                 self.data.n_vertices()
             )));
         }
+        // A resumed run keeps the best step from before the interruption.
+        let best = match self.resumed_best.take() {
+            None => None,
+            Some(b) => {
+                if b.layers.len() != self.weights.layers.len() || b.components.len() != self.weights.c.len() {
+                    return Err(Error::Invalid(format!(
+                        "the checkpoint's best validation step has {} layers and {} numbers of C, the run {} and {}",
+                        b.layers.len(),
+                        b.components.len(),
+                        self.weights.layers.len(),
+                        self.weights.c.len()
+                    )));
+                }
+                let Weights { k, n, least_squares, .. } = self.weights;
+                Some((b.iteration, b.error, Weights { layers: b.layers, c: b.components, k, n, least_squares }))
+            }
+        };
         let b = data.n_shapes();
         let bp = padded_width(b);
         self.validation = Some(Validation {
@@ -645,25 +662,8 @@ impl<'a> Trainer<'a> {
                 ws.set_feature_weights(self.feature_weights.clone());
                 ws
             },
-            best: None,
+            best,
         });
-        // A resumed run keeps the best step from before the interruption.
-        if let Some(b) = self.resumed_best.take() {
-            let layers_match = b.layers.len() == self.weights.layers.len();
-            if !layers_match || b.components.len() != self.weights.c.len() {
-                return Err(Error::Invalid(format!(
-                    "the checkpoint's best validation step has {} layers and {} numbers of C, the run {} and {}",
-                    b.layers.len(),
-                    b.components.len(),
-                    self.weights.layers.len(),
-                    self.weights.c.len()
-                )));
-            }
-            let weights = Weights { layers: b.layers, c: b.components, ..self.weights.clone() };
-            if let Some(v) = &mut self.validation {
-                v.best = Some((b.iteration, b.error, weights));
-            }
-        }
         Ok(self)
     }
 
@@ -780,11 +780,6 @@ impl<'a> Trainer<'a> {
     /// Completed steps.
     pub fn iteration(&self) -> usize {
         self.iteration
-    }
-
-    /// Seconds trained so far, including those before a resume (the checkpoint's).
-    pub fn train_seconds(&self) -> f64 {
-        self.train_seconds
     }
 
     /// The hyperparameters.
@@ -1176,14 +1171,7 @@ impl<'a> Trainer<'a> {
             components: self.weights.c.clone(),
             columns: 9 * self.weights.n,
             adam: self.adam.clone(),
-            best: self.validation.as_ref().and_then(|v| v.best.as_ref()).map(|(iteration, error, w)| {
-                checkpoint::BestStep {
-                    iteration: *iteration,
-                    error: *error,
-                    layers: w.layers.clone(),
-                    components: w.c.clone(),
-                }
-            }),
+            best: self.best_step().map(|b| b.to_owned()),
         })
     }
 
@@ -1199,16 +1187,15 @@ impl<'a> Trainer<'a> {
                 components: &self.weights.c,
                 columns: 9 * self.weights.n,
                 adam: &self.adam,
-                best: self.validation.as_ref().and_then(|v| v.best.as_ref()).map(|(iteration, error, w)| {
-                    checkpoint::BestStepParts {
-                        iteration: *iteration,
-                        error: *error,
-                        layers: &w.layers,
-                        components: &w.c,
-                    }
-                }),
+                best: self.best_step(),
             },
         )
+    }
+
+    /// The best validation step so far (runs with `validation > 0`), as a checkpoint stores it.
+    fn best_step(&self) -> Option<checkpoint::BestStepParts<'_>> {
+        let (iteration, error, w) = self.validation.as_ref()?.best.as_ref()?;
+        Some(checkpoint::BestStepParts { iteration: *iteration, error: *error, layers: &w.layers, components: &w.c })
     }
 
     /// Runs until `config.iterations` steps are done or the stop flag is set, calling
