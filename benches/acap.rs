@@ -95,7 +95,7 @@ fn bench_acap(c: &mut Criterion) {
         ("fit_inverse", AcapDecoder::FitInverse { edge_weight: meshdeco::representation::acap::DEFAULT_EDGE_WEIGHT }),
         ("edge_lsq", AcapDecoder::EdgeLeastSquares),
     ] {
-        let acap = Acap::with_options(&reference, AcapOptions { decoder }).unwrap();
+        let acap = Acap::with_options(&reference, AcapOptions { decoder, ..Default::default() }).unwrap();
         let features = acap.encode_frame(&frame, Consistency::Global).unwrap().features();
         c.bench_function(&format!("acap_decode_{what}_{}_vertices_{name}", reference.n_vertices()), |b| {
             b.iter(|| black_box(acap.decode_frame(black_box(&features)).unwrap()))

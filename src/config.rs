@@ -60,6 +60,7 @@
 //! | `engine` | autoencoder | `hand` | `hand` (hand-written CPU step, fast) \| `graph` (Burn autodiff graph on `device`) |
 //! | `device` | autoencoder | `cpu` | `cpu` \| `wgpu` (needs `engine = "graph"` and a build with `--features wgpu`) |
 //! | `consistency` | autoencoder, pca, splocs | `global` | ACAP rotation consistency: `bfs` \| `global` |
+//! | `features` | autoencoder | `acap` | the network's 9 numbers per vertex: `acap` (log R and S) \| `gradient` (T − I of the same 1-ring fit; [`crate::representation::acap::FeatureMap`]) |
 //! | `lambda`, `r`, `threshold`, `regions`, `max_regions`, `beta`, `gamma` | region-pca | see region-pca docs | segmentation and coupling |
 //! | `min_piece`, `keep_searching` | region-pca | 0, false | fragment merging and search past the first non-compact k (`SegmentationConfig`) |
 
@@ -73,8 +74,9 @@ pub use crate::representation::feature_cache::CachePolicy;
 mod method;
 pub use method::{
     AE_DECODER_EDGE_WEIGHT, AE_DECODER_EDGE_WEIGHT_MAX, AE_DECODER_NOISE_POWER, AE_DECODER_NOISE_POWER_MAX,
-    AE_GEODESIC_M, AutoencoderMethod, ConsistencyName, DialSparsity, FeatureWeights, FixedCenter, MethodConfig,
-    MethodKind, MethodSettings, PcaMethod, RegionPcaMethod, SPLOCS_GEODESIC_M, ScalingName, SplocsMethod, method_key,
+    AE_GEODESIC_M, AeFeatures, AutoencoderMethod, ConsistencyName, DialSparsity, FeatureWeights, FixedCenter,
+    MethodConfig, MethodKind, MethodSettings, PcaMethod, RegionPcaMethod, SPLOCS_GEODESIC_M, ScalingName, SplocsMethod,
+    method_key,
 };
 
 /// Which frames belong to a split, as 0-based indices (after natural sort).

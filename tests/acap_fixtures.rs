@@ -370,7 +370,9 @@ fn dataset_round_trip(name: &str) -> Option<(f64, f64, f64, f64)> {
     }
     let feats = AcapFrame::stack(&enc).unwrap();
     let e_fit = erms(&frames, &acap.decode_sequence(&feats).unwrap());
-    let edge = Acap::with_options(&meshes[0], AcapOptions { decoder: AcapDecoder::EdgeLeastSquares }).unwrap();
+    let edge =
+        Acap::with_options(&meshes[0], AcapOptions { decoder: AcapDecoder::EdgeLeastSquares, ..Default::default() })
+            .unwrap();
     let e_edge = erms(&frames, &edge.decode_sequence(&feats).unwrap());
     println!(
         "{name}: {} frames × {} vertices, round-trip Erms (centroid-aligned) {e_fit:.3e} (fit inverse, default), {e_edge:.4} (edge least squares); energy BFS {eb:.3} → global {eg:.3} (sum over frames)",

@@ -27,7 +27,7 @@ fn acap_decode_adjoint_matches_forward() {
     for m in &meshes {
         let n = m.n_vertices();
         for decoder in [AcapDecoder::FitInverse { edge_weight: 1e-3 }, AcapDecoder::EdgeLeastSquares] {
-            let acap = Acap::with_options(m, AcapOptions { decoder }).unwrap();
+            let acap = Acap::with_options(m, AcapOptions { decoder, ..Default::default() }).unwrap();
             let t = random_transforms(n, 3);
             let p = acap.decode_transforms(&t).unwrap();
             let p0 = acap.decode_transforms(&vec![[[0.0; 3]; 3]; n]).unwrap();

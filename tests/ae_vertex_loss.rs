@@ -7,16 +7,20 @@ mod common;
 use meshdeco::mesh::TriMesh;
 use meshdeco::nn::OutputLoss;
 use meshdeco::pipeline::ae_vertex_loss::AcapVertexLoss;
-use meshdeco::representation::acap::{Acap, Consistency};
+use meshdeco::representation::Features;
+use meshdeco::representation::acap::{Acap, AcapOptions, Consistency, FeatureMap};
 use meshdeco::representation::scaling::{FeatureScaling, ScalingMode};
 
-/// Scaled features of the synthetic tube's frames `frames` (F × N × 9) and their scaling.
-fn tube_features(frames: &[usize]) -> (Acap, Vec<Vec<f64>>, FeatureScaling) {
+/// Scaled features of the synthetic tube's frames `frames` (F × N × 9) in feature map `map`,
+/// and their scaling.
+fn tube_features(frames: &[usize], map: FeatureMap) -> (Acap, Vec<Vec<f64>>, FeatureScaling) {
     let seq = meshdeco::synthetic::load("synthetic:tube").expect("tube");
     let rest = TriMesh::new(seq.frames[0].clone(), seq.faces.clone());
-    let acap = Acap::new(&rest).expect("acap");
-    let picked: Vec<Vec<[f64; 3]>> = frames.iter().map(|&f| seq.frames[f].clone()).collect();
-    let feats = acap.encode_features(&picked, Consistency::Bfs).expect("features");
+    let acap = Acap::with_options(&rest, AcapOptions { map, ..Default::default() }).expect("acap");
+    let mut feats = Features::zeros(frames.len(), rest.n_vertices(), 9);
+    for (i, &f) in frames.iter().enumerate() {
+        feats.frame_mut(i).copy_from_slice(&acap.encode_values(&seq.frames[f], Consistency::Bfs).expect("features"));
+    }
     let scaling = FeatureScaling::fit(&feats, ScalingMode::PerDimension).expect("scaling");
     let scaled = scaling.apply(&feats).expect("scaled");
     let rows = (0..feats.n_frames).map(|f| scaled.frame(f).to_vec()).collect();
@@ -35,10 +39,17 @@ fn vcb(lanes: &[Vec<f64>], bp: usize) -> Vec<f32> {
     out
 }
 
+/// For ACAP's features and for the gradient map's (`features = "gradient"`).
 #[test]
 fn vertex_term_is_the_reconstructions_squared_error_and_its_gradient_matches_finite_differences() {
-    let (acap, x, scaling) = tube_features(&[5, 20]);
-    let (_, y, _) = tube_features(&[9, 33]);
+    for map in [FeatureMap::RotationStretch, FeatureMap::Gradient] {
+        vertex_term_check(map);
+    }
+}
+
+fn vertex_term_check(map: FeatureMap) {
+    let (acap, x, scaling) = tube_features(&[5, 20], map);
+    let (_, y, _) = tube_features(&[9, 33], map);
     let n = acap.n_vertices();
     let loss = AcapVertexLoss::new(&acap, &scaling).expect("loss");
     let bp = 8;
@@ -88,14 +99,14 @@ fn vertex_term_is_the_reconstructions_squared_error_and_its_gradient_matches_fin
     assert!(analytic.abs() > 1e-6, "a derivative to compare: {analytic}");
     assert!(
         (fd - analytic).abs() <= 2e-3 * fd.abs().max(analytic.abs()),
-        "directional derivative: finite differences {fd}, gradient {analytic}"
+        "{map:?}: directional derivative: finite differences {fd}, gradient {analytic}"
     );
 }
 
 #[test]
 fn a_trainer_refuses_lambda_vertex_without_the_vertex_loss() {
     use meshdeco::nn::{AutoencoderConfig, HopDistances, NeighborIndex, Trainer, TrainingData};
-    let (acap, x, _) = tube_features(&[5, 20, 30]);
+    let (acap, x, _) = tube_features(&[5, 20, 30], FeatureMap::RotationStretch);
     let nb = NeighborIndex::from_faces(acap.n_vertices(), &meshdeco::synthetic::tube_mesh().faces).expect("nb");
     let mut feats = meshdeco::representation::Features::zeros(3, acap.n_vertices(), 9);
     for (f, lane) in x.iter().enumerate() {

@@ -23,7 +23,7 @@ use crate::methods::splocs::{AdmmConfig, SplocsConfig};
 use crate::nn::augment::AugmentMix;
 use crate::nn::config::{AutoencoderConfig, ComputeDevice, EncoderKind, Engine, InitBias};
 use crate::representation::RepresentationKind;
-use crate::representation::acap::Consistency;
+use crate::representation::acap::{Consistency, FeatureMap};
 use crate::representation::scaling::ScalingMode;
 
 /// Method kinds (the `kind` key).
@@ -54,6 +54,39 @@ impl MethodKind {
     /// Parses a config name.
     pub fn parse(s: &str) -> Option<Self> {
         Self::ALL.into_iter().find(|k| k.name() == s)
+    }
+}
+
+/// What the autoencoder's 9 numbers per vertex are (`features` key): `acap` (the paper's logR
+/// and S, the default) | `gradient` (the 1-ring deformation gradient minus the identity,
+/// T − I: deformations that add in positions add in it). See
+/// [`crate::representation::acap::FeatureMap`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum AeFeatures {
+    #[default]
+    Acap,
+    Gradient,
+}
+
+impl AeFeatures {
+    /// The representation's feature map.
+    pub fn to_map(self) -> FeatureMap {
+        match self {
+            AeFeatures::Acap => FeatureMap::RotationStretch,
+            AeFeatures::Gradient => FeatureMap::Gradient,
+        }
+    }
+
+    /// Name as written in configs and headers (the feature map's).
+    pub fn name(self) -> &'static str {
+        self.to_map().name()
+    }
+
+    /// Whether this is the default (`skip_serializing_if`: configs that leave it out read back
+    /// alike).
+    fn is_default(&self) -> bool {
+        *self == AeFeatures::default()
     }
 }
 
@@ -381,6 +414,9 @@ pub struct AutoencoderMethod {
     /// Width of the outlier fence beyond the quantile range, in multiples of it (≥ 0).
     pub scaling_fence: f64,
     pub consistency: ConsistencyName,
+    /// `acap` | `gradient`: what the network's 9 numbers per vertex are ([`AeFeatures`]).
+    #[serde(skip_serializing_if = "AeFeatures::is_default")]
+    pub features: AeFeatures,
     /// `hand` | `graph`.
     pub engine: Engine,
     /// `cpu` | `wgpu`.
@@ -507,6 +543,7 @@ macro_rules! network_keys {
                     scaling_quantile,
                     scaling_fence,
                     consistency,
+                    features,
                     fit_test,
                     dial_sparsity,
                     feature_weights,
@@ -520,6 +557,7 @@ macro_rules! network_keys {
                     scaling_quantile,
                     scaling_fence,
                     consistency,
+                    features,
                     fit_test,
                     dial_sparsity,
                     feature_weights,
@@ -538,6 +576,7 @@ macro_rules! network_keys {
                     scaling_quantile: _,
                     scaling_fence: _,
                     consistency: _,
+                    features: _,
                     fit_test: _,
                     dial_sparsity: _,
                     feature_weights: _,
@@ -596,6 +635,7 @@ struct AutoencoderOwnKeys {
     scaling_quantile: f64,
     scaling_fence: f64,
     consistency: ConsistencyName,
+    features: AeFeatures,
     fit_test: bool,
     dial_sparsity: DialSparsity,
     feature_weights: FeatureWeights,
@@ -747,6 +787,7 @@ impl Default for AutoencoderMethod {
                 scaling_quantile: AE_SCALING_QUANTILE,
                 scaling_fence: AE_SCALING_FENCE,
                 consistency: ConsistencyName::Global,
+                features: AeFeatures::Acap,
                 fit_test: true,
                 dial_sparsity: AE_DIAL_SPARSITY,
                 feature_weights: AE_FEATURE_WEIGHTS,

@@ -457,10 +457,20 @@ fn measure(
 }
 
 /// Every key of a method as resolved, defaults included (its `Debug` text: every field, numbers
-/// in the shortest text that reads back to the same value).
+/// in the shortest text that reads back to the same value), except the keys added since the
+/// record began ([`KEYS_ADDED_SINCE`]) while at their default, so that the cells recorded
+/// before them still match.
 pub fn resolved_keys(method: &crate::config::MethodConfig) -> String {
-    format!("{method:?}")
+    let mut text = format!("{method:?}");
+    for (key, default) in KEYS_ADDED_SINCE {
+        text = text.replacen(&format!(", {key}: {default}"), "", 1);
+    }
+    text
 }
+
+/// Keys added to a method after [`resolved_keys`] began to be recorded, with their default's
+/// `Debug` text.
+const KEYS_ADDED_SINCE: [(&str, &str); 1] = [("features", "Acap")];
 
 /// The finished result stored in a cell's folder (`cell.json`), if one reads.
 fn read_cell(dir: &Path) -> Option<CellResult> {
@@ -753,4 +763,23 @@ pub fn run(
 /// [`run`] without progress reporting.
 pub fn run_silent(cfg: &EvalConfig, out: &Path, opts: &EvalOptions) -> Result<EvalOutcome> {
     run(cfg, out, opts, &mut Silent, &mut Silent)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::resolved_keys;
+    use crate::config::{AeFeatures, AutoencoderMethod, MethodConfig};
+
+    /// A key added after the record began is left out at its default (the cells recorded before
+    /// it still match) and recorded when set.
+    #[test]
+    fn keys_added_since_are_recorded_only_when_set() {
+        let plain = MethodConfig::Autoencoder(AutoencoderMethod::default());
+        let text = resolved_keys(&plain);
+        assert!(!text.contains("features"), "{text}");
+        assert!(text.contains("consistency: Global, engine"), "the neighbours close up: {text}");
+        let set = MethodConfig::Autoencoder(AutoencoderMethod { features: AeFeatures::Gradient, ..Default::default() });
+        assert!(resolved_keys(&set).contains("features: Gradient"));
+        assert_ne!(resolved_keys(&set), text);
+    }
 }

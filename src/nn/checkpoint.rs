@@ -153,6 +153,11 @@ pub struct CheckpointHeader {
     /// checkpoints written before it was recorded.
     #[serde(default, skip_serializing_if = "is_zero")]
     pub train_seconds: f64,
+    /// The name of what the network's input features are when the caller named them
+    /// ([`super::training::Trainer::with_input`]: the autoencoder's `features` key when not the
+    /// default); absent for the default. A resume must read the same features.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub input: Option<String>,
 }
 
 fn is_zero(x: &f64) -> bool {
@@ -532,6 +537,7 @@ mod tests {
             batch: Some(3),
             feature_weighted: true,
             train_seconds: MISREAD[2],
+            input: Some("gradient".into()),
             last_loss: Some(LossTerms {
                 total: MISREAD[4],
                 reconstruction: MISREAD[2],

@@ -244,6 +244,8 @@ pub struct Trainer<'a> {
     rest: Option<Vec<f32>>,
     /// Per-vertex weights of the feature error ([`Self::with_feature_weights`]).
     feature_weights: Option<Arc<[f32]>>,
+    /// The caller's name of the input features, recorded in checkpoints ([`Trainer::with_input`]).
+    input: Option<String>,
 }
 
 /// Lanes a batch has besides its shapes and synthetic shapes: the rest shape's, when the code
@@ -483,6 +485,7 @@ impl<'a> Trainer<'a> {
             feature_norm: norm,
             rest: None,
             feature_weights: None,
+            input: None,
         })
     }
 
@@ -522,6 +525,13 @@ impl<'a> Trainer<'a> {
         }
         self.feature_weights = Some(w);
         Ok(self)
+    }
+
+    /// Names what the input features are (`None`: the default), recorded in every checkpoint
+    /// ([`super::checkpoint::CheckpointHeader::input`]) so that a resume can check it.
+    pub fn with_input(mut self, name: Option<&str>) -> Self {
+        self.input = name.map(str::to_string);
+        self
     }
 
     /// Gives the run the vertex term's loss (`lambda_vertex > 0` needs one; it is weighted by
@@ -1145,6 +1155,7 @@ impl<'a> Trainer<'a> {
             batch: Some(self.config.batch_for(self.data.n_shapes())),
             feature_weighted: self.feature_weights.is_some(),
             train_seconds: self.train_seconds,
+            input: self.input.clone(),
         }
     }
 

@@ -46,7 +46,7 @@ use crate::mesh::Vec3;
 use crate::methods::posing::{PosePrior, Pull, pull_matrix};
 use crate::model::Model;
 use crate::nn::latent_fit::DecoderVjp;
-use crate::representation::acap::{Acap, feature_transform, feature_transform_jacobian};
+use crate::representation::acap::{Acap, FeatureMap};
 
 /// Hyperparameters of [`AePoser`].
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -113,6 +113,8 @@ pub struct AePoser<'a> {
     piece_derivatives: Vec<Vec<f64>>,
     /// Per feature dimension (9): ∂f/∂x̂ = 1/a of the scaling, and its centre c.
     unscale: [(f64, f64); 9],
+    /// What the features are (how they make T_i).
+    map: FeatureMap,
     config: AePoseConfig,
 }
 
@@ -175,6 +177,7 @@ impl<'a> AePoser<'a> {
             kappa,
             piece_derivatives,
             unscale,
+            map: acap.map(),
             config: *config,
         })
     }
@@ -192,7 +195,7 @@ impl<'a> AePoser<'a> {
     /// Constrained positions (model units) from scaled features.
     fn positions(&self, xs: &[f64]) -> Vec<Vec3> {
         let f = self.unscaled(xs);
-        let t: Vec<Mat3> = f.chunks_exact(9).map(feature_transform).collect();
+        let t: Vec<Mat3> = f.chunks_exact(9).map(|v| self.map.transform(v)).collect();
         self.g
             .iter()
             .zip(&self.kappa)
@@ -243,7 +246,7 @@ impl<'a> AePoser<'a> {
             let n = f.len() / 9;
             let mut u = vec![vec![0.0; 9 * n]; 3 * nv];
             for i in 0..n {
-                let dt = feature_transform_jacobian(&f[9 * i..9 * i + 9]);
+                let dt = self.map.transform_jacobian(&f[9 * i..9 * i + 9]);
                 for (a, g) in self.g.iter().enumerate() {
                     let gi = g[i];
                     if gi == [0.0; 3] {

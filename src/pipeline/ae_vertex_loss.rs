@@ -32,7 +32,7 @@ use crate::math::mat3::Mat3;
 use crate::mesh::{Vec3, bounding_box};
 use crate::nn::OutputLoss;
 use crate::representation::acap::{
-    Acap, feature_rotation, feature_transform, feature_transform_vjp_with, feature_transform_with,
+    Acap, FeatureMap, feature_rotation, feature_transform_vjp_with, feature_transform_with,
 };
 use crate::representation::scaling::FeatureScaling;
 
@@ -97,7 +97,7 @@ impl<'a> AcapVertexLoss<'a> {
                 .chunks_exact(9)
                 .map(|v| {
                     let f: [f64; 9] = std::array::from_fn(|q| f32::from_bits(v[q]) as f64 * u[q].0 + u[q].1);
-                    feature_transform(&f)
+                    self.acap.map().transform(&f)
                 })
                 .collect(),
         );
@@ -116,13 +116,19 @@ impl<'a> AcapVertexLoss<'a> {
         let tx = self.input_transforms(x, bp, j);
         let fh: Vec<[f64; 9]> =
             (0..n).map(|i| std::array::from_fn(|q| xhat[(i * 9 + q) * bp + j] as f64 * u[q].0 + u[q].1)).collect();
-        let rh: Vec<Mat3> = fh.iter().map(|f| feature_rotation(f)).collect();
-        let dt: Vec<Mat3> = fh
-            .iter()
-            .zip(&rh)
+        // ACAP's rotations once per lane, for T and its vector–Jacobian product alike.
+        let rh: Vec<Mat3> = match self.acap.map() {
+            FeatureMap::RotationStretch => fh.iter().map(|f| feature_rotation(f)).collect(),
+            FeatureMap::Gradient => Vec::new(),
+        };
+        let transform = |i: usize| match self.acap.map() {
+            FeatureMap::RotationStretch => feature_transform_with(&fh[i], &rh[i]),
+            map => map.transform(&fh[i]),
+        };
+        let dt: Vec<Mat3> = (0..n)
             .zip(tx.iter())
-            .map(|((f, r), tt)| {
-                let ta = feature_transform_with(f, r);
+            .map(|(i, tt)| {
+                let ta = transform(i);
                 std::array::from_fn(|a| std::array::from_fn(|c| ta[a][c] - tt[a][c]))
             })
             .collect();
@@ -139,8 +145,11 @@ impl<'a> AcapVertexLoss<'a> {
             .collect();
         let adj = self.acap.decode_transforms_adjoint(&g)?;
         let mut out = vec![0.0f32; 9 * n];
-        for (i, ((f, r), a)) in fh.iter().zip(&rh).zip(&adj).enumerate() {
-            let v = feature_transform_vjp_with(f, r, a);
+        for (i, (f, a)) in fh.iter().zip(&adj).enumerate() {
+            let v = match self.acap.map() {
+                FeatureMap::RotationStretch => feature_transform_vjp_with(f, &rh[i], a),
+                map => map.transform_vjp(f, a),
+            };
             for q in 0..9 {
                 out[i * 9 + q] = (v[q] * u[q].0) as f32;
             }

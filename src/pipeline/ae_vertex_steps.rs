@@ -45,7 +45,7 @@ use crate::error::{Error, Result};
 use crate::math::mat3::Mat3;
 use crate::mesh::Vec3;
 use crate::nn::latent_fit::{DecoderVjp, JacobianScratch};
-use crate::representation::acap::{Acap, feature_transform, feature_transform_jacobian};
+use crate::representation::acap::Acap;
 
 /// Dimensionless pull towards the network's code (λ = γ · tr(JᵀJ)/K).
 pub const STEP_GAMMA: f64 = 1e-3;
@@ -107,7 +107,8 @@ impl<'a> VertexSteps<'a> {
 
     /// Per-vertex transforms T_i of scaled features x̂ (9N).
     fn transforms(&self, xh: &[f64]) -> Vec<Mat3> {
-        xh.chunks_exact(9).map(|v| feature_transform(&self.unscaled(v))).collect()
+        let map = self.acap.map();
+        xh.chunks_exact(9).map(|v| map.transform(&self.unscaled(v))).collect()
     }
 
     fn unscaled(&self, v: &[f64]) -> [f64; 9] {
@@ -172,7 +173,8 @@ impl<'a> VertexSteps<'a> {
             let (xh, stride) = self.decoder.jacobian_with(&z, &mut scratch)?;
             let jx = scratch.jacobian();
             let fs: Vec<[f64; 9]> = xh.chunks_exact(9).map(|v| self.unscaled(v)).collect();
-            let t: Vec<Mat3> = fs.iter().map(|f| feature_transform(f)).collect();
+            let map = self.acap.map();
+            let t: Vec<Mat3> = fs.iter().map(|f| map.transform(f)).collect();
             let p = centred(&self.acap.decode_transforms(&t)?);
             let data = error(&p);
             start_error.get_or_insert(data);
@@ -181,7 +183,7 @@ impl<'a> VertexSteps<'a> {
             let dt: Vec<[Mat3; 9]> = fs
                 .iter()
                 .map(|f| {
-                    let mut m = feature_transform_jacobian(f);
+                    let mut m = map.transform_jacobian(f);
                     for (q, mq) in m.iter_mut().enumerate() {
                         mq.iter_mut().flatten().for_each(|v| *v *= self.unscale[q].0);
                     }

@@ -36,7 +36,7 @@ use super::metrics_file::DialReadout;
 use super::pose::single_frame;
 use super::registry::{FitContext, FitStats, Fitted};
 use crate::artifact::{self, ArrayStore};
-use crate::config::{AutoencoderMethod, DialSparsity, FeatureWeights, MethodConfig, MethodKind};
+use crate::config::{AeFeatures, AutoencoderMethod, DialSparsity, FeatureWeights, MethodConfig, MethodKind};
 use crate::error::{Error, Result};
 use crate::mesh::{self, MeshSequence, TriMesh, Vec3};
 use crate::methods::sparse_dials::SparseDials;
@@ -49,7 +49,7 @@ use crate::nn::{
     stall_check_step,
 };
 use crate::preprocess::{Prepared, UnitBox};
-use crate::representation::acap::{AcapDecoder, Consistency};
+use crate::representation::acap::{AcapDecoder, Consistency, FeatureMap};
 use crate::representation::noise_sensitivity::{NOISE_DRAWS, NOISE_LEVEL, feature_noise_variance, noise_weights};
 use crate::representation::roundtrip::Alignment;
 use crate::representation::scaling::{FeatureScaling, RangeHistogram, ScalingMode};
@@ -68,6 +68,10 @@ pub struct AeHeader {
     pub representation: String,
     /// ACAP rotation consistency (`bfs` or `global`).
     pub consistency: String,
+    /// What the network's 9 numbers per vertex are (`features`: `acap` or `gradient`); absent
+    /// in models trained before the key, which are `acap`.
+    #[serde(default = "default_features", skip_serializing_if = "is_default_features")]
+    pub features: String,
     /// Edge weight μ of the ACAP decoder of the network's features (`decoder_edge_weight`;
     /// models trained before it get today's default,
     /// [`crate::config::AE_DECODER_EDGE_WEIGHT`]).
@@ -115,6 +119,14 @@ impl CenterDistances for GeodesicSupport {
     }
 }
 
+fn default_features() -> String {
+    AeFeatures::default().name().into()
+}
+
+fn is_default_features(s: &String) -> bool {
+    *s == default_features()
+}
+
 fn default_decoder_edge_weight() -> f64 {
     crate::config::AE_DECODER_EDGE_WEIGHT
 }
@@ -131,12 +143,14 @@ fn default_decoder_noise_power() -> f64 {
 fn ae_representation(
     rest: &TriMesh,
     consistency: Consistency,
+    map: FeatureMap,
     edge_weight: f64,
     noise_power: f64,
 ) -> Result<Representation> {
     let options = RepresentationOptions {
         acap_consistency: consistency,
         acap_decoder: AcapDecoder::FitInverse { edge_weight },
+        acap_map: map,
         ..Default::default()
     };
     let rep = Representation::new(RepresentationKind::Acap, rest, options)?;
@@ -226,9 +240,17 @@ impl AeArtifact {
         let (header, arrays): (AeHeader, ArrayStore) = artifact::load_model(&dir)?;
         let rest = rest_from_arrays(&arrays)?;
         check_header(&header, &dir.join("model.json"), rest.n_vertices())?;
+        let map = FeatureMap::parse(&header.features).ok_or_else(|| {
+            Error::parse(
+                dir.join("model.json"),
+                None,
+                format!("`features` is \"{}\", expected \"acap\" or \"gradient\"", header.features),
+            )
+        })?;
         let representation = ae_representation(
             &rest,
             consistency_of(&header.consistency),
+            map,
             header.decoder_edge_weight,
             header.decoder_noise_power,
         )?;
@@ -835,8 +857,13 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
     }
     ctx.progress.stage("acap features", prep.train.len() as u64);
     let t_rep = Instant::now();
-    let representation =
-        ae_representation(&prep.rest, m.consistency.to_acap(), m.decoder_edge_weight, m.decoder_noise_power)?;
+    let representation = ae_representation(
+        &prep.rest,
+        m.consistency.to_acap(),
+        m.features.to_map(),
+        m.decoder_edge_weight,
+        m.decoder_noise_power,
+    )?;
     // The network's 9 numbers per vertex, and the pieces' translations (multi-piece meshes).
     // When the features are cached in a file (large data: `data.cache`), training reads them
     // from it a batch at a time; otherwise they are computed into memory and scaled in place.
@@ -948,6 +975,19 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
                 ),
             ));
         }
+        // What the features are is not a network hyperparameter either.
+        let input = ck.header.input.as_deref().unwrap_or(AeFeatures::default().name());
+        if input != m.features.name() {
+            return Err(Error::config(
+                "features",
+                format!(
+                    "{}: the checkpoint was trained with features = \"{input}\", this run would use \"{}\": \
+                     set method.features = \"{input}\" to resume it",
+                    from.display(),
+                    m.features.name()
+                ),
+            ));
+        }
         // A checkpoint written before checkpoints held the best validation step: the step kept
         // is chosen among those after the resume.
         if ae_cfg.validation > 0 && ck.best.is_none() && ck.header.iteration >= ae_cfg.validate_every.max(1) {
@@ -976,7 +1016,9 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
         if let Some(v) = &vertex_loss {
             trainer = trainer.with_output_loss(v);
         }
-        trainer = trainer.with_rest(&rest_features)?;
+        trainer = trainer
+            .with_rest(&rest_features)?
+            .with_input((m.features != AeFeatures::default()).then_some(m.features.name()));
         if let Some(w) = &feature_weights {
             trainer = trainer.with_feature_weights(w)?;
         }
@@ -1189,6 +1231,7 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
             method: MethodKind::Autoencoder.name().into(),
             representation: RepresentationKind::Acap.name().into(),
             consistency: m.consistency.name().into(),
+            features: m.features.name().into(),
             decoder_edge_weight: m.decoder_edge_weight,
             decoder_noise_power: m.decoder_noise_power,
             scaling,

@@ -180,16 +180,92 @@ pub enum AcapDecoder {
 /// Default `edge_weight` of [`AcapDecoder::FitInverse`].
 pub const DEFAULT_EDGE_WEIGHT: f64 = 1e-6;
 
+/// What the 9 numbers per vertex are: how a vertex's features make its deformation gradient
+/// T_i (step 3 of the module docs), which both maps decode alike.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum FeatureMap {
+    /// logR and S of T = exp(logR)·S (the layout of the module docs; the paper's ACAP
+    /// features): a rotation of any size is one feature value, and rotations add along their
+    /// consistent angle.
+    #[default]
+    RotationStretch,
+    /// T − I, row-major (T₀₀ − 1, T₀₁, T₀₂, T₁₀, …, T₂₂ − 1): the 1-ring fit itself, linear in
+    /// the frame's vertices except for its normal row (step 2), so deformations that add in
+    /// positions add here too; a sum of rotations is no rotation (large rotations shrink).
+    Gradient,
+}
+
+impl FeatureMap {
+    /// The config name: `acap` | `gradient`.
+    pub fn name(self) -> &'static str {
+        match self {
+            FeatureMap::RotationStretch => "acap",
+            FeatureMap::Gradient => "gradient",
+        }
+    }
+
+    /// Inverse of [`FeatureMap::name`].
+    pub fn parse(s: &str) -> Option<Self> {
+        match s {
+            "acap" => Some(FeatureMap::RotationStretch),
+            "gradient" => Some(FeatureMap::Gradient),
+            _ => None,
+        }
+    }
+
+    /// T of one vertex from its 9 unscaled features ([`feature_transform`] for ACAP).
+    pub fn transform(self, f: &[f64]) -> Mat3 {
+        match self {
+            FeatureMap::RotationStretch => feature_transform(f),
+            FeatureMap::Gradient => [[1.0 + f[0], f[1], f[2]], [f[3], 1.0 + f[4], f[5]], [f[6], f[7], 1.0 + f[8]]],
+        }
+    }
+
+    /// ∂T/∂f_q for q = 0..9 ([`feature_transform_jacobian`] for ACAP; the unit matrices E_q
+    /// for the gradient map).
+    pub fn transform_jacobian(self, f: &[f64]) -> [Mat3; 9] {
+        match self {
+            FeatureMap::RotationStretch => feature_transform_jacobian(f),
+            FeatureMap::Gradient => std::array::from_fn(|q| {
+                let mut e = [[0.0; 3]; 3];
+                e[q / 3][q % 3] = 1.0;
+                e
+            }),
+        }
+    }
+
+    /// The vector–Jacobian product ⟨A, ∂T/∂f_q⟩ for q = 0..9 ([`feature_transform_vjp`] for
+    /// ACAP; A's entries row-major for the gradient map).
+    pub fn transform_vjp(self, f: &[f64], a: &Mat3) -> [f64; 9] {
+        match self {
+            FeatureMap::RotationStretch => feature_transform_vjp(f, a),
+            FeatureMap::Gradient => std::array::from_fn(|q| a[q / 3][q % 3]),
+        }
+    }
+
+    /// The 9 features of a deformation gradient T (the inverse of [`FeatureMap::transform`]
+    /// for the gradient map; ACAP's need the frame's rotation consistency:
+    /// [`Acap::encode_values`]).
+    fn gradient_values(t: &Mat3) -> [f64; 9] {
+        std::array::from_fn(|q| t[q / 3][q % 3] - if q / 3 == q % 3 { 1.0 } else { 0.0 })
+    }
+}
+
 /// Hyperparameters of the ACAP encoder/decoder.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct AcapOptions {
     /// The decoder (default: fit inverse with edge weight [`DEFAULT_EDGE_WEIGHT`]).
     pub decoder: AcapDecoder,
+    /// What the features are (default: ACAP's logR and S).
+    pub map: FeatureMap,
 }
 
 impl Default for AcapOptions {
     fn default() -> Self {
-        AcapOptions { decoder: AcapDecoder::FitInverse { edge_weight: DEFAULT_EDGE_WEIGHT } }
+        AcapOptions {
+            decoder: AcapDecoder::FitInverse { edge_weight: DEFAULT_EDGE_WEIGHT },
+            map: FeatureMap::default(),
+        }
     }
 }
 
@@ -450,7 +526,24 @@ impl Acap {
         Ok(AcapFrame { log_r, s, energy_bfs, energy })
     }
 
-    /// Positions (N) from an N×9 feature vector; the centroid is the reference's.
+    /// The N×9 feature vector of one frame in this codec's [`FeatureMap`]: ACAP's
+    /// ([`Acap::encode_frame`] with `consistency`) or T − I (the consistency unused).
+    pub fn encode_values(&self, positions: &[Vec3], consistency: Consistency) -> Result<Vec<f64>> {
+        match self.options.map {
+            FeatureMap::RotationStretch => Ok(self.encode_frame(positions, consistency)?.features()),
+            FeatureMap::Gradient => {
+                Ok(self.deformation_gradients(positions)?.iter().flat_map(FeatureMap::gradient_values).collect())
+            }
+        }
+    }
+
+    /// What the features are.
+    pub fn map(&self) -> FeatureMap {
+        self.options.map
+    }
+
+    /// Positions (N) from an N×9 feature vector of this codec's [`FeatureMap`]; the centroid
+    /// is the reference's.
     pub fn decode_frame(&self, features: &[f64]) -> Result<Vec<Vec3>> {
         let n = self.n_vertices();
         if features.len() != n * WIDTH {
@@ -467,7 +560,8 @@ impl Acap {
                 k % WIDTH
             )));
         }
-        let t: Vec<Mat3> = features.chunks_exact(WIDTH).map(feature_transform).collect();
+        let map = self.options.map;
+        let t: Vec<Mat3> = features.chunks_exact(WIDTH).map(|f| map.transform(f)).collect();
         self.decode_transforms(&t)
     }
 
@@ -723,7 +817,7 @@ mod tests {
             AcapDecoder::FitInverse { edge_weight: 0.5 },
             AcapDecoder::EdgeLeastSquares,
         ] {
-            let acap = Acap::with_options(&m, AcapOptions { decoder }).unwrap();
+            let acap = Acap::with_options(&m, AcapOptions { decoder, ..Default::default() }).unwrap();
             let back = acap.decode_frame(&f.features()).unwrap();
             // The decoder keeps the reference centroid (origin here).
             for (b, p) in back.iter().zip(&m.positions) {
@@ -740,7 +834,7 @@ mod tests {
         let m = octahedron();
         let moved: Vec<Vec3> =
             m.positions.iter().map(|p| [1.2 * p[0] + 0.1 * p[1], p[1], 0.9 * p[2] - 0.2 * p[0]]).collect();
-        let options = AcapOptions { decoder: AcapDecoder::FitInverse { edge_weight: 1e-6 } };
+        let options = AcapOptions { decoder: AcapDecoder::FitInverse { edge_weight: 1e-6 }, ..Default::default() };
         let plain = Acap::with_options(&m, options).unwrap();
         let f = plain.encode_frame(&moved, Consistency::Bfs).unwrap().features();
         let weights = [1e-4, 1.0, 0.3, 1.0, 0.05, 1.0];
@@ -773,7 +867,7 @@ mod tests {
             let j = ((v * 7919) % 13) as f64 / 13.0 - 0.5;
             *p = [p[0] + 0.2 * j, p[1] - 0.15 * j, 0.3 * (0.9 * p[0]).sin() * (0.7 * p[1]).cos() + 0.1 * j];
         }
-        let options = AcapOptions { decoder: AcapDecoder::FitInverse { edge_weight: 1e-4 } };
+        let options = AcapOptions { decoder: AcapDecoder::FitInverse { edge_weight: 1e-4 }, ..Default::default() };
         let plain = Acap::with_options(&grid, options).unwrap();
         let centre = 2 * 6 + 2; // vertex (2, 2) of the 6 × 6
         let mut weights = vec![1.0; n];
@@ -794,12 +888,66 @@ mod tests {
         }
     }
 
+    /// The gradient map: the rest shape encodes to zero, a frame's features are its 1-ring fits
+    /// T − I and decode back to it (up to the translation), and T, its Jacobian (against central
+    /// differences) and its vector–Jacobian product agree; the names read back.
+    #[test]
+    fn the_gradient_map_is_t_minus_i_and_round_trips() {
+        let m = octahedron();
+        let options = AcapOptions { map: FeatureMap::Gradient, ..Default::default() };
+        let acap = Acap::with_options(&m, options).unwrap();
+        assert_eq!(acap.map(), FeatureMap::Gradient);
+        assert!(acap.encode_values(&m.positions, Consistency::Bfs).unwrap().iter().all(|v| v.abs() < 1e-12));
+        let moved: Vec<Vec3> =
+            m.positions.iter().map(|p| [1.2 * p[0] + 0.1 * p[1], p[1] - 0.3 * p[2], 0.9 * p[2] - 0.2 * p[0]]).collect();
+        let f = acap.encode_values(&moved, Consistency::Bfs).unwrap();
+        let t = acap.deformation_gradients(&moved).unwrap();
+        for (v, ti) in f.chunks_exact(9).zip(&t) {
+            let back = FeatureMap::Gradient.transform(v);
+            assert!((0..9).all(|q| (back[q / 3][q % 3] - ti[q / 3][q % 3]).abs() < 1e-12), "{back:?} vs {ti:?}");
+        }
+        // The same frame's ACAP features are another vector that decodes to the same shape.
+        let acap_features = Acap::new(&m).unwrap().encode_values(&moved, Consistency::Bfs).unwrap();
+        assert!(acap_features.iter().zip(&f).any(|(a, b)| (a - b).abs() > 0.05));
+        let back = acap.decode_frame(&f).unwrap();
+        let mean = |p: &[Vec3], k: usize| p.iter().map(|q| q[k]).sum::<f64>() / p.len() as f64;
+        for (b, p) in back.iter().zip(&moved) {
+            for k in 0..3 {
+                let (db, dp) = (b[k] - mean(&back, k), p[k] - mean(&moved, k));
+                assert!((db - dp).abs() < 1e-5, "{b:?} vs {p:?}");
+            }
+        }
+        let mut rng = crate::rng::Rng::new(5);
+        let v: Vec<f64> = rng.normal_vec(9, 0.3).iter().map(|&x| x as f64).collect();
+        let a: Mat3 = std::array::from_fn(|_| std::array::from_fn(|_| rng.normal_vec(1, 1.0)[0] as f64));
+        let map = FeatureMap::Gradient;
+        let (jac, vjp) = (map.transform_jacobian(&v), map.transform_vjp(&v, &a));
+        for q in 0..9 {
+            let (mut hi, mut lo) = (v.clone(), v.clone());
+            hi[q] += 1e-4;
+            lo[q] -= 1e-4;
+            let (th, tl) = (map.transform(&hi), map.transform(&lo));
+            let mut contracted = 0.0;
+            for r in 0..3 {
+                for c in 0..3 {
+                    assert!(((th[r][c] - tl[r][c]) / 2e-4 - jac[q][r][c]).abs() < 1e-9, "∂T/∂f_{q}");
+                    contracted += a[r][c] * jac[q][r][c];
+                }
+            }
+            assert!((vjp[q] - contracted).abs() < 1e-12, "vjp {q}");
+        }
+        for map in [FeatureMap::RotationStretch, FeatureMap::Gradient] {
+            assert_eq!(FeatureMap::parse(map.name()), Some(map));
+        }
+        assert_eq!(FeatureMap::parse("logr"), None);
+    }
+
     #[test]
     fn decoder_options_are_validated() {
         let m = octahedron();
-        let bad = AcapOptions { decoder: AcapDecoder::FitInverse { edge_weight: -1.0 } };
+        let bad = AcapOptions { decoder: AcapDecoder::FitInverse { edge_weight: -1.0 }, ..Default::default() };
         assert!(Acap::with_options(&m, bad).is_err());
-        let bad = AcapOptions { decoder: AcapDecoder::FitInverse { edge_weight: f64::NAN } };
+        let bad = AcapOptions { decoder: AcapDecoder::FitInverse { edge_weight: f64::NAN }, ..Default::default() };
         assert!(Acap::with_options(&m, bad).is_err());
     }
 

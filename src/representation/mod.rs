@@ -142,6 +142,9 @@ pub struct RepresentationOptions {
     pub gradient_normal: NormalConvention,
     /// ACAP decoder (features → vertices); see [`acap::AcapDecoder`].
     pub acap_decoder: acap::AcapDecoder,
+    /// What the acap kind's 9 numbers per vertex are (default logR and S); see
+    /// [`acap::FeatureMap`].
+    pub acap_map: acap::FeatureMap,
 }
 
 impl Default for RepresentationOptions {
@@ -150,6 +153,7 @@ impl Default for RepresentationOptions {
             acap_consistency: Consistency::Bfs,
             gradient_normal: NormalConvention::UnitNormal,
             acap_decoder: acap::AcapOptions::default().decoder,
+            acap_map: acap::FeatureMap::default(),
         }
     }
 }
@@ -201,9 +205,10 @@ impl Representation {
             RepresentationKind::TriangleGradient => {
                 Codec::TriangleGradient(Box::new(TriangleGradient::new(rest, options.gradient_normal)?))
             }
-            RepresentationKind::Acap => {
-                Codec::Acap(Box::new(Acap::with_options(rest, acap::AcapOptions { decoder: options.acap_decoder })?))
-            }
+            RepresentationKind::Acap => Codec::Acap(Box::new(Acap::with_options(
+                rest,
+                acap::AcapOptions { decoder: options.acap_decoder, map: options.acap_map },
+            )?)),
         };
         let topo = Topology::new(rest.n_vertices(), &rest.faces);
         let adjacency = match kind.element() {
@@ -317,7 +322,7 @@ impl Representation {
                 self.options.acap_decoder
             )));
         }
-        let options = acap::AcapOptions { decoder: self.options.acap_decoder };
+        let options = acap::AcapOptions { decoder: self.options.acap_decoder, map: self.options.acap_map };
         self.codec = Codec::Acap(Box::new(Acap::with_fit_weights(&self.rest, options, Some(weights))?));
         Ok(self)
     }
@@ -350,7 +355,7 @@ impl Representation {
         let own = match &self.codec {
             Codec::Displacement(d) => d.encode_frame(positions),
             Codec::TriangleGradient(t) => t.encode_frame(positions),
-            Codec::Acap(a) => Ok(a.encode_frame(positions, self.options.acap_consistency)?.features()),
+            Codec::Acap(a) => a.encode_values(positions, self.options.acap_consistency),
         }?;
         let Some((placement, element_piece)) = &self.pieces else {
             return Ok(own);
