@@ -488,7 +488,9 @@ pub fn key(rep: &Representation, seq: &dyn FrameSource, frames: &[usize]) -> Res
     let mut h = Hasher::new();
     h.bytes(MAGIC.as_bytes());
     h.bytes(rep.kind().name().as_bytes());
-    h.bytes(format!("{:?}", rep.options()).as_bytes());
+    // The options' text without the ACAP feature map at its default (added later): the caches
+    // written before it keep their keys.
+    h.bytes(format!("{:?}", rep.options()).replacen(", acap_map: RotationStretch", "", 1).as_bytes());
     let rest = rep.rest();
     let (rf, rc) = frame_hash(&rest.positions);
     h.word(rf);
@@ -640,6 +642,14 @@ mod tests {
         };
         let rep2 = Representation::new(RepresentationKind::Acap, rep.rest(), opts).unwrap();
         assert_ne!(key(&rep, &seq, &frames).unwrap(), key(&rep2, &seq, &frames).unwrap());
+        let opts = RepresentationOptions { acap_map: crate::representation::acap::FeatureMap::Gradient, ..opts };
+        let rep3 = Representation::new(RepresentationKind::Acap, rep.rest(), opts).unwrap();
+        assert_ne!(key(&rep2, &seq, &frames).unwrap(), key(&rep3, &seq, &frames).unwrap(), "the feature map");
+        assert!(
+            !format!("{:?}", RepresentationOptions::default())
+                .replacen(", acap_map: RotationStretch", "", 1)
+                .contains("acap_map")
+        );
         let mut moved = seq.clone();
         moved.frames[7][0][0] += 1e-12;
         assert_ne!(key(&rep, &seq, &frames).unwrap(), key(&rep, &moved, &frames).unwrap());
