@@ -15,7 +15,9 @@
 //! 6. logR_i = φ_i \[a_i\]× with φ_i the consistent angle (radians, any real value).
 //!
 //! Feature vector per vertex (width 9): logR (0,1), (0,2), (1,2), then S (0,0), (0,1), (0,2),
-//! (1,1), (1,2), (2,2). The reference itself gives logR = 0, S = I.
+//! (1,1), (1,2), (2,2). The reference itself gives logR = 0, S = I. With
+//! [`FeatureMap::Gradient`] (the autoencoder's `features = "gradient"`) the 9 numbers are T_i − I
+//! row-major instead (steps 4–6 skipped; the reference gives 0); decoding is the same from T_i on.
 //!
 //! Decoding (features → positions): T_i = exp(logR_i)·S_i (Rodrigues), then, by default, the
 //! exact inverse of step 3 ([`FitInverse`]: positions whose 1-ring fits give these T_i; encode →
