@@ -83,9 +83,9 @@ impl AeFeatures {
         self.to_map().name()
     }
 
-    /// Whether this is the default (`skip_serializing_if`: configs that leave it out read back
-    /// alike).
-    fn is_default(&self) -> bool {
+    /// Whether this is the default (`skip_serializing_if`: configs and model headers that leave
+    /// it out read back alike).
+    pub fn is_default(&self) -> bool {
         *self == AeFeatures::default()
     }
 }

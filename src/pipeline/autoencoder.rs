@@ -70,8 +70,8 @@ pub struct AeHeader {
     pub consistency: String,
     /// What the network's 9 numbers per vertex are (`features`: `acap` or `gradient`); absent
     /// in models trained before the key, which are `acap`.
-    #[serde(default = "default_features", skip_serializing_if = "is_default_features")]
-    pub features: String,
+    #[serde(default, skip_serializing_if = "AeFeatures::is_default")]
+    pub features: AeFeatures,
     /// Edge weight μ of the ACAP decoder of the network's features (`decoder_edge_weight`;
     /// models trained before it get today's default,
     /// [`crate::config::AE_DECODER_EDGE_WEIGHT`]).
@@ -117,14 +117,6 @@ impl CenterDistances for GeodesicSupport {
     fn distances(&self, center: usize) -> Vec<f64> {
         SupportDistances::distances(self, &[center]).unwrap_or_else(|_| vec![f64::INFINITY; self.n_vertices()])
     }
-}
-
-fn default_features() -> String {
-    AeFeatures::default().name().into()
-}
-
-fn is_default_features(s: &String) -> bool {
-    *s == default_features()
 }
 
 fn default_decoder_edge_weight() -> f64 {
@@ -240,17 +232,10 @@ impl AeArtifact {
         let (header, arrays): (AeHeader, ArrayStore) = artifact::load_model(&dir)?;
         let rest = rest_from_arrays(&arrays)?;
         check_header(&header, &dir.join("model.json"), rest.n_vertices())?;
-        let map = FeatureMap::parse(&header.features).ok_or_else(|| {
-            Error::parse(
-                dir.join("model.json"),
-                None,
-                format!("`features` is \"{}\", expected \"acap\" or \"gradient\"", header.features),
-            )
-        })?;
         let representation = ae_representation(
             &rest,
             consistency_of(&header.consistency),
-            map,
+            header.features.to_map(),
             header.decoder_edge_weight,
             header.decoder_noise_power,
         )?;
@@ -1231,7 +1216,7 @@ pub fn fit(m: &AutoencoderMethod, prep: &Prepared, ctx: &mut FitContext<'_>) -> 
             method: MethodKind::Autoencoder.name().into(),
             representation: RepresentationKind::Acap.name().into(),
             consistency: m.consistency.name().into(),
-            features: m.features.name().into(),
+            features: m.features,
             decoder_edge_weight: m.decoder_edge_weight,
             decoder_noise_power: m.decoder_noise_power,
             scaling,

@@ -158,6 +158,20 @@ impl Default for RepresentationOptions {
     }
 }
 
+impl RepresentationOptions {
+    /// The options as the text of content keys (the feature cache's): their `Debug` text without
+    /// the ACAP feature map at its default, a field added later, so that keys made before it
+    /// stay valid.
+    pub fn key_text(&self) -> String {
+        let text = format!("{self:?}");
+        if self.acap_map == acap::FeatureMap::default() {
+            text.replacen(", acap_map: RotationStretch", "", 1)
+        } else {
+            text
+        }
+    }
+}
+
 /// Per-kind encoder/decoder state.
 enum Codec {
     Displacement(Displacement),
